@@ -1,0 +1,246 @@
+//! Scene buffers on the device and the filter dispatch.
+
+use std::collections::HashMap;
+use std::time::{Duration, Instant};
+
+use wgpu::util::DeviceExt;
+
+use super::{Gpu, GpuError, PipelineTiming};
+use crate::jit::{Input, ValidatedKernel, FIRST_INPUT_BINDING, WORKGROUP};
+use crate::scene::Scene;
+
+/// Upper bound on weight evaluations in one dispatch. Large images and radii
+/// are split into bands of rows so that no single dispatch runs long enough to
+/// trip a GPU watchdog (Windows resets a GPU after about 2 s).
+pub const MAX_WEIGHTS_PER_DISPATCH: u64 = 1 << 22;
+
+/// A scene's data on the device. Inputs are uploaded when a kernel first needs them.
+pub struct SceneBuffers {
+    width: u32,
+    height: u32,
+    color: wgpu::Buffer,
+    inputs: HashMap<Input, wgpu::Buffer>,
+}
+
+/// Result of a filter dispatch.
+#[derive(Clone, Debug)]
+pub struct Filtered {
+    /// Filtered colour, RGBA (alpha copied from the input, 1).
+    pub color: Vec<[f32; 4]>,
+    /// Domain-error bits per pixel.
+    pub flags: Vec<u32>,
+    pub pipeline: PipelineTiming,
+    /// Wall time from submission until the results were on the device, all bands.
+    pub dispatch: Duration,
+    /// Number of dispatches the image was split into.
+    pub dispatches: usize,
+}
+
+impl Filtered {
+    pub fn rgb(&self) -> Vec<[f32; 3]> {
+        self.color.iter().map(|c| [c[0], c[1], c[2]]).collect()
+    }
+
+    /// Number of pixels with at least one domain error.
+    pub fn flagged_pixels(&self) -> usize {
+        self.flags.iter().filter(|f| **f != 0).count()
+    }
+
+    /// Union of all domain-error bits.
+    pub fn all_flags(&self) -> u32 {
+        self.flags.iter().fold(0, |a, f| a | f)
+    }
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
+struct Params {
+    width: u32,
+    height: u32,
+    radius: u32,
+    row_offset: u32,
+}
+
+impl SceneBuffers {
+    /// Upload the scene's colour.
+    pub fn new(gpu: &Gpu, scene: &Scene) -> Self {
+        let rgba: Vec<[f32; 4]> = scene.color.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
+        let color = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("color"),
+            contents: bytemuck::cast_slice(&rgba),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        SceneBuffers { width: scene.width as u32, height: scene.height as u32, color, inputs: HashMap::new() }
+    }
+
+    fn ensure(&mut self, gpu: &Gpu, scene: &Scene, input: Input) -> Result<(), GpuError> {
+        if self.inputs.contains_key(&input) {
+            return Ok(());
+        }
+        let missing = || GpuError::Runtime {
+            during: "binding inputs",
+            message: format!("scene `{}` has no `{}`", scene.name, input.describe()),
+        };
+        let data: Vec<f32> = match input {
+            Input::Feature(f) => {
+                let values = scene.feature(f).ok_or_else(missing)?;
+                if input.components() == 1 {
+                    values.iter().map(|v| v[0]).collect()
+                } else {
+                    values.iter().flat_map(|v| [v[0], v[1], v[2], 0.0]).collect()
+                }
+            }
+            Input::Variance(v) => scene.variance(v).ok_or_else(missing)?.to_vec(),
+        };
+        let buffer = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("input"),
+            contents: bytemuck::cast_slice(&data),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        self.inputs.insert(input, buffer);
+        Ok(())
+    }
+}
+
+/// Rows per dispatch for an image `width` wide filtered with `radius`: a
+/// multiple of the workgroup height, at least one workgroup.
+pub fn rows_per_dispatch(width: u32, radius: u32) -> u32 {
+    let window = (2 * radius as u64 + 1).pow(2);
+    let rows = MAX_WEIGHTS_PER_DISPATCH / (width as u64 * window).max(1);
+    let rows = (rows / WORKGROUP[1] as u64) * WORKGROUP[1] as u64;
+    rows.clamp(WORKGROUP[1] as u64, u32::MAX as u64) as u32
+}
+
+impl Gpu {
+    /// Filter a scene with a compiled kernel and read the result back.
+    pub fn filter(
+        &self,
+        kernel: &ValidatedKernel,
+        buffers: &mut SceneBuffers,
+        scene: &Scene,
+        radius: u32,
+    ) -> Result<Filtered, GpuError> {
+        let (pipeline, timing) = self.pipeline(kernel)?;
+        for input in &kernel.source().layout.inputs {
+            buffers.ensure(self, scene, *input)?;
+        }
+        let device = self.device();
+        let pixels = (buffers.width * buffers.height) as u64;
+        let out = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("filtered"),
+            size: pixels * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let flags = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("flags"),
+            size: pixels * 4,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: pixels * 20,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let layout = pipeline.get_bind_group_layout(0);
+        let band = rows_per_dispatch(buffers.width, radius);
+        let start = Instant::now();
+        let mut dispatches = 0;
+        let mut row = 0;
+        while row < buffers.height {
+            let rows = band.min(buffers.height - row);
+            let params = Params { width: buffers.width, height: buffers.height, radius, row_offset: row };
+            let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("params"),
+                contents: bytemuck::bytes_of(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            let mut entries = vec![
+                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: buffers.color.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: out.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: flags.as_entire_binding() },
+            ];
+            for (k, input) in kernel.source().layout.inputs.iter().enumerate() {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: FIRST_INPUT_BINDING + k as u32,
+                    resource: buffers.inputs[input].as_entire_binding(),
+                });
+            }
+            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &layout,
+                entries: &entries,
+            });
+            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+            {
+                let mut pass =
+                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+                pass.set_pipeline(&pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+                pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
+            }
+            self.queue().submit([encoder.finish()]);
+            self.wait("filtering")?;
+            dispatches += 1;
+            row += rows;
+        }
+        let dispatch = start.elapsed();
+
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, pixels * 16);
+        encoder.copy_buffer_to_buffer(&flags, 0, &staging, pixels * 16, pixels * 4);
+        self.queue().submit([encoder.finish()]);
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "filtering", message: error.to_string() });
+        }
+        let bytes = self.read(&staging)?;
+        let color: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes[..(pixels * 16) as usize]);
+        let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(pixels * 16) as usize..]);
+        Ok(Filtered { color, flags, pipeline: timing, dispatch, dispatches })
+    }
+
+    /// Run a probe kernel ([`crate::jit::KernelKind::Probe`]): the raw weight
+    /// w_ii and the domain-error bits of every pixel.
+    pub fn probe(
+        &self,
+        kernel: &ValidatedKernel,
+        buffers: &mut SceneBuffers,
+        scene: &Scene,
+    ) -> Result<(Vec<f32>, Vec<u32>), GpuError> {
+        assert_eq!(kernel.source().kind, crate::jit::KernelKind::Probe, "probe() runs probe kernels");
+        let out = self.filter(kernel, buffers, scene, 0)?;
+        Ok((out.color.iter().map(|c| c[0]).collect(), out.flags))
+    }
+
+    fn wait(&self, during: &'static str) -> Result<(), GpuError> {
+        self.device()
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Runtime { during, message: e.to_string() })
+    }
+
+    /// Map a MAP_READ buffer and copy its contents out.
+    fn read(&self, staging: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+        let slice = staging.slice(..);
+        let (sender, receiver) = std::sync::mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |result| {
+            let _ = sender.send(result);
+        });
+        self.wait("reading results back")?;
+        receiver
+            .recv()
+            .map_err(|e| GpuError::Runtime { during: "reading results back", message: e.to_string() })?
+            .map_err(|e| GpuError::Runtime { during: "reading results back", message: e.to_string() })?;
+        let bytes = slice
+            .get_mapped_range()
+            .map_err(|e| GpuError::Runtime { during: "reading results back", message: e.to_string() })?
+            .to_vec();
+        staging.unmap();
+        Ok(bytes)
+    }
+}

@@ -1,0 +1,145 @@
+//! Everything that talks to wgpu: the device, the pipeline cache, scene
+//! buffers and filter dispatches. Only validated kernels come in.
+
+pub mod adapter;
+mod filter;
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
+
+use crate::jit::{KernelKey, ValidatedKernel, FIRST_INPUT_BINDING};
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error(
+        "no GPU adapter with compute shaders was found (backends tried: {backends}).\n\
+         On Linux without a GPU, install Mesa's software drivers:\n  \
+         apt-get install -y mesa-vulkan-drivers   # lavapipe, Vulkan\n  \
+         apt-get install -y libegl1 libegl-mesa0 libgl1-mesa-dri   # llvmpipe, OpenGL through EGL\n\
+         To force a backend set FILTERJIT_BACKEND=vulkan|gl|metal|dx12."
+    )]
+    NoAdapter { backends: String },
+    #[error("FILTERJIT_ADAPTER={wanted} matches no adapter; found: {}", found.join("; "))]
+    NoMatchingAdapter { wanted: String, found: Vec<String> },
+    #[error("FILTERJIT_BACKEND={0} is not a backend; use vulkan, gl, metal or dx12")]
+    BadBackend(String),
+    #[error("cannot open the GPU device {adapter}: {message}")]
+    Device { adapter: String, message: String },
+    #[error(
+        "the kernel for `{expression}` needs {needed} storage buffers, but {adapter} allows {limit} per shader stage"
+    )]
+    TooManyBindings { expression: String, needed: u32, limit: u32, adapter: String },
+    #[error("wgpu refused the pipeline for `{expression}`: {message}\n--- WGSL ---\n{wgsl}")]
+    Pipeline { expression: String, message: String, wgsl: String },
+    #[error("the GPU failed while {during}: {message}")]
+    Runtime { during: &'static str, message: String },
+}
+
+/// An open device with its pipeline cache.
+pub struct Gpu {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    info: wgpu::AdapterInfo,
+    limits: wgpu::Limits,
+    pipelines: Mutex<HashMap<KernelKey, Arc<wgpu::ComputePipeline>>>,
+}
+
+/// Timings of getting a pipeline.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct PipelineTiming {
+    /// Time in wgpu's pipeline creation (zero on a cache hit).
+    pub create: Duration,
+    pub cache_hit: bool,
+}
+
+impl Gpu {
+    /// Open the adapter [`adapter::choose`] picks.
+    pub fn open() -> Result<Gpu, GpuError> {
+        let adapter = adapter::choose()?;
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let descriptor = wgpu::DeviceDescriptor {
+            label: Some("filterjit"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits.clone(),
+            ..Default::default()
+        };
+        let (device, queue) = pollster::block_on(adapter.request_device(&descriptor))
+            .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
+        Ok(Gpu { device, queue, info, limits, pipelines: Mutex::new(HashMap::new()) })
+    }
+
+    /// One line naming the adapter and backend.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} ({:?}, {:?}, driver {})",
+            self.info.name, self.info.backend, self.info.device_type, self.info.driver_info
+        )
+    }
+
+    pub fn info(&self) -> &wgpu::AdapterInfo {
+        &self.info
+    }
+
+    /// Whether this is a software rasteriser (lavapipe, llvmpipe).
+    pub fn is_software(&self) -> bool {
+        self.info.device_type == wgpu::DeviceType::Cpu
+    }
+
+    pub(crate) fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+    pub(crate) fn queue(&self) -> &wgpu::Queue {
+        &self.queue
+    }
+
+    /// Number of pipelines in the cache.
+    pub fn cached_pipelines(&self) -> usize {
+        self.pipelines.lock().expect("pipeline cache lock").len()
+    }
+
+    /// Get the pipeline of a kernel: from the cache, or created and cached.
+    pub fn pipeline(&self, kernel: &ValidatedKernel) -> Result<(Arc<wgpu::ComputePipeline>, PipelineTiming), GpuError> {
+        if let Some(p) = self.pipelines.lock().expect("pipeline cache lock").get(&kernel.key()) {
+            return Ok((p.clone(), PipelineTiming { create: Duration::ZERO, cache_hit: true }));
+        }
+        let needed = FIRST_INPUT_BINDING - 1 + kernel.source().layout.inputs.len() as u32;
+        let limit = self.limits.max_storage_buffers_per_shader_stage;
+        if needed > limit {
+            return Err(GpuError::TooManyBindings {
+                expression: kernel.source().canonical.clone(),
+                needed,
+                limit,
+                adapter: self.info.name.clone(),
+            });
+        }
+        let start = Instant::now();
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("filterjit kernel"),
+            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(kernel.module().clone())),
+        });
+        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("filterjit kernel"),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline {
+                expression: kernel.source().canonical.clone(),
+                message: error.to_string(),
+                wgsl: kernel.wgsl().to_string(),
+            });
+        }
+        let pipeline = Arc::new(pipeline);
+        let create = start.elapsed();
+        self.pipelines.lock().expect("pipeline cache lock").insert(kernel.key(), pipeline.clone());
+        Ok((pipeline, PipelineTiming { create, cache_hit: false }))
+    }
+}

@@ -1,0 +1,276 @@
+//! Stage 3: typed [`Expr`] → WGSL source of a complete filter kernel.
+//!
+//! The expression body is lowered here into straight-line SSA (`let _eN = …`);
+//! the kernel skeleton lives in `templates/filter.wgsl.tera` and the operator
+//! helpers in `templates/ops.wgsl`.
+
+use std::collections::BTreeSet;
+use std::sync::OnceLock;
+
+use serde::Serialize;
+
+use crate::lang::{Expr, Feature, FeatureSource, ScalarVar};
+use crate::semantics;
+
+/// Bumped whenever the template or the lowering changes what a kernel computes
+/// or how it binds its inputs; part of every pipeline-cache key.
+pub const TEMPLATE_VERSION: u32 = 1;
+
+/// Workgroup shape of every filter kernel.
+pub const WORKGROUP: [u32; 2] = [8, 8];
+
+/// Per-pixel data a kernel reads, besides the colour every kernel reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Input {
+    /// A stored feature or a gradient (never `color` or `pixel`).
+    Feature(Feature),
+    /// A per-pixel scalar variance.
+    Variance(ScalarVar),
+}
+
+impl Input {
+    /// Number of f32 components per pixel in the bound buffer.
+    pub fn components(self) -> usize {
+        match self {
+            Input::Feature(f) if f.dimension() == 1 => 1,
+            Input::Feature(_) => 4,
+            Input::Variance(_) => 1,
+        }
+    }
+
+    fn ident(self) -> String {
+        match self {
+            Input::Feature(f) => format!("buf_{}", f.name().to_ascii_lowercase()),
+            Input::Variance(v) => format!("buf_{}", v.name().to_ascii_lowercase()),
+        }
+    }
+
+    pub fn describe(self) -> String {
+        match self {
+            Input::Feature(f) => f.name().to_string(),
+            Input::Variance(v) => v.name().to_string(),
+        }
+    }
+}
+
+/// The binding interface of a kernel: group 0, binding 0 the parameters,
+/// 1 the colour, 2 the output, 3 the domain-error flags, then `inputs` in order.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct KernelLayout {
+    pub inputs: Vec<Input>,
+}
+
+/// Index of the first per-expression input binding.
+pub const FIRST_INPUT_BINDING: u32 = 4;
+
+impl KernelLayout {
+    /// Exactly the inputs `expr` reads, in a canonical order.
+    pub fn of(expr: &Expr) -> Self {
+        let mut inputs = BTreeSet::new();
+        for f in expr.features() {
+            if matches!(f.source(), FeatureSource::Stored(_) | FeatureSource::Gradient(_)) && f != Feature::Color {
+                inputs.insert(Input::Feature(f));
+            }
+        }
+        for v in expr.variables() {
+            inputs.insert(Input::Variance(v));
+        }
+        KernelLayout { inputs: inputs.into_iter().collect() }
+    }
+
+    pub fn describe(&self) -> String {
+        self.inputs.iter().map(|i| i.describe()).collect::<Vec<_>>().join(",")
+    }
+}
+
+/// What a kernel computes. Both kinds share the binding interface.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum KernelKind {
+    /// The filter: f_i = Σ_j w_ij c_j / Σ_j w_ij.
+    #[default]
+    Filter,
+    /// The raw weight w_ii per pixel, for testing operator semantics.
+    Probe,
+}
+
+impl KernelKind {
+    fn template(self) -> &'static str {
+        match self {
+            KernelKind::Filter => FILTER_TEMPLATE,
+            KernelKind::Probe => PROBE_TEMPLATE,
+        }
+    }
+}
+
+/// WGSL text of a kernel, not yet validated.
+#[derive(Clone, Debug)]
+pub struct KernelSource {
+    pub kind: KernelKind,
+    pub expr: Expr,
+    /// The expression's canonical text.
+    pub canonical: String,
+    pub layout: KernelLayout,
+    pub wgsl: String,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum LowerError {
+    #[error("literal {0} is out of range: literals must be finite, non-negative and at most {max:e}", max = semantics::BIG)]
+    Literal(f64),
+    #[error("kernel template failed to render: {0}")]
+    Template(String),
+}
+
+/// Lower an expression to the WGSL source of its filter kernel.
+pub fn lower(expr: &Expr) -> Result<KernelSource, LowerError> {
+    lower_kind(expr, KernelKind::Filter)
+}
+
+/// Lower an expression into a kernel of the given kind.
+pub fn lower_kind(expr: &Expr, kind: KernelKind) -> Result<KernelSource, LowerError> {
+    expr.validate().map_err(LowerError::Literal)?;
+    let layout = KernelLayout::of(expr);
+    let mut body = Body::default();
+    let result = body.emit(expr);
+
+    let centre_lines = centre_loads(expr);
+    let neighbour_lines: Vec<String> = neighbour_loads(expr).into_iter().chain(body.lines).collect();
+
+    #[derive(Serialize)]
+    struct BindingView {
+        index: u32,
+        ident: String,
+        element: &'static str,
+        describes: String,
+    }
+    let bindings: Vec<BindingView> = layout
+        .inputs
+        .iter()
+        .enumerate()
+        .map(|(k, input)| BindingView {
+            index: FIRST_INPUT_BINDING + k as u32,
+            ident: input.ident(),
+            element: if input.components() == 1 { "f32" } else { "vec4<f32>" },
+            describes: input.describe(),
+        })
+        .collect();
+
+    let canonical = expr.canonical();
+    let mut context = tera::Context::new();
+    context.insert("crate_version", env!("CARGO_PKG_VERSION"));
+    context.insert("template_version", &TEMPLATE_VERSION);
+    context.insert("expression", &canonical);
+    context.insert("length", &expr.len());
+    context.insert("ops", OPS_WGSL);
+    context.insert("bindings", &bindings);
+    context.insert("workgroup_x", &WORKGROUP[0]);
+    context.insert("workgroup_y", &WORKGROUP[1]);
+    context.insert("centre_lines", &centre_lines);
+    context.insert("neighbour_lines", &neighbour_lines);
+    context.insert("result", &result);
+    let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
+    Ok(KernelSource { kind, expr: expr.clone(), canonical, layout, wgsl })
+}
+
+/// The operator helpers, verbatim.
+pub const OPS_WGSL: &str = include_str!("../../templates/ops.wgsl");
+const FILTER_TEMPLATE: &str = "filter.wgsl";
+const PROBE_TEMPLATE: &str = "probe.wgsl";
+
+fn templates() -> &'static tera::Tera {
+    static TERA: OnceLock<tera::Tera> = OnceLock::new();
+    TERA.get_or_init(|| {
+        let mut tera = tera::Tera::default();
+        tera.add_raw_template(FILTER_TEMPLATE, include_str!("../../templates/filter.wgsl.tera"))
+            .expect("built-in kernel template parses");
+        tera.add_raw_template(PROBE_TEMPLATE, include_str!("../../templates/probe.wgsl.tera"))
+            .expect("built-in probe template parses");
+        tera
+    })
+}
+
+/// WGSL spelling of an f32 literal (always with a `.` or an exponent).
+pub fn wgsl_f32(value: f64) -> String {
+    format!("{:?}", value as f32)
+}
+
+fn feature_ident(side: char, f: Feature) -> String {
+    format!("feat_{side}_{}", f.name().to_ascii_lowercase())
+}
+
+fn var_ident(v: ScalarVar) -> String {
+    format!("var_{}", v.name().to_ascii_lowercase())
+}
+
+/// Load of feature `f` at pixel index `index`, as a zero-padded vec3.
+fn load(f: Feature, index: &str, coords: (&str, &str)) -> String {
+    match f {
+        Feature::Pixel => format!("vec3<f32>(f32({}), f32({}), 0.0)", coords.0, coords.1),
+        Feature::Color => format!("buf_color[{index}].xyz"),
+        _ if f.dimension() == 1 => format!("vec3<f32>({}[{index}], 0.0, 0.0)", Input::Feature(f).ident()),
+        _ => format!("{}[{index}].xyz", Input::Feature(f).ident()),
+    }
+}
+
+fn pair_sides(expr: &Expr) -> (BTreeSet<Feature>, BTreeSet<Feature>) {
+    let (mut centre, mut neighbour) = (BTreeSet::new(), BTreeSet::new());
+    expr.visit(&mut |e| {
+        if let Expr::Pair(_, i, j) = e {
+            centre.insert(*i);
+            neighbour.insert(*j);
+        }
+    });
+    (centre, neighbour)
+}
+
+fn centre_loads(expr: &Expr) -> Vec<String> {
+    let (centre, _) = pair_sides(expr);
+    let features = centre.into_iter().map(|f| format!("let {} = {};", feature_ident('i', f), load(f, "i", ("x", "y"))));
+    let vars =
+        expr.variables().into_iter().map(|v| format!("let {} = {}[i];", var_ident(v), Input::Variance(v).ident()));
+    features.chain(vars).collect()
+}
+
+fn neighbour_loads(expr: &Expr) -> Vec<String> {
+    let (_, neighbour) = pair_sides(expr);
+    neighbour
+        .into_iter()
+        .map(|f| {
+            let value = if f == Feature::Color { "color_j".to_string() } else { load(f, "j", ("xj", "yj")) };
+            format!("let {} = {};", feature_ident('j', f), value)
+        })
+        .collect()
+}
+
+/// Straight-line SSA for the expression body.
+#[derive(Default)]
+struct Body {
+    lines: Vec<String>,
+}
+
+impl Body {
+    fn temp(&mut self, value: String) -> String {
+        let name = format!("_e{}", self.lines.len());
+        self.lines.push(format!("let {name} = {value};"));
+        name
+    }
+
+    fn emit(&mut self, e: &Expr) -> String {
+        match e {
+            Expr::Const(c) => wgsl_f32(semantics::fin(*c)),
+            Expr::Var(v) => var_ident(*v),
+            Expr::Unary(op, a) => {
+                let a = self.emit(a);
+                self.temp(format!("{}({a})", op.wgsl_helper()))
+            }
+            Expr::Binary(op, a, b) => {
+                let a = self.emit(a);
+                let b = self.emit(b);
+                self.temp(format!("{}({a}, {b})", op.wgsl_helper()))
+            }
+            Expr::Pair(op, i, j) => {
+                self.temp(format!("{}({}, {})", op.wgsl_helper(), feature_ident('i', *i), feature_ident('j', *j)))
+            }
+        }
+    }
+}

@@ -1,0 +1,21 @@
+//! filterjit: filter-weight expressions compiled into specialised WGSL
+//! compute kernels, for removing Monte Carlo noise from rendered images.
+//!
+//! The stages, each its own module (see ARCHITECTURE.md):
+//! text → [`lang::parse`] → [`lang::check`] → [`jit::lower`] → [`jit::validate`] → [`gpu::Gpu::pipeline`].
+
+pub mod corpus;
+pub mod cpu;
+pub mod gpu;
+pub mod io;
+pub mod jit;
+pub mod lang;
+pub mod metrics;
+pub mod preview;
+pub mod rng;
+pub mod scene;
+pub mod semantics;
+
+pub use jit::{compile, ValidatedKernel};
+pub use lang::{parse_expr, Expr, ExprError};
+pub use scene::Scene;

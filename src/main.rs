@@ -1,0 +1,262 @@
+//! The `filterjit` command line. Flags are parsed here and resolved into
+//! library calls; errors are rendered here, with their whole context chain.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use clap::{Parser, Subcommand};
+
+use filterjit::metrics::{self, Errors};
+use filterjit::scene::{self, Absent, Request};
+use filterjit::{corpus, cpu, gpu, jit, lang, preview, semantics};
+
+#[derive(Parser)]
+#[command(
+    name = "filterjit",
+    version,
+    about = "Compile filter-weight expressions into specialised WGSL kernels and denoise Monte Carlo renders"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print the validated WGSL kernel of an expression.
+    Compile {
+        /// The expression, or @name for a shipped one (see `filterjit list`).
+        expr: String,
+        /// Write the WGSL to this file instead of standard output.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+    /// Parse and type-check an expression; print its canonical form, length and inputs.
+    Check { expr: String },
+    /// Filter a scene with an expression on the GPU; write the result as EXR and a PNG preview.
+    Filter {
+        /// The expression, or @name for a shipped one.
+        #[arg(long)]
+        expr: String,
+        /// Window radius r: the window is (2r+1)² pixels.
+        #[arg(long, default_value_t = 5)]
+        radius: u32,
+        /// A scene directory (noisy.exr, reference.exr, ...) or a noisy EXR file.
+        scene: PathBuf,
+        /// Output EXR; a PNG preview is written beside it.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Reference image, when not beside the noisy image.
+        #[arg(long)]
+        reference: Option<PathBuf>,
+        /// Samples per pixel of the noisy image, when the scene does not say.
+        #[arg(long)]
+        spp: Option<u32>,
+        /// What to do with features the scene lacks.
+        #[arg(long, value_enum, default_value_t = Absent::Refuse)]
+        absent: Absent,
+        /// Also run the f64 CPU reference and report its difference from the GPU result.
+        #[arg(long)]
+        cpu_check: bool,
+    },
+    /// List the shipped expressions.
+    List,
+    /// List the GPU adapters and say which one filterjit uses.
+    Adapters,
+}
+
+fn main() -> ExitCode {
+    // Mesa's Vulkan device-select layer probes for a Wayland/X display and
+    // prints errors without one; filterjit chooses its adapter itself
+    // (gpu::adapter). Set before any thread exists.
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Compile { expr, output } => {
+            let expr = resolve_expr(&expr)?;
+            let kernel = jit::compile(&expr)?;
+            match output {
+                Some(path) => filterjit::io::write_bytes_atomically(&path, kernel.wgsl().as_bytes())
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| format!("writing {}", path.display()))?,
+                None => print!("{}", kernel.wgsl()),
+            }
+            Ok(())
+        }
+        Command::Check { expr } => {
+            let expr = resolve_expr(&expr)?;
+            println!("{expr}");
+            println!("length: {} nodes", expr.len());
+            let names: Vec<&str> =
+                expr.features().iter().map(|f| f.name()).chain(expr.variables().iter().map(|v| v.name())).collect();
+            println!(
+                "reads: {}",
+                if names.is_empty() { "nothing but the colour".to_string() } else { names.join(", ") }
+            );
+            Ok(())
+        }
+        Command::Filter { expr, radius, scene, output, reference, spp, absent, cpu_check } => {
+            filter(&expr, radius, &scene, &output, reference, spp, absent, cpu_check)
+        }
+        Command::List => {
+            for (name, text) in corpus::named() {
+                println!("@{name}\n    {text}");
+            }
+            Ok(())
+        }
+        Command::Adapters => {
+            let backends = gpu::adapter::requested_backends()?;
+            let adapters = gpu::adapter::available(backends, true);
+            if adapters.is_empty() {
+                bail!(gpu::GpuError::NoAdapter { backends: format!("{backends:?}") });
+            }
+            for (k, a) in adapters.iter().enumerate() {
+                let info = a.get_info();
+                println!(
+                    "{} {} ({:?}, {:?}) {}",
+                    if k == 0 { "*" } else { " " },
+                    info.name,
+                    info.backend,
+                    info.device_type,
+                    info.driver_info
+                );
+            }
+            println!("* = the best; filterjit uses it unless {} names another", gpu::adapter::ADAPTER_ENV);
+            Ok(())
+        }
+    }
+}
+
+/// An expression from the command line: text, or @name of a shipped one.
+fn resolve_expr(arg: &str) -> Result<lang::Expr> {
+    let text = match arg.strip_prefix('@') {
+        Some(name) => match corpus::lookup(name) {
+            Some(text) => text.to_string(),
+            None => {
+                let names: Vec<String> = corpus::named().iter().map(|(n, _)| format!("@{n}")).collect();
+                bail!("no shipped expression `@{name}`; there are: {}", names.join(", "))
+            }
+        },
+        None => arg.to_string(),
+    };
+    lang::parse_expr(&text).map_err(|e| anyhow::anyhow!("invalid expression:\n{e}"))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn filter(
+    expr: &str,
+    radius: u32,
+    scene_path: &Path,
+    output: &Path,
+    reference: Option<PathBuf>,
+    spp: Option<u32>,
+    absent: Absent,
+    cpu_check: bool,
+) -> Result<()> {
+    let expr = resolve_expr(expr)?;
+    let request = Request { reference_path: reference, spp, absent, ..Request::for_expr(&expr) };
+    let load_start = Instant::now();
+    let scene = scene::load(scene_path, &request).with_context(|| format!("loading scene {}", scene_path.display()))?;
+    let load_time = load_start.elapsed();
+    for note in &scene.notes {
+        if note.contains("absent") || note.contains("non-finite") {
+            eprintln!("note: {note}");
+        }
+    }
+
+    let compile_start = Instant::now();
+    let kernel = jit::compile(&expr)?;
+    let lower_validate = compile_start.elapsed();
+    let gpu = gpu::Gpu::open()?;
+    let mut buffers = gpu::SceneBuffers::new(&gpu, &scene);
+    let first = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
+    // A second, warm run: software drivers compile the pipeline at its first dispatch.
+    let warm = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
+    let rgb = warm.rgb();
+
+    filterjit::scene::exr_io::write_rgb(output, scene.width, scene.height, &rgb)
+        .with_context(|| format!("writing {}", output.display()))?;
+    let png = output.with_extension("png");
+    preview::write_png(&png, scene.width, scene.height, &rgb)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("writing {}", png.display()))?;
+
+    let megapixels = scene.pixels() as f64 / 1e6;
+    println!(
+        "scene     {} ({}x{}, {}, spp {})",
+        scene.name,
+        scene.width,
+        scene.height,
+        scene.layout.unwrap_or("?"),
+        scene.spp.map_or("unknown".into(), |s| s.to_string())
+    );
+    println!("device    {}", gpu.describe());
+    println!(
+        "kernel    {} nodes, reads color{}",
+        expr.len(),
+        kernel.source().layout.inputs.iter().map(|i| format!(", {}", i.describe())).collect::<String>()
+    );
+    println!(
+        "time      load {:.1} ms | lower+validate {:.2} ms | pipeline {:.1} ms | first dispatch {:.1} ms | filter {:.1} ms ({:.1} ms/Mpx, radius {radius}, {} dispatch{})",
+        ms(load_time),
+        ms(lower_validate),
+        ms(first.pipeline.create),
+        ms(first.dispatch),
+        ms(warm.dispatch),
+        ms(warm.dispatch) / megapixels,
+        warm.dispatches,
+        if warm.dispatches == 1 { "" } else { "es" }
+    );
+    if warm.flagged_pixels() > 0 {
+        println!(
+            "domain    {} of {} pixels had domain errors: {}",
+            warm.flagged_pixels(),
+            scene.pixels(),
+            semantics::flag::describe(warm.all_flags()).join("; ")
+        );
+    }
+    match &scene.reference {
+        Some(reference) => {
+            let noisy = metrics::errors(&scene.color, reference, scene.spp);
+            let filtered = metrics::errors(&rgb, reference, scene.spp);
+            println!("error     {:<10} {:>12} {:>14} {:>12}", "", "relMSE", "relMSE*m/2", "MSE");
+            print_errors("noisy", &noisy);
+            print_errors("filtered", &filtered);
+        }
+        None => println!("error     no reference image: errors not computed"),
+    }
+    if cpu_check {
+        let reference = cpu::filter(&expr, &scene, radius)?;
+        let worst = rgb
+            .iter()
+            .zip(&reference.color)
+            .flat_map(|(g, c)| (0..3).map(move |q| (g[q] as f64 - c[q]).abs() / (c[q].abs() + 1e-3)))
+            .fold(0.0f64, f64::max);
+        println!("cpu       max relative difference GPU f32 vs CPU f64: {worst:.3e}");
+    }
+    println!("wrote     {} and {}", output.display(), png.display());
+    Ok(())
+}
+
+fn print_errors(label: &str, e: &Errors) {
+    let m2 = e.relmse_half_spp.map_or("-".to_string(), |v| format!("{v:.6}"));
+    println!("          {label:<10} {:>12.6} {:>14} {:>12.6}", e.relmse, m2, e.mse);
+}
+
+fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}

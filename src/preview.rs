@@ -1,0 +1,25 @@
+//! Tone-mapped PNG previews of linear HDR images.
+
+use std::path::Path;
+
+/// Linear → sRGB transfer, after clamping to [0, 1]. Every preview uses this
+/// one mapping, so previews of different methods compare directly.
+pub fn tone_map(linear: f32) -> u8 {
+    let c = if linear.is_finite() { linear.clamp(0.0, 1.0) } else { 0.0 };
+    let s = if c <= 0.003_130_8 { 12.92 * c } else { 1.055 * c.powf(1.0 / 2.4) - 0.055 };
+    (s * 255.0 + 0.5) as u8
+}
+
+/// Write an 8-bit sRGB PNG atomically.
+pub fn write_png(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> Result<(), String> {
+    let pixels: Vec<u8> = rgb.iter().flat_map(|c| c.map(tone_map)).collect();
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut bytes, width as u32, height as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
+        writer.write_image_data(&pixels).map_err(|e| e.to_string())?;
+    }
+    crate::io::write_bytes_atomically(path, &bytes)
+}

@@ -1,0 +1,85 @@
+//! The command line as a user runs it.
+
+use std::process::{Command, Output};
+
+use crate::common::mitsuba_sample;
+
+fn filterjit(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_filterjit")).args(args).output().expect("the binary runs")
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+/// Value of a row of the error table, e.g. `filtered`.
+fn relmse(stdout: &str, row: &str) -> f64 {
+    let line = stdout
+        .lines()
+        .find(|l| l.split_whitespace().next() == Some(row))
+        .unwrap_or_else(|| panic!("no `{row}` row:\n{stdout}"));
+    line.split_whitespace().nth(1).unwrap().parse().unwrap()
+}
+
+#[test]
+fn filter_runs_the_first_thesis_expression_on_the_mitsuba_sample() {
+    let out_dir = std::env::temp_dir().join(format!("filterjit-cli-{}", std::process::id()));
+    let output = out_dir.join("thesis1.exr");
+    let sample = mitsuba_sample();
+    let run = filterjit(&[
+        "filter",
+        "--expr",
+        "@thesis1",
+        "--radius",
+        "5",
+        sample.to_str().unwrap(),
+        "-o",
+        output.to_str().unwrap(),
+        "--absent",
+        "zero",
+    ]);
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "stdout:\n{stdout}\nstderr:\n{}", text(&run.stderr));
+    assert!(relmse(&stdout, "filtered") < relmse(&stdout, "noisy"), "{stdout}");
+    assert!(output.is_file() && output.with_extension("png").is_file());
+    let written = filterjit::scene::load(&output, &Default::default()).unwrap();
+    assert_eq!((written.width, written.height), (64, 64));
+    assert!(
+        !std::fs::read_dir(&out_dir).unwrap().any(|e| e.unwrap().file_name().to_string_lossy().contains(".tmp-")),
+        "no temporary files left"
+    );
+}
+
+#[test]
+fn a_bad_expression_exits_non_zero_with_the_position() {
+    let run = filterjit(&["compile", "exp(-distance2(normal) +)"]);
+    assert!(!run.status.success());
+    let stderr = text(&run.stderr);
+    assert!(stderr.contains("1:25") && stderr.contains("expected"), "{stderr}");
+    let run = filterjit(&["compile", "exp(normal)"]);
+    assert!(!run.status.success());
+    assert!(text(&run.stderr).contains("1:5"), "{}", text(&run.stderr));
+}
+
+#[test]
+fn a_missing_scene_or_feature_exits_non_zero_naming_it() {
+    let run = filterjit(&["filter", "--expr", "1", "/nonexistent/scene", "-o", "/tmp/never.exr"]);
+    assert!(!run.status.success());
+    assert!(text(&run.stderr).contains("/nonexistent/scene"), "{}", text(&run.stderr));
+    let sample = mitsuba_sample();
+    let run = filterjit(&["filter", "--expr", "@thesis1", sample.to_str().unwrap(), "-o", "/tmp/never.exr"]);
+    assert!(!run.status.success());
+    let stderr = text(&run.stderr);
+    assert!(stderr.contains("directIllumination") && stderr.contains("mitsuba-cornell-64"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
+fn compile_prints_validated_wgsl_and_unknown_names_are_listed() {
+    let run = filterjit(&["compile", "@thesis2"]);
+    assert!(run.status.success());
+    let wgsl = text(&run.stdout);
+    assert!(wgsl.contains("@compute") && wgsl.contains("// expression: exp(-atan(abs(dot(color))))"));
+    let run = filterjit(&["compile", "@nope"]);
+    assert!(!run.status.success() && text(&run.stderr).contains("@thesis1"));
+}

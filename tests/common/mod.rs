@@ -1,0 +1,84 @@
+//! Shared test helpers: one GPU for the whole binary, synthetic scenes, the Mitsuba sample.
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+use filterjit::gpu::Gpu;
+use filterjit::lang::{Feature, ScalarVar};
+use filterjit::rng::Rng;
+use filterjit::Scene;
+
+/// The device every GPU test shares. There is no skipping: without an adapter
+/// the GPU tests fail, saying what to install.
+pub fn gpu() -> &'static Gpu {
+    static GPU: OnceLock<Gpu> = OnceLock::new();
+    GPU.get_or_init(|| match Gpu::open() {
+        Ok(gpu) => {
+            eprintln!("GPU tests run on {}", gpu.describe());
+            gpu
+        }
+        Err(e) => panic!("GPU tests need an adapter: {e}"),
+    })
+}
+
+/// The Mitsuba sample beside the repository (tests may read ../shared; the program never does).
+pub fn mitsuba_sample() -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/samples/mitsuba-cornell-64");
+    assert!(dir.join("noisy.exr").is_file(), "the Mitsuba sample is missing at {}", dir.display());
+    dir
+}
+
+/// Limits read from the environment so CI can shrink or grow a run.
+pub fn env_usize(name: &str, default: usize) -> usize {
+    std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+/// A synthetic scene with every feature and variance: smooth regions with
+/// edges, noisy colour, some strong outliers. Values are already normalised.
+pub fn synthetic_scene(width: usize, height: usize, seed: u64) -> Scene {
+    let mut rng = Rng::seeded(seed);
+    let n = width * height;
+    let region = |x: usize, y: usize| usize::from(x * 2 >= width) + 2 * usize::from(y * 3 >= height);
+    let mut reference = Vec::with_capacity(n);
+    let mut color = Vec::with_capacity(n);
+    for y in 0..height {
+        for x in 0..width {
+            let r = region(x, y) as f32;
+            let base = [0.2 + 0.2 * r, 0.1 + 0.05 * r, 0.5 - 0.1 * r];
+            reference.push(base);
+            let noise = |rng: &mut Rng| (rng.unit() as f32 - 0.5) * 0.6;
+            let mut c = [base[0] + noise(&mut rng), base[1] + noise(&mut rng), base[2] + noise(&mut rng)];
+            if rng.chance(0.02) {
+                c = c.map(|v| v.abs() * 50.0); // a firefly
+            }
+            color.push(c.map(|v| v.max(0.0)));
+        }
+    }
+    let mut scene = Scene::from_color(format!("synthetic-{width}x{height}-{seed}"), width, height, color);
+    scene.reference = Some(reference);
+    scene.spp = Some(4);
+    for f in Feature::ALL {
+        if !f.needs_data() || *f == Feature::Color {
+            continue;
+        }
+        let dim = f.dimension();
+        let data: Vec<[f32; 3]> = (0..n)
+            .map(|p| {
+                let (x, y) = (p % width, p / width);
+                let r = region(x, y) as f32;
+                let mut v = [0f32; 3];
+                for (c, value) in v.iter_mut().enumerate().take(dim) {
+                    let smooth = ((x as f32 * 0.3 + c as f32).sin() * 0.1 + r * 0.25 - 0.3 + y as f32 * 0.01)
+                        * (1.0 + *f as usize as f32 * 0.05);
+                    *value = (smooth + (rng.unit() as f32 - 0.5) * 0.02).clamp(-1.0, 1.0);
+                }
+                v
+            })
+            .collect();
+        scene.features.insert(*f, data);
+    }
+    for v in ScalarVar::ALL {
+        scene.variances.insert(*v, (0..n).map(|_| (rng.unit() as f32).powi(3)).collect());
+    }
+    scene
+}

@@ -1,0 +1,9 @@
+//! One integration-test binary, a module per area (keeps link times down).
+
+mod common;
+
+mod cli;
+mod gpu_vs_cpu;
+mod lang;
+mod scenes;
+mod snapshots;

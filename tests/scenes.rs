@@ -1,0 +1,176 @@
+//! Scene import: the Mitsuba sample, pbrt-style files, absent features, damaged files.
+
+use std::path::{Path, PathBuf};
+
+use filterjit::lang::{Feature, ScalarVar};
+use filterjit::metrics;
+use filterjit::scene::{self, Absent, Request, SceneError};
+
+use crate::common::mitsuba_sample;
+
+fn request(features: &[Feature], variances: &[ScalarVar]) -> Request {
+    Request {
+        features: features.iter().copied().collect(),
+        variances: variances.iter().copied().collect(),
+        reference: true,
+        ..Default::default()
+    }
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("filterjit-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+#[test]
+fn mitsuba_sample_loads_with_the_noisy_error_its_readme_states() {
+    let scene = scene::load(&mitsuba_sample(), &request(&[], &[])).unwrap();
+    assert_eq!((scene.width, scene.height, scene.spp), (64, 64, Some(4)));
+    assert!(scene.features.is_empty() && scene.variances.is_empty(), "nothing but colour was asked for");
+    let e = metrics::errors(&scene.color, scene.reference.as_ref().unwrap(), scene.spp);
+    // The sample's README gives the mean over pixels *and channels*; equation 3.5 sums over channels.
+    let readme_mean_over_channels = 0.06842629574634661;
+    assert!((e.relmse / 3.0 - readme_mean_over_channels).abs() < 1e-6, "relMSE {}", e.relmse);
+    assert_eq!(e.relmse_half_spp, Some(e.relmse * 2.0));
+}
+
+#[test]
+fn mitsuba_features_are_loaded_normalised_and_only_when_asked() {
+    let wanted = [Feature::Normal, Feature::Texture, Feature::WpGradient];
+    let scene = scene::load(&mitsuba_sample(), &request(&wanted, &[ScalarVar::ColorVariance])).unwrap();
+    let keys: Vec<Feature> = scene.features.keys().copied().collect();
+    assert_eq!(keys, vec![Feature::Normal, Feature::Texture, Feature::WpGradient], "world position itself is not kept");
+    for (f, values) in &scene.features {
+        for v in values {
+            let len = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            assert!(len <= 1.0 + 1e-5, "{f} has a vector of length {len}");
+        }
+    }
+    let variance = scene.variance(ScalarVar::ColorVariance).unwrap();
+    assert!(variance.iter().all(|v| (0.0..=1.0).contains(v)));
+    assert!(variance.iter().any(|v| *v > 0.5), "normalised to about [0, 1]");
+}
+
+#[test]
+fn a_missing_feature_is_refused_naming_the_feature_and_the_scene() {
+    let err = scene::load(&mitsuba_sample(), &request(&[Feature::DirectIllumination], &[])).unwrap_err();
+    let text = err.to_string();
+    assert!(matches!(err, SceneError::MissingFeature { .. }), "{text}");
+    assert!(text.contains("directIllumination") && text.contains("mitsuba-cornell-64"), "{text}");
+    let err = scene::load(&mitsuba_sample(), &request(&[Feature::DiGradient], &[])).unwrap_err();
+    assert!(err.to_string().contains("diGradient"), "{err}");
+    let err = scene::load(&mitsuba_sample(), &request(&[], &[ScalarVar::NVariance])).unwrap_err();
+    assert!(err.to_string().contains("nVariance"), "{err}");
+
+    let zero = Request { absent: Absent::Zero, ..request(&[Feature::DirectIllumination], &[]) };
+    let scene = scene::load(&mitsuba_sample(), &zero).unwrap();
+    assert!(scene.features[&Feature::DirectIllumination].iter().all(|v| *v == [0.0; 3]));
+    assert!(scene.notes.iter().any(|n| n.contains("directIllumination") && n.contains("absent")));
+}
+
+fn write_exr(path: &Path, width: usize, height: usize, channels: &[(&str, Vec<f32>)]) {
+    use exr::prelude::*;
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> =
+        channels.iter().map(|(name, data)| AnyChannel::new(*name, FlatSamples::F32(data.clone()))).collect();
+    let layer =
+        Layer::new((width, height), LayerAttributes::named("main"), Encoding::FAST_LOSSLESS, AnyChannels::sort(list));
+    Image::from_layer(layer).write().to_file(path).unwrap();
+}
+
+#[test]
+fn pbrt_gbuffer_files_load_with_old_and_new_channel_names() {
+    let dir = temp_dir("pbrt");
+    let (w, h) = (6, 5);
+    let n = w * h;
+    let ramp = |k: f32| (0..n).map(|p| p as f32 * k).collect::<Vec<f32>>();
+    let mut channels = vec![("R", ramp(0.01)), ("G", ramp(0.02)), ("B", ramp(0.03))];
+    for c in [
+        "Albedo.R",
+        "Albedo.G",
+        "Albedo.B",
+        "Px",
+        "Py",
+        "Pz",
+        "Nsx",
+        "Nsy",
+        "Nsz",
+        "Variance.R",
+        "Variance.G",
+        "Variance.B",
+    ] {
+        channels.push((c, ramp(0.1)));
+    }
+    write_exr(&dir.join("noisy.exr"), w, h, &channels);
+    write_exr(&dir.join("reference.exr"), w, h, &[("R", ramp(0.01)), ("G", ramp(0.02)), ("B", ramp(0.03))]);
+    let scene = scene::load(
+        &dir,
+        &request(&[Feature::Texture, Feature::WorldPosition, Feature::Normal], &[ScalarVar::ColorVariance]),
+    )
+    .unwrap();
+    assert_eq!(scene.layout, Some("pbrt-v4 GBufferFilm / filterjit"));
+    assert_eq!(scene.features.len(), 3);
+    assert_eq!(metrics::errors(&scene.color, scene.reference.as_ref().unwrap(), None).mse, 0.0);
+    let err = scene::load(&dir, &request(&[Feature::Depth], &[])).unwrap_err();
+    assert!(err.to_string().contains("`depth`"), "{err}");
+}
+
+#[test]
+fn damaged_and_mismatched_files_give_clear_errors() {
+    let dir = temp_dir("damaged");
+    let noisy = std::fs::read(mitsuba_sample().join("noisy.exr")).unwrap();
+    // Truncated noisy image.
+    std::fs::write(dir.join("noisy.exr"), &noisy[..noisy.len() / 3]).unwrap();
+    let err = scene::load(&dir, &request(&[Feature::Normal], &[])).unwrap_err();
+    assert!(err.to_string().contains("noisy.exr"), "{err}");
+    // Garbage.
+    std::fs::write(dir.join("noisy.exr"), b"not an exr at all").unwrap();
+    let err = scene::load(&dir, &request(&[], &[])).unwrap_err();
+    assert!(matches!(err, SceneError::Exr { .. }), "{err}");
+    // Reference of another size.
+    std::fs::write(dir.join("noisy.exr"), &noisy).unwrap();
+    write_exr(
+        &dir.join("reference.exr"),
+        32,
+        32,
+        &[("R", vec![0.0; 1024]), ("G", vec![0.0; 1024]), ("B", vec![0.0; 1024])],
+    );
+    let err = scene::load(&dir, &request(&[], &[])).unwrap_err();
+    assert!(matches!(err, SceneError::SizeMismatch { .. }) && err.to_string().contains("32x32"), "{err}");
+    // Reference without colour channels.
+    write_exr(&dir.join("reference.exr"), 64, 64, &[("Y", vec![0.0; 4096])]);
+    let err = scene::load(&dir, &request(&[], &[])).unwrap_err();
+    assert!(err.to_string().contains("reference.exr") && err.to_string().contains("R, G, B"), "{err}");
+    // Nothing there.
+    let err = scene::load(&dir.join("nope"), &request(&[], &[])).unwrap_err();
+    assert!(err.to_string().contains("nope"), "{err}");
+}
+
+#[test]
+fn non_finite_inputs_are_sanitised_and_reported() {
+    let dir = temp_dir("nonfinite");
+    let (w, h) = (4, 4);
+    let mut r = vec![0.5f32; 16];
+    r[3] = f32::NAN;
+    r[7] = f32::INFINITY;
+    let mut n = vec![0.0f32; 16];
+    n[1] = f32::NEG_INFINITY;
+    write_exr(
+        &dir.join("noisy.exr"),
+        w,
+        h,
+        &[
+            ("R", r),
+            ("G", vec![0.5; 16]),
+            ("B", vec![0.5; 16]),
+            ("N.X", n),
+            ("N.Y", vec![0.0; 16]),
+            ("N.Z", vec![1.0; 16]),
+        ],
+    );
+    let scene = scene::load(&dir, &request(&[Feature::Normal], &[])).unwrap();
+    assert!(scene.color.iter().flatten().all(|v| v.is_finite()));
+    assert!(scene.features[&Feature::Normal].iter().flatten().all(|v| v.is_finite()));
+    assert!(scene.notes.iter().any(|n| n.contains("noisy colour: 2 non-finite")), "{:?}", scene.notes);
+}

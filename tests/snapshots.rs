@@ -1,0 +1,33 @@
+//! insta snapshots of the generated WGSL: one per corpus expression.
+//! CI never updates them (INSTA_UPDATE=no); review changes with `cargo insta review`.
+
+use filterjit::{corpus, jit, parse_expr};
+
+const CORPUS: &str = include_str!("data/corpus.txt");
+
+fn settings() -> insta::Settings {
+    let mut settings = insta::Settings::clone_current();
+    settings.set_snapshot_path(concat!(env!("CARGO_MANIFEST_DIR"), "/snapshots"));
+    settings.set_prepend_module_to_snapshot(false);
+    settings.set_omit_expression(true);
+    settings
+}
+
+#[test]
+fn generated_wgsl_matches_snapshots() {
+    let mut cases = corpus::named();
+    cases.extend(corpus::parse_named(CORPUS));
+    assert!(cases.len() >= 15);
+    settings().bind(|| {
+        for (name, text) in cases {
+            let expr = parse_expr(text).unwrap_or_else(|e| panic!("{name}:\n{e}"));
+            let kernel = jit::compile(&expr).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert!(kernel.wgsl().contains(&format!("// expression: {expr}")), "the header names the expression");
+            // The operator helpers are `templates/ops.wgsl` verbatim; a marker stands for them
+            // so that each snapshot shows what is particular to its expression.
+            assert!(kernel.wgsl().contains(jit::lower::OPS_WGSL));
+            let particular = kernel.wgsl().replace(jit::lower::OPS_WGSL, "// <templates/ops.wgsl, verbatim>\n");
+            insta::assert_snapshot!(format!("wgsl__{name}"), particular);
+        }
+    });
+}
