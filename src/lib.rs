@@ -12,6 +12,7 @@ pub mod jit;
 pub mod lang;
 pub mod metrics;
 pub mod preview;
+pub mod render;
 pub mod rng;
 pub mod scene;
 pub mod semantics;

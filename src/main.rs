@@ -10,7 +10,7 @@ use clap::{Parser, Subcommand};
 
 use filterjit::metrics::{self, Errors};
 use filterjit::scene::{self, Absent, Request};
-use filterjit::{corpus, cpu, gpu, jit, lang, preview, semantics};
+use filterjit::{corpus, cpu, gpu, jit, lang, preview, render, semantics};
 
 #[derive(Parser)]
 #[command(
@@ -61,6 +61,26 @@ enum Command {
         #[arg(long)]
         cpu_check: bool,
     },
+    /// Render a scene (a .toml file or a built-in name) into a dataset: noisy
+    /// colour, features, variances and a converged reference.
+    Render {
+        /// A scene description (.toml) or the name of a built-in scene.
+        scene: String,
+        #[arg(long, default_value_t = 4)]
+        spp: u32,
+        #[arg(long, default_value_t = 1024)]
+        reference_spp: u32,
+        /// Image size, WIDTHxHEIGHT.
+        #[arg(long, default_value = "128x128", value_parser = parse_size)]
+        size: (u32, u32),
+        #[arg(long, default_value_t = 0)]
+        seed: u32,
+        /// Output directory; without it the dataset goes into the cache and its path is printed.
+        #[arg(short, long)]
+        output: Option<PathBuf>,
+    },
+    /// List the built-in scenes.
+    Scenes,
     /// List the shipped expressions.
     List,
     /// List the GPU adapters and say which one filterjit uses.
@@ -111,6 +131,16 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Filter { expr, radius, scene, output, reference, spp, absent, cpu_check } => {
             filter(&expr, radius, &scene, &output, reference, spp, absent, cpu_check)
+        }
+        Command::Render { scene, spp, reference_spp, size, seed, output } => {
+            render(&scene, spp, reference_spp, size, seed, output.as_deref())
+        }
+        Command::Scenes => {
+            for (name, _) in render::BUILTIN {
+                let d = render::builtin(name).expect("listed")?;
+                println!("{name:<16} {:<6} {}", format!("{:?}", d.split).to_lowercase(), d.summary);
+            }
+            Ok(())
         }
         Command::List => {
             for (name, text) in corpus::named() {
@@ -249,6 +279,64 @@ fn filter(
         println!("cpu       max relative difference GPU f32 vs CPU f64: {worst:.3e}");
     }
     println!("wrote     {} and {}", output.display(), png.display());
+    Ok(())
+}
+
+fn parse_size(text: &str) -> Result<(u32, u32), String> {
+    let (w, h) = text.split_once('x').ok_or_else(|| format!("`{text}` is not WIDTHxHEIGHT"))?;
+    let parse = |v: &str| v.trim().parse::<u32>().map_err(|_| format!("`{text}` is not WIDTHxHEIGHT"));
+    let (w, h) = (parse(w)?, parse(h)?);
+    if w == 0 || h == 0 {
+        return Err(format!("`{text}`: the size must be at least 1x1"));
+    }
+    Ok((w, h))
+}
+
+/// A progress bar counting pixel samples, with samples per second.
+fn sample_bar(label: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{prefix:>14} {bar:30} {percent:>3}% {per_sec:>14} eta {eta}")
+            .expect("valid template"),
+    );
+    bar.set_prefix(label.to_string());
+    bar
+}
+
+fn render(scene: &str, spp: u32, reference_spp: u32, size: (u32, u32), seed: u32, output: Option<&Path>) -> Result<()> {
+    let d = render::describe(scene)?;
+    let settings = render::RenderSettings { width: size.0, height: size.1, spp, reference_spp, seed };
+    let gpu = gpu::Gpu::open()?;
+    let bar = sample_bar(&d.name);
+    let mut progress = |done: u64, total: u64| {
+        bar.set_length(total);
+        bar.set_position(done);
+    };
+    let dir = match output {
+        Some(dir) => {
+            let rendered = render::render(&gpu, &d, &settings, &mut progress)?;
+            rendered.write(dir, &d, &settings)?;
+            dir.to_path_buf()
+        }
+        None => render::cached(&gpu, &render::cache_root(), &d, &settings, &mut progress)?,
+    };
+    bar.finish_and_clear();
+    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join(scene::META_FILE))?)?;
+    println!("scene     {} ({:?}) on {}", d.name, d.split, gpu.describe());
+    println!(
+        "render    {}x{}, {} spp noisy, {} spp reference: {:.2} s, {:.3} M samples/s",
+        size.0,
+        size.1,
+        spp,
+        reference_spp,
+        meta["render_seconds"].as_f64().unwrap_or(0.0),
+        meta["samples_per_second"].as_f64().unwrap_or(0.0) / 1e6
+    );
+    println!(
+        "reference estimated residual relMSE {:.3e} (from its two half-buffers)",
+        meta["reference_residual_relmse"].as_f64().unwrap_or(0.0)
+    );
+    println!("wrote     {}", dir.display());
     Ok(())
 }
 

@@ -83,3 +83,42 @@ fn compile_prints_validated_wgsl_and_unknown_names_are_listed() {
     let run = filterjit(&["compile", "@nope"]);
     assert!(!run.status.success() && text(&run.stderr).contains("@thesis1"));
 }
+
+#[test]
+fn render_then_filter_a_builtin_scene_with_every_thesis_expression() {
+    let dir = std::env::temp_dir().join(format!("filterjit-cli-render-{}", std::process::id()));
+    let dataset = dir.join("glossy-floor");
+    let run = filterjit(&[
+        "render",
+        "glossy-floor",
+        "--size",
+        "24x16",
+        "--spp",
+        "2",
+        "--reference-spp",
+        "8",
+        "-o",
+        dataset.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(text(&run.stdout).contains("samples/s"), "{}", text(&run.stdout));
+    // Our datasets carry every feature, so the thesis expressions need no --absent.
+    for name in ["@thesis1", "@thesis2", "@thesis3"] {
+        let out = dir.join(format!("{}.exr", &name[1..]));
+        let run = filterjit(&[
+            "filter",
+            "--expr",
+            name,
+            "--radius",
+            "3",
+            dataset.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        let stdout = text(&run.stdout);
+        assert!(run.status.success(), "{name}: {}", text(&run.stderr));
+        assert!(relmse(&stdout, "filtered").is_finite(), "{stdout}");
+    }
+    let run = filterjit(&["render", "no-such-scene"]);
+    assert!(!run.status.success() && text(&run.stderr).contains("built-in"), "{}", text(&run.stderr));
+}

@@ -5,5 +5,6 @@ mod common;
 mod cli;
 mod gpu_vs_cpu;
 mod lang;
+mod render;
 mod scenes;
 mod snapshots;

@@ -114,6 +114,13 @@ fn pbrt_gbuffer_files_load_with_old_and_new_channel_names() {
     assert_eq!(metrics::errors(&scene.color, scene.reference.as_ref().unwrap(), None).mse, 0.0);
     let err = scene::load(&dir, &request(&[Feature::Depth], &[])).unwrap_err();
     assert!(err.to_string().contains("`depth`"), "{err}");
+    // And it filters.
+    let expr =
+        filterjit::parse_expr("exp(-(distance2(normal) + distance2(texture) + distance2(worldPosition)))").unwrap();
+    let kernel = filterjit::jit::compile(&expr).unwrap();
+    let mut buffers = filterjit::gpu::SceneBuffers::new(crate::common::gpu(), &scene);
+    let out = crate::common::gpu().filter(&kernel, &mut buffers, &scene, 2).unwrap();
+    assert!(out.rgb().iter().flatten().all(|v| v.is_finite()));
 }
 
 #[test]

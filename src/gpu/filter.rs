@@ -225,7 +225,7 @@ impl Gpu {
     }
 
     /// Map a MAP_READ buffer and copy its contents out.
-    fn read(&self, staging: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+    pub(super) fn read(&self, staging: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
         let slice = staging.slice(..);
         let (sender, receiver) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |result| {

@@ -3,12 +3,14 @@
 
 pub mod adapter;
 mod filter;
+mod trace;
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
+pub use trace::{TraceScene, PATHTRACE_WGSL};
 
 use crate::jit::{KernelKey, ValidatedKernel, FIRST_INPUT_BINDING};
 
@@ -45,6 +47,7 @@ pub struct Gpu {
     info: wgpu::AdapterInfo,
     limits: wgpu::Limits,
     pipelines: Mutex<HashMap<KernelKey, Arc<wgpu::ComputePipeline>>>,
+    tracer: OnceLock<wgpu::ComputePipeline>,
 }
 
 /// Timings of getting a pipeline.
@@ -69,7 +72,7 @@ impl Gpu {
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&descriptor))
             .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
-        Ok(Gpu { device, queue, info, limits, pipelines: Mutex::new(HashMap::new()) })
+        Ok(Gpu { device, queue, info, limits, pipelines: Mutex::new(HashMap::new()), tracer: OnceLock::new() })
     }
 
     /// One line naming the adapter and backend.

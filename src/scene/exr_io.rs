@@ -107,3 +107,20 @@ pub fn write_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> 
     crate::io::write_atomically(path, |tmp| image.write().to_file(tmp).map_err(|e| e.to_string()))
         .map_err(|message| SceneError::Exr { file: path.to_path_buf(), message })
 }
+
+/// Write named f32 channels as one EXR layer, atomically. Each channel holds width*height values.
+pub fn write_channels(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: &[(&str, Vec<f32>)],
+) -> Result<(), SceneError> {
+    use exr::prelude::*;
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> =
+        channels.iter().map(|(name, data)| AnyChannel::new(*name, FlatSamples::F32(data.clone()))).collect();
+    let layer =
+        Layer::new((width, height), LayerAttributes::default(), Encoding::FAST_LOSSLESS, AnyChannels::sort(list));
+    let image = Image::from_layer(layer);
+    crate::io::write_atomically(path, |tmp| image.write().to_file(tmp).map_err(|e| e.to_string()))
+        .map_err(|message| SceneError::Exr { file: path.to_path_buf(), message })
+}

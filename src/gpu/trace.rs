@@ -1,0 +1,141 @@
+//! The path tracer on the device: `templates/pathtrace.wgsl`, validated by
+//! naga, one pipeline per device; dispatches return per-pixel sums.
+
+use std::sync::OnceLock;
+
+use wgpu::util::DeviceExt;
+
+use super::{Gpu, GpuError};
+use crate::render::packed::{PackedScene, TraceParams, SUMS_PER_PIXEL};
+
+/// The path tracer's source.
+pub const PATHTRACE_WGSL: &str = include_str!("../../templates/pathtrace.wgsl");
+
+/// The tracer's WGSL, parsed and validated once.
+fn module() -> Result<&'static naga::Module, GpuError> {
+    static MODULE: OnceLock<Result<naga::Module, String>> = OnceLock::new();
+    MODULE
+        .get_or_init(|| {
+            let module = naga::front::wgsl::parse_str(PATHTRACE_WGSL).map_err(|e| e.emit_to_string(PATHTRACE_WGSL))?;
+            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+                .validate(&module)
+                .map_err(|e| e.emit_to_string(PATHTRACE_WGSL))?;
+            Ok(module)
+        })
+        .as_ref()
+        .map_err(|message| GpuError::Pipeline {
+            expression: "<path tracer>".into(),
+            message: message.clone(),
+            wgsl: String::new(),
+        })
+}
+
+/// A scene uploaded for tracing.
+pub struct TraceScene {
+    prims: wgpu::Buffer,
+    materials: wgpu::Buffer,
+    lights: wgpu::Buffer,
+}
+
+impl Gpu {
+    fn trace_pipeline(&self) -> Result<&wgpu::ComputePipeline, GpuError> {
+        if let Some(p) = self.tracer.get() {
+            return Ok(p);
+        }
+        let module = module()?;
+        let scope = self.device().push_error_scope(wgpu::ErrorFilter::Validation);
+        let shader = self.device().create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("filterjit path tracer"),
+            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module.clone())),
+        });
+        let pipeline = self.device().create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("filterjit path tracer"),
+            layout: None,
+            module: &shader,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Pipeline {
+                expression: "<path tracer>".into(),
+                message: error.to_string(),
+                wgsl: String::new(),
+            });
+        }
+        Ok(self.tracer.get_or_init(|| pipeline))
+    }
+
+    /// Upload a packed scene.
+    pub fn upload_trace_scene(&self, scene: &PackedScene) -> TraceScene {
+        let storage = |label, bytes: &[u8]| {
+            self.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytes,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        // Empty storage buffers are not allowed: keep at least one element.
+        let lights: Vec<u32> = if scene.lights.is_empty() { vec![0] } else { scene.lights.clone() };
+        TraceScene {
+            prims: storage("prims", bytemuck::cast_slice(&scene.prims)),
+            materials: storage("materials", bytemuck::cast_slice(&scene.materials)),
+            lights: storage("lights", bytemuck::cast_slice(&lights)),
+        }
+    }
+
+    /// Trace `params.sample_count` samples for rows `params.row_offset ..
+    /// + rows`; returns `SUMS_PER_PIXEL` sums per pixel of those rows.
+    pub fn trace(&self, scene: &TraceScene, params: &TraceParams, rows: u32) -> Result<Vec<f32>, GpuError> {
+        let pipeline = self.trace_pipeline()?;
+        let device = self.device();
+        let pixels = (params.width * params.height) as u64;
+        let size = pixels * SUMS_PER_PIXEL as u64 * 4;
+        let sums = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("sums"),
+            size,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let first = params.row_offset as u64 * params.width as u64 * SUMS_PER_PIXEL as u64 * 4;
+        let band = rows as u64 * params.width as u64 * SUMS_PER_PIXEL as u64 * 4;
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("sums readback"),
+            size: band,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("trace params"),
+            contents: bytemuck::bytes_of(params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &[
+                wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 1, resource: scene.prims.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 2, resource: scene.materials.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 3, resource: scene.lights.as_entire_binding() },
+                wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
+            ],
+        });
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass =
+                encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(params.width.div_ceil(8), rows.div_ceil(8), 1);
+        }
+        encoder.copy_buffer_to_buffer(&sums, first, &staging, 0, band);
+        self.queue().submit([encoder.finish()]);
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "path tracing", message: error.to_string() });
+        }
+        let bytes = self.read(&staging)?;
+        Ok(bytemuck::pod_collect_to_vec(&bytes))
+    }
+}

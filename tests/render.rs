@@ -1,0 +1,118 @@
+//! The built-in path tracer: agreement with Mitsuba, every scene, determinism, the cache.
+
+use filterjit::lang::{Feature, ScalarVar};
+use filterjit::render::{self, RenderSettings};
+use filterjit::scene::{self, Request};
+use filterjit::{metrics, Scene};
+
+use crate::common::{gpu, mitsuba_sample};
+
+fn tiny() -> RenderSettings {
+    RenderSettings { width: 16, height: 12, spp: 2, reference_spp: 4, seed: 3 }
+}
+
+fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("filterjit-render-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// Our Cornell box against Mitsuba 3's reference of the same scene (box filter, 64x64).
+#[test]
+fn the_cornell_box_agrees_with_mitsuba() {
+    let d = render::builtin("cornell").unwrap().unwrap();
+    let settings = RenderSettings { width: 64, height: 64, spp: 4, reference_spp: 512, seed: 1 };
+    let rendered = render::render(gpu(), &d, &settings, &mut |_, _| {}).unwrap();
+    let ours = rendered.reference();
+    let mitsuba = scene::load(&mitsuba_sample(), &Request { reference: true, ..Default::default() }).unwrap();
+    let theirs = mitsuba.reference.as_ref().unwrap();
+    let between = metrics::errors(&ours, theirs, None).relmse;
+    let noisy_vs_mitsuba = metrics::errors(&mitsuba.color, theirs, None).relmse;
+    let our_noisy_vs_ours = metrics::errors(&rendered.noisy(), &ours, None).relmse;
+    // Both references carry noise of their own; the estimate says how much ours has.
+    let residual = rendered.reference_residual_relmse();
+    eprintln!(
+        "relMSE ours vs Mitsuba {between:.5} (our residual {residual:.5}); noisy 4 spp vs Mitsuba {noisy_vs_mitsuba:.4}, ours {our_noisy_vs_ours:.4}"
+    );
+    assert!(between < 0.05 * noisy_vs_mitsuba, "the renderers disagree: {between} vs noisy {noisy_vs_mitsuba}");
+    assert!(between < 0.05 * our_noisy_vs_ours);
+    assert!(
+        between < 4.0 * (residual + 3.0 * 2.8e-4),
+        "more than noise separates the two: {between}, residual {residual}"
+    );
+}
+
+#[test]
+fn every_builtin_scene_renders_into_a_loadable_dataset() {
+    let all_features: Vec<Feature> = Feature::ALL.to_vec();
+    let request = Request {
+        features: all_features.iter().copied().collect(),
+        variances: ScalarVar::ALL.iter().copied().collect(),
+        reference: true,
+        ..Default::default()
+    };
+    let mut splits = (0, 0);
+    for (name, _) in render::BUILTIN {
+        let d = render::builtin(name).unwrap().unwrap_or_else(|e| panic!("{name}: {e}"));
+        match d.split {
+            render::Split::Train => splits.0 += 1,
+            render::Split::Test => splits.1 += 1,
+        }
+        let dir = temp_dir(name);
+        let rendered = render::render(gpu(), &d, &tiny(), &mut |_, _| {}).unwrap();
+        rendered.write(&dir, &d, &tiny()).unwrap();
+        let scene: Scene = scene::load(&dir, &request).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(scene.spp, Some(2));
+        assert!(scene.color.iter().flatten().all(|v| v.is_finite() && *v >= 0.0), "{name}");
+        assert!(scene.color.iter().flatten().any(|v| *v > 0.0), "{name} is black");
+        assert_eq!(
+            scene.features.len(),
+            all_features.len() - 2,
+            "{name}: every feature but colour and pixel is stored"
+        );
+        assert!(scene.notes.iter().all(|n| !n.contains("non-finite")), "{name}: {:?}", scene.notes);
+    }
+    assert!(splits.0 >= 5 && splits.1 >= 3, "train/test split {splits:?}");
+}
+
+#[test]
+fn renders_are_deterministic_for_a_seed() {
+    let d = render::builtin("glossy-floor").unwrap().unwrap();
+    let a = render::render(gpu(), &d, &tiny(), &mut |_, _| {}).unwrap();
+    let b = render::render(gpu(), &d, &tiny(), &mut |_, _| {}).unwrap();
+    let c = render::render(gpu(), &d, &RenderSettings { seed: 4, ..tiny() }, &mut |_, _| {}).unwrap();
+    assert_eq!(a.noisy(), b.noisy());
+    assert_eq!(a.reference(), b.reference());
+    assert_ne!(a.noisy(), c.noisy());
+}
+
+#[test]
+fn the_cache_renders_once_per_scene_text_and_settings() {
+    let root = temp_dir("cache");
+    let d = render::builtin("soft-shadows").unwrap().unwrap();
+    let settings = RenderSettings { seed: 11, ..tiny() };
+    let mut calls = 0;
+    let first = render::cached(gpu(), &root, &d, &settings, &mut |_, _| calls += 1).unwrap();
+    assert!(calls > 0, "the first call renders");
+    let mut again = 0;
+    let second = render::cached(gpu(), &root, &d, &settings, &mut |_, _| again += 1).unwrap();
+    assert_eq!((first.clone(), again), (second, 0), "the second call reads the cache");
+    assert!(first.join("meta.json").is_file());
+    let key = |d: &render::Description, s: &RenderSettings| render::cache_dir(&root, d, s);
+    assert_ne!(key(&d, &settings), key(&d, &RenderSettings { spp: 3, ..settings }), "settings are part of the key");
+    let mut edited = d.clone();
+    edited.source.push_str("\n# edited\n");
+    assert_ne!(key(&d, &settings), key(&edited, &settings), "the file's text is part of the key");
+}
+
+#[test]
+fn bad_scene_files_give_file_and_line() {
+    let err = render::describe("/nonexistent/scene.toml").unwrap_err().to_string();
+    assert!(err.contains("/nonexistent/scene.toml") && err.contains("cornell"), "{err}");
+    let dir = temp_dir("bad-toml");
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("bad.toml");
+    std::fs::write(&file, "split = \"train\"\n[camera]\nposition = [0, 0]\n").unwrap();
+    let err = render::describe(file.to_str().unwrap()).unwrap_err().to_string();
+    assert!(err.contains("bad.toml") && err.contains("line 3"), "{err}");
+}
