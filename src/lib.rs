@@ -6,6 +6,8 @@
 
 pub mod corpus;
 pub mod cpu;
+pub mod evolve;
+pub mod gp;
 pub mod gpu;
 pub mod io;
 pub mod jit;

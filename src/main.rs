@@ -79,12 +79,97 @@ enum Command {
         #[arg(short, long)]
         output: Option<PathBuf>,
     },
+    /// Evolve filter expressions with genetic programming (thesis chapter 3), every
+    /// individual compiled into its own kernel. With no arguments: the built-in
+    /// training scenes, settings that finish in minutes on a 2-core CPU.
+    Evolve(Box<EvolveArgs>),
     /// List the built-in scenes.
     Scenes,
     /// List the shipped expressions.
     List,
     /// List the GPU adapters and say which one filterjit uses.
     Adapters,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Preset {
+    /// 4 islands of 25, 15 generations, 32x32 scenes, radius 3: minutes on a 2-core CPU.
+    Quick,
+    /// The thesis's settings: 4 islands of 100, 200 generations, 64x64 scenes, radius 10.
+    Thesis,
+}
+
+/// Raw `evolve` flags; unset ones take the preset's values.
+#[derive(clap::Args)]
+struct EvolveArgs {
+    /// Values for every flag not given.
+    #[arg(long, value_enum, default_value_t = Preset::Quick)]
+    preset: Preset,
+    /// Training scenes: built-in names, .toml files or dataset directories [default: the built-in training scenes].
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// Test scenes, likewise [default: the built-in test scenes].
+    #[arg(long, value_delimiter = ',')]
+    test_scenes: Vec<String>,
+    /// Size scenes are rendered at, WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Samples per pixel of rendered noisy images.
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Samples per pixel of rendered references.
+    #[arg(long)]
+    reference_spp: Option<u32>,
+    /// Filter window radius.
+    #[arg(long)]
+    radius: Option<u32>,
+    /// The expression the population is seeded from.
+    #[arg(long, default_value = "@bilateral")]
+    seed_expr: String,
+    #[arg(long)]
+    islands: Option<usize>,
+    #[arg(long)]
+    island_size: Option<usize>,
+    #[arg(long)]
+    generations: Option<u32>,
+    /// Longest expression, in nodes.
+    #[arg(long)]
+    max_length: Option<usize>,
+    #[arg(long)]
+    tournament: Option<usize>,
+    /// Share of each generation copied unchanged.
+    #[arg(long)]
+    replication: Option<f64>,
+    /// Share made by crossover (the rest by mutation).
+    #[arg(long)]
+    crossover: Option<f64>,
+    /// Probability that a crossover child is mutated.
+    #[arg(long)]
+    crossover_mutation: Option<f64>,
+    /// Weights of the mutations insert,replace,swap,delete.
+    #[arg(long, value_delimiter = ',')]
+    mutation_weights: Option<Vec<f64>>,
+    /// Generations between migrations.
+    #[arg(long)]
+    migration_interval: Option<u32>,
+    /// Share of each initial island that is the seed itself.
+    #[arg(long)]
+    seed_share: Option<f64>,
+    /// Expressions per island in the hall of fame.
+    #[arg(long)]
+    hall_of_fame: Option<usize>,
+    /// Random seed of the search (and of rendering).
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Run directory: checkpoint, log, hall of fame, summary.
+    #[arg(short, long, default_value = "runs/evolve")]
+    output: PathBuf,
+    /// Continue the run in --output from its last checkpoint.
+    #[arg(long)]
+    resume: bool,
+    /// Threads that compile kernels [default: the number of cores].
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 fn main() -> ExitCode {
@@ -135,6 +220,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Render { scene, spp, reference_spp, size, seed, output } => {
             render(&scene, spp, reference_spp, size, seed, output.as_deref())
         }
+        Command::Evolve(args) => evolve(*args),
         Command::Scenes => {
             for (name, _) in render::BUILTIN {
                 let d = render::builtin(name).expect("listed")?;
@@ -174,6 +260,23 @@ fn run(cli: Cli) -> Result<()> {
 /// An expression from the command line: text, or @name of a shipped one.
 fn resolve_expr(arg: &str) -> Result<lang::Expr> {
     let text = match arg.strip_prefix('@') {
+        Some(reference) if corpus::lookup(reference).is_none() && file_reference(reference).is_some() => {
+            let (path, name) = file_reference(reference).expect("checked");
+            let content = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+            let entries = corpus::parse_named(&content);
+            let found = match &name {
+                Some(n) => entries.iter().find(|(k, _)| k == n),
+                None => entries.first(),
+            };
+            match found {
+                Some((_, text)) => text.to_string(),
+                None => bail!(
+                    "{} has no expression{}",
+                    path.display(),
+                    name.map(|n| format!(" named `{n}`")).unwrap_or_default()
+                ),
+            }
+        }
         Some(name) => match corpus::lookup(name) {
             Some(text) => text.to_string(),
             None => {
@@ -184,6 +287,17 @@ fn resolve_expr(arg: &str) -> Result<lang::Expr> {
         None => arg.to_string(),
     };
     lang::parse_expr(&text).map_err(|e| anyhow::anyhow!("invalid expression:\n{e}"))
+}
+
+/// `PATH` or `PATH:NAME` of an existing file of named expressions.
+fn file_reference(reference: &str) -> Option<(PathBuf, Option<String>)> {
+    let whole = PathBuf::from(reference);
+    if whole.is_file() {
+        return Some((whole, None));
+    }
+    let (path, name) = reference.rsplit_once(':')?;
+    let path = PathBuf::from(path);
+    path.is_file().then(|| (path, Some(name.to_string())))
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -337,6 +451,126 @@ fn render(scene: &str, spp: u32, reference_spp: u32, size: (u32, u32), seed: u32
         meta["reference_residual_relmse"].as_f64().unwrap_or(0.0)
     );
     println!("wrote     {}", dir.display());
+    Ok(())
+}
+
+fn evolve(args: EvolveArgs) -> Result<()> {
+    use filterjit::evolve as ev;
+    let base = filterjit::gp::Settings::default();
+    let (preset, size, spp, reference_spp, radius) = match args.preset {
+        Preset::Quick => {
+            (filterjit::gp::Settings { island_size: 25, generations: 15, ..base.clone() }, (32, 32), 4, 512, 3)
+        }
+        Preset::Thesis => (base.clone(), (64, 64), 4, 1024, 10),
+    };
+    let settings = filterjit::gp::Settings {
+        islands: args.islands.unwrap_or(preset.islands),
+        island_size: args.island_size.unwrap_or(preset.island_size),
+        generations: args.generations.unwrap_or(preset.generations),
+        max_length: args.max_length.unwrap_or(preset.max_length),
+        tournament: args.tournament.unwrap_or(preset.tournament),
+        replication: args.replication.unwrap_or(preset.replication),
+        crossover: args.crossover.unwrap_or(preset.crossover),
+        crossover_mutation: args.crossover_mutation.unwrap_or(preset.crossover_mutation),
+        mutation_weights: args.mutation_weights.clone().unwrap_or(preset.mutation_weights.clone()),
+        migration_interval: args.migration_interval.unwrap_or(preset.migration_interval),
+        seed_share: args.seed_share.unwrap_or(preset.seed_share),
+        hall_of_fame: args.hall_of_fame.unwrap_or(preset.hall_of_fame),
+        seed: args.seed.unwrap_or(preset.seed),
+    };
+    let size = args.size.unwrap_or(size);
+    let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
+    let seed_text = resolve_expr(&args.seed_expr)?.to_string();
+    let config = ev::RunConfig {
+        training: if args.scenes.is_empty() { builtin(render::Split::Train) } else { args.scenes.clone() },
+        test: if args.test_scenes.is_empty() { builtin(render::Split::Test) } else { args.test_scenes.clone() },
+        render: render::RenderSettings {
+            width: size.0,
+            height: size.1,
+            spp: args.spp.unwrap_or(spp),
+            reference_spp: args.reference_spp.unwrap_or(reference_spp),
+            seed: settings.seed as u32,
+        },
+        radius: args.radius.unwrap_or(radius),
+        seed_expr: seed_text,
+    };
+    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()));
+    let gpu = gpu::Gpu::open()?;
+    eprintln!(
+        "evolve    {} islands x {}, {} generations, max length {}, radius {}, scenes {}x{} on {}",
+        settings.islands,
+        settings.island_size,
+        settings.generations,
+        settings.max_length,
+        config.radius,
+        size.0,
+        size.1,
+        gpu.describe()
+    );
+    let render_bar = sample_bar("rendering");
+    let mut on_render = |done: u64, total: u64| {
+        render_bar.set_length(total);
+        render_bar.set_position(done);
+        if done == total {
+            render_bar.finish_and_clear();
+        }
+    };
+    let bar = indicatif::ProgressBar::new(settings.generations as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("generation {pos:>4}/{len} {bar:20} {msg}").expect("valid template"),
+    );
+    let mut on_report = |r: &filterjit::gp::Report| {
+        bar.set_position(r.generation as u64);
+        bar.set_message(format!(
+            "best {:.4} median {:.4} invalid {} | compile {:.1}s evaluate {:.1}s gp {:.2}s",
+            r.best, r.median, r.invalid, r.compile_s, r.evaluate_s, r.gp_s
+        ));
+    };
+    let summary = ev::run(
+        &gpu,
+        ev::RunOptions {
+            settings,
+            config,
+            output: args.output.clone(),
+            resume: args.resume,
+            threads,
+            stop_after: None,
+            on_report: &mut on_report,
+            on_render: &mut on_render,
+        },
+    )?
+    .expect("runs to the end");
+    bar.finish();
+    println!("best      {}", summary.best.expr);
+    println!(
+        "fitness   {:.5} (training: mean relMSE / noisy relMSE), length {}",
+        summary.best.fitness.value,
+        lang::parse_expr(&summary.best.expr).map(|e| e.len()).unwrap_or(0)
+    );
+    println!("test      {:<16} {:>12} {:>12} {:>12}", "scene", "noisy", "seed", "best");
+    for (k, name) in summary.test_scenes.iter().enumerate() {
+        println!(
+            "          {:<16} {:>12.5} {:>12.5} {:>12.5}",
+            name, summary.test_noisy_relmse[k], summary.test_seed.relmse[k], summary.test_best.relmse[k]
+        );
+    }
+    println!(
+        "          {:<16} {:>12} {:>12.5} {:>12.5}   (mean relMSE / noisy relMSE)",
+        "normalised", "1", summary.test_seed.normalised, summary.test_best.normalised
+    );
+    let mut used: Vec<(&String, &usize)> = summary.feature_frequencies.iter().filter(|(_, n)| **n > 0).collect();
+    used.sort_by(|a, b| b.1.cmp(a.1));
+    println!("features  {}", used.iter().map(|(f, n)| format!("{f} {n}")).collect::<Vec<_>>().join(", "));
+    println!("time      {:.1} s", summary.seconds);
+    println!(
+        "wrote     {}/{{{},{},{},{},{}}}",
+        args.output.display(),
+        ev::HALL_OF_FAME_FILE,
+        ev::LOG_FILE,
+        ev::CHECKPOINT_FILE,
+        ev::FEATURES_FILE,
+        ev::SUMMARY_FILE
+    );
     Ok(())
 }
 

@@ -3,6 +3,7 @@
 mod common;
 
 mod cli;
+mod evolve;
 mod gpu_vs_cpu;
 mod lang;
 mod render;

@@ -18,8 +18,8 @@ pub const MAX_WEIGHTS_PER_DISPATCH: u64 = 1 << 22;
 pub struct SceneBuffers {
     width: u32,
     height: u32,
-    color: wgpu::Buffer,
-    inputs: HashMap<Input, wgpu::Buffer>,
+    pub(super) color: wgpu::Buffer,
+    pub(super) inputs: HashMap<Input, wgpu::Buffer>,
 }
 
 /// Result of a filter dispatch.
@@ -73,7 +73,7 @@ impl SceneBuffers {
         SceneBuffers { width: scene.width as u32, height: scene.height as u32, color, inputs: HashMap::new() }
     }
 
-    fn ensure(&mut self, gpu: &Gpu, scene: &Scene, input: Input) -> Result<(), GpuError> {
+    pub(super) fn ensure(&mut self, gpu: &Gpu, scene: &Scene, input: Input) -> Result<(), GpuError> {
         if self.inputs.contains_key(&input) {
             return Ok(());
         }

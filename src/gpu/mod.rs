@@ -3,6 +3,7 @@
 
 pub mod adapter;
 mod filter;
+mod fitness;
 mod trace;
 
 use std::collections::HashMap;
@@ -10,6 +11,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
+pub use fitness::{FitnessScene, SceneError as FitnessError};
 pub use trace::{TraceScene, PATHTRACE_WGSL};
 
 use crate::jit::{KernelKey, ValidatedKernel, FIRST_INPUT_BINDING};

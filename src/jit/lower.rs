@@ -91,6 +91,9 @@ pub enum KernelKind {
     Filter,
     /// The raw weight w_ii per pixel, for testing operator semantics.
     Probe,
+    /// The filter's relMSE terms and domain errors, reduced per workgroup
+    /// (binding 2 partial sums, 3 partial flags; the reference after the inputs).
+    Fitness,
 }
 
 impl KernelKind {
@@ -98,6 +101,7 @@ impl KernelKind {
         match self {
             KernelKind::Filter => FILTER_TEMPLATE,
             KernelKind::Probe => PROBE_TEMPLATE,
+            KernelKind::Fitness => FITNESS_TEMPLATE,
         }
     }
 }
@@ -161,21 +165,99 @@ pub fn lower_kind(expr: &Expr, kind: KernelKind) -> Result<KernelSource, LowerEr
     context.insert("template_version", &TEMPLATE_VERSION);
     context.insert("expression", &canonical);
     context.insert("length", &expr.len());
-    context.insert("ops", OPS_WGSL);
+    context.insert("ops", &helpers_for(&wgsl_body_text(&centre_lines, &neighbour_lines, &result)));
     context.insert("bindings", &bindings);
     context.insert("workgroup_x", &WORKGROUP[0]);
     context.insert("workgroup_y", &WORKGROUP[1]);
     context.insert("centre_lines", &centre_lines);
     context.insert("neighbour_lines", &neighbour_lines);
     context.insert("result", &result);
+    context.insert("reference_binding", &(FIRST_INPUT_BINDING + layout.inputs.len() as u32));
     let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
     Ok(KernelSource { kind, expr: expr.clone(), canonical, layout, wgsl })
 }
 
 /// The operator helpers, verbatim.
 pub const OPS_WGSL: &str = include_str!("../../templates/ops.wgsl");
+
+/// `templates/ops.wgsl` cut into its prelude (comments, constants, the flag
+/// variable) and its functions, in file order.
+fn helper_items() -> &'static (String, Vec<(String, String)>) {
+    static ITEMS: OnceLock<(String, Vec<(String, String)>)> = OnceLock::new();
+    ITEMS.get_or_init(|| {
+        let mut prelude = String::new();
+        let mut functions: Vec<(String, String)> = Vec::new();
+        for line in OPS_WGSL.lines() {
+            if let Some(rest) = line.strip_prefix("fn ") {
+                let name = rest.split('(').next().unwrap_or_default().trim().to_string();
+                functions.push((name, String::new()));
+            } else if line.starts_with("//") && functions.last().is_some_and(|(_, body)| body.trim_end().ends_with('}'))
+            {
+                // A comment between functions belongs to the next one.
+                functions.push((String::new(), String::new()));
+            }
+            match functions.last_mut() {
+                Some((_, body)) => {
+                    body.push_str(line);
+                    body.push('\n');
+                }
+                None => {
+                    prelude.push_str(line);
+                    prelude.push('\n');
+                }
+            }
+        }
+        // Attach leading comments (items without a name) to the function after them.
+        let mut merged: Vec<(String, String)> = Vec::new();
+        let mut pending = String::new();
+        for (name, body) in functions {
+            if name.is_empty() {
+                pending.push_str(&body);
+            } else {
+                merged.push((name, std::mem::take(&mut pending) + &body));
+            }
+        }
+        (prelude, merged)
+    })
+}
+
+fn wgsl_body_text(centre: &[String], neighbour: &[String], result: &str) -> String {
+    let mut text = centre.join("\n");
+    text.push('\n');
+    text.push_str(&neighbour.join("\n"));
+    text.push('\n');
+    text.push_str(result);
+    // Every kernel computes its weight through fj_weight.
+    text.push_str("\nfj_weight(");
+    text
+}
+
+/// The prelude and exactly the helper functions `code` calls, directly or
+/// through other helpers: a smaller module compiles faster, and a kernel
+/// reads as what it computes.
+pub fn helpers_for(code: &str) -> String {
+    let (prelude, functions) = helper_items();
+    let mut used = vec![false; functions.len()];
+    let mut frontier = vec![code.to_string()];
+    while let Some(text) = frontier.pop() {
+        for (k, (name, body)) in functions.iter().enumerate() {
+            if !used[k] && text.contains(&format!("{name}(")) {
+                used[k] = true;
+                frontier.push(body.clone());
+            }
+        }
+    }
+    let mut out = prelude.clone();
+    for (k, (_, body)) in functions.iter().enumerate() {
+        if used[k] {
+            out.push_str(body);
+        }
+    }
+    out
+}
 const FILTER_TEMPLATE: &str = "filter.wgsl";
 const PROBE_TEMPLATE: &str = "probe.wgsl";
+const FITNESS_TEMPLATE: &str = "fitness.wgsl";
 
 fn templates() -> &'static tera::Tera {
     static TERA: OnceLock<tera::Tera> = OnceLock::new();
@@ -185,6 +267,8 @@ fn templates() -> &'static tera::Tera {
             .expect("built-in kernel template parses");
         tera.add_raw_template(PROBE_TEMPLATE, include_str!("../../templates/probe.wgsl.tera"))
             .expect("built-in probe template parses");
+        tera.add_raw_template(FITNESS_TEMPLATE, include_str!("../../templates/fitness.wgsl.tera"))
+            .expect("built-in fitness template parses");
         tera
     })
 }

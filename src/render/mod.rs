@@ -80,7 +80,7 @@ pub fn describe(arg: &str) -> Result<Description, DescriptionError> {
     }
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, serde::Deserialize)]
 pub struct RenderSettings {
     pub width: u32,
     pub height: u32,

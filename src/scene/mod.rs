@@ -166,13 +166,51 @@ fn locate(path: &Path, request: &Request) -> Result<Files, SceneError> {
     Ok(Files { reference, variance: beside(VARIANCE_FILE), meta: beside(META_FILE), noisy, name })
 }
 
-/// Samples per pixel from Mitsuba's `meta.json` (`noisy.spp`) or filterjit's (`spp`).
-fn read_spp(meta: &Path) -> Result<Option<u32>, SceneError> {
+/// The features and variances a scene on disk provides, from its channel names alone.
+pub fn provides(path: &Path) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>), SceneError> {
+    let files = locate(path, &Request::default())?;
+    let (channels, _, _) = exr_io::channel_names(&files.noisy)?;
+    let layout = Layout::detect(&channels);
+    let mut features: BTreeSet<Feature> = [Feature::Color, Feature::Pixel].into_iter().collect();
+    for f in Feature::ALL {
+        if f.source() == FeatureSource::Stored(*f)
+            && *f != Feature::Color
+            && pick(layout.feature(*f), &channels).is_some()
+        {
+            features.insert(*f);
+        }
+    }
+    for f in Feature::ALL {
+        if let FeatureSource::Gradient(base) = f.source() {
+            if features.contains(&base) {
+                features.insert(*f);
+            }
+        }
+    }
+    let separate = match &files.variance {
+        Some(file) => exr_io::channel_names(file)?.0,
+        None => Vec::new(),
+    };
+    let variances = ScalarVar::ALL
+        .iter()
+        .copied()
+        .filter(|v| {
+            let (alternatives, in_separate_file) = layout.variance(*v);
+            pick(alternatives, if in_separate_file { &separate } else { &channels }).is_some()
+        })
+        .collect();
+    Ok((features, variances))
+}
+
+/// Samples per pixel and scene name from Mitsuba's `meta.json` (`noisy.spp`,
+/// `scene`) or filterjit's (`spp`, `scene`).
+fn read_meta(meta: &Path) -> Result<(Option<u32>, Option<String>), SceneError> {
     let text = std::fs::read_to_string(meta).map_err(|e| SceneError::io(meta, e))?;
     let json: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| SceneError::Meta { file: meta.to_path_buf(), message: e.to_string() })?;
     let spp = json.pointer("/noisy/spp").or_else(|| json.get("spp")).and_then(|v| v.as_u64());
-    Ok(spp.map(|s| s as u32))
+    let name = json.get("scene").and_then(|v| v.as_str()).map(str::to_string);
+    Ok((spp.map(|s| s as u32), name))
 }
 
 /// Load a scene: a directory holding `noisy.exr` (and `reference.exr`,
@@ -355,14 +393,14 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
         _ => None,
     };
 
-    let spp = match (request.spp, &files.meta) {
-        (Some(spp), _) => Some(spp),
-        (None, Some(meta)) => read_spp(meta)?,
-        (None, None) => None,
+    let (meta_spp, meta_name) = match &files.meta {
+        Some(meta) => read_meta(meta)?,
+        None => (None, None),
     };
+    let spp = request.spp.or(meta_spp);
 
     Ok(Scene {
-        name: files.name,
+        name: meta_name.unwrap_or(files.name),
         width,
         height,
         spp,

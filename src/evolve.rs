@@ -1,0 +1,420 @@
+//! `filterjit evolve`: the GP engine wired to scenes and to the JIT. Each
+//! individual is compiled into its own fitness kernel; fitness is reduced on
+//! the device; the run checkpoints every generation.
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use serde::{Deserialize, Serialize};
+
+use crate::gp::{self, EvalTime, Evaluator, Fitness, Settings, State};
+use crate::gpu::{FitnessScene, Gpu};
+use crate::jit::{self, KernelKind};
+use crate::lang::{Expr, Feature, ScalarVar};
+use crate::render::{self, RenderSettings};
+use crate::scene::{self, Request, Scene};
+use crate::{metrics, semantics};
+
+/// Fitness of expressions on a set of scenes, on the GPU.
+pub struct GpuEvaluator<'g> {
+    gpu: &'g Gpu,
+    scenes: Vec<Scene>,
+    device_scenes: Vec<FitnessScene>,
+    /// relMSE of each scene's noisy input: fitness divides by it (thesis 3.2.3).
+    noisy: Vec<f64>,
+    radius: u32,
+    threads: usize,
+    time: EvalTime,
+}
+
+impl<'g> GpuEvaluator<'g> {
+    pub fn new(gpu: &'g Gpu, scenes: Vec<Scene>, radius: u32, threads: usize) -> Result<Self> {
+        let mut device_scenes = Vec::new();
+        let mut noisy = Vec::new();
+        for s in &scenes {
+            device_scenes.push(FitnessScene::new(gpu, s)?);
+            let reference =
+                s.reference.as_ref().with_context(|| format!("scene `{}` has no reference image", s.name))?;
+            noisy.push(metrics::errors(&s.color, reference, s.spp).relmse.max(1e-12));
+        }
+        Ok(GpuEvaluator { gpu, scenes, device_scenes, noisy, radius, threads, time: EvalTime::default() })
+    }
+
+    pub fn scenes(&self) -> &[Scene] {
+        &self.scenes
+    }
+
+    /// relMSE of every expression on every scene (`[expr][scene]`), with domain-error bits.
+    pub fn errors(&mut self, exprs: &[Expr]) -> Result<Vec<Vec<crate::gpu::FitnessError>>> {
+        let start = Instant::now();
+        let threads = self.threads.max(1);
+        let chunk = exprs.len().div_ceil(threads).max(1);
+        let compiled: Vec<Result<jit::ValidatedKernel, jit::CompileError>> = std::thread::scope(|s| {
+            let handles: Vec<_> = exprs
+                .chunks(chunk)
+                .map(|part| {
+                    s.spawn(move || part.iter().map(|e| jit::compile_kind(e, KernelKind::Fitness)).collect::<Vec<_>>())
+                })
+                .collect();
+            handles.into_iter().flat_map(|h| h.join().expect("compile thread panicked")).collect()
+        });
+        let kernels: Vec<jit::ValidatedKernel> = compiled.into_iter().collect::<Result<_, _>>()?;
+        let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
+        self.gpu.prepare_pipelines(&refs, threads)?;
+        self.time.compile += start.elapsed();
+        let start = Instant::now();
+        let data: Vec<&Scene> = self.scenes.iter().collect();
+        let out = self.gpu.evaluate_fitness(&refs, &mut self.device_scenes, &data, self.radius)?;
+        // Each generation's kernels are new: the memo keeps their fitness, not their pipelines.
+        self.gpu.prune_pipelines(|_| false);
+        self.time.evaluate += start.elapsed();
+        Ok(out)
+    }
+
+    pub fn noisy_relmse(&self) -> &[f64] {
+        &self.noisy
+    }
+}
+
+impl Evaluator for GpuEvaluator<'_> {
+    fn evaluate(&mut self, exprs: &[Expr]) -> Result<Vec<Fitness>> {
+        let errors = self.errors(exprs)?;
+        Ok(errors
+            .iter()
+            .map(|per_scene| {
+                let flags = per_scene.iter().fold(0, |a, e| a | e.flags);
+                if flags != 0 {
+                    return Fitness::invalid(format!("domain error: {}", semantics::flag::describe(flags).join("; ")));
+                }
+                if per_scene.iter().any(|e| !e.finite || !e.relmse.is_finite()) {
+                    return Fitness::invalid("non-finite error");
+                }
+                let mean =
+                    per_scene.iter().zip(&self.noisy).map(|(e, n)| e.relmse / n).sum::<f64>() / per_scene.len() as f64;
+                Fitness::valid(mean)
+            })
+            .collect())
+    }
+
+    fn take_time(&mut self) -> EvalTime {
+        std::mem::take(&mut self.time)
+    }
+}
+
+/// Where scenes come from: built-in names, .toml descriptions, or dataset directories/files.
+pub fn resolve_scenes(
+    gpu: &Gpu,
+    args: &[String],
+    settings: &RenderSettings,
+    progress: render::Progress<'_>,
+) -> Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for arg in args {
+        let path = Path::new(arg);
+        let is_dataset = path.is_dir() || path.extension().is_some_and(|e| e == "exr");
+        if is_dataset {
+            out.push(path.to_path_buf());
+        } else {
+            let d = render::describe(arg)?;
+            out.push(render::cached(gpu, &render::cache_root(), &d, settings, &mut *progress)?);
+        }
+    }
+    Ok(out)
+}
+
+/// Features and variances every one of the datasets provides.
+pub fn common_terminals(datasets: &[PathBuf]) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>)> {
+    let mut features: Option<BTreeSet<Feature>> = None;
+    let mut variances: Option<BTreeSet<ScalarVar>> = None;
+    for d in datasets {
+        let (f, v) = scene::provides(d).with_context(|| format!("reading {}", d.display()))?;
+        features = Some(match features {
+            Some(all) => all.intersection(&f).copied().collect(),
+            None => f,
+        });
+        variances = Some(match variances {
+            Some(all) => all.intersection(&v).copied().collect(),
+            None => v,
+        });
+    }
+    Ok((features.unwrap_or_default(), variances.unwrap_or_default()))
+}
+
+pub fn load_all(
+    datasets: &[PathBuf],
+    features: &BTreeSet<Feature>,
+    variances: &BTreeSet<ScalarVar>,
+) -> Result<Vec<Scene>> {
+    datasets
+        .iter()
+        .map(|d| {
+            let request = Request {
+                features: features.clone(),
+                variances: variances.clone(),
+                reference: true,
+                ..Default::default()
+            };
+            scene::load(d, &request).with_context(|| format!("loading {}", d.display()))
+        })
+        .collect()
+}
+
+/// The checkpoint file: the state after a generation, and what produced it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Checkpoint {
+    pub version: u32,
+    pub settings: Settings,
+    pub run: RunConfig,
+    pub state: State,
+}
+
+/// The run's inputs besides the GP settings; a resumed run must match them.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RunConfig {
+    pub training: Vec<String>,
+    pub test: Vec<String>,
+    pub render: RenderSettings,
+    pub radius: u32,
+    pub seed_expr: String,
+}
+
+pub const CHECKPOINT_FILE: &str = "checkpoint.json";
+pub const LOG_FILE: &str = "log.jsonl";
+pub const HALL_OF_FAME_FILE: &str = "hall_of_fame.txt";
+pub const FEATURES_FILE: &str = "features.json";
+pub const SUMMARY_FILE: &str = "summary.json";
+
+pub fn write_checkpoint(dir: &Path, checkpoint: &Checkpoint) -> Result<()> {
+    let text = serde_json::to_string(checkpoint)?;
+    crate::io::write_bytes_atomically(&dir.join(CHECKPOINT_FILE), text.as_bytes()).map_err(anyhow::Error::msg)
+}
+
+pub fn read_checkpoint(dir: &Path) -> Result<Checkpoint> {
+    let path = dir.join(CHECKPOINT_FILE);
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let checkpoint: Checkpoint =
+        serde_json::from_str(&text).with_context(|| format!("{} is not a filterjit checkpoint", path.display()))?;
+    if checkpoint.version != 1 {
+        bail!("{}: checkpoint version {} is not supported", path.display(), checkpoint.version);
+    }
+    Ok(checkpoint)
+}
+
+/// The log keeps one JSON line per generation; rewrite it to end at `generation`
+/// (a resumed run may have logged generations after its last checkpoint).
+pub fn log_upto(dir: &Path, generation: u32) -> Result<()> {
+    let path = dir.join(LOG_FILE);
+    let Ok(text) = std::fs::read_to_string(&path) else { return Ok(()) };
+    let kept: String = text
+        .lines()
+        .filter(|l| {
+            serde_json::from_str::<serde_json::Value>(l)
+                .ok()
+                .and_then(|v| v["generation"].as_u64())
+                .is_some_and(|g| g <= generation as u64)
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    crate::io::write_bytes_atomically(&path, kept.as_bytes()).map_err(anyhow::Error::msg)
+}
+
+pub fn append_log(dir: &Path, report: &gp::Report) -> Result<()> {
+    use std::io::Write;
+    let mut file = std::fs::OpenOptions::new().create(true).append(true).open(dir.join(LOG_FILE))?;
+    writeln!(file, "{}", serde_json::to_string(report)?)?;
+    Ok(())
+}
+
+/// The hall of fame in the named-expression format `filter --expr @FILE` reads.
+pub fn hall_of_fame_text(state: &State, k: usize) -> String {
+    let mut text = String::from("# filterjit hall of fame: the best expressions of every island, best first.\n# Use one with `filterjit filter --expr @hall_of_fame.txt:NAME` (the first without :NAME).\n");
+    let mut entries = gp::hall_of_fame(state, k);
+    entries.sort_by(|a, b| a.1.fitness.value.total_cmp(&b.1.fitness.value));
+    let mut rank_in_island = vec![0usize; state.islands.len()];
+    for (island, m) in entries {
+        rank_in_island[island] += 1;
+        let len = crate::lang::parse_expr(&m.expr).map(|e| e.len()).unwrap_or(0);
+        let fitness = match &m.fitness.invalid {
+            Some(reason) => format!("invalid ({reason})"),
+            None => format!("{:.6}", m.fitness.value),
+        };
+        text.push_str(&format!(
+            "# fitness {fitness}, length {len}\nisland{island}_rank{} = {}\n",
+            rank_in_island[island], m.expr
+        ));
+    }
+    text
+}
+
+/// Test-set results of one expression.
+#[derive(Clone, Debug, Serialize)]
+pub struct TestResult {
+    pub expr: String,
+    /// relMSE per test scene (equation 3.5 without m/2).
+    pub relmse: Vec<f64>,
+    /// Mean over test scenes of relMSE / noisy relMSE.
+    pub normalised: f64,
+    pub invalid: Option<String>,
+}
+
+/// What a finished run reports.
+#[derive(Clone, Debug, Serialize)]
+pub struct Summary {
+    pub generations: u32,
+    pub best: gp::StoredMember,
+    pub test_scenes: Vec<String>,
+    pub test_noisy_relmse: Vec<f64>,
+    pub test_best: TestResult,
+    pub test_seed: TestResult,
+    pub feature_frequencies: std::collections::BTreeMap<String, usize>,
+    pub seconds: f64,
+}
+
+/// Evaluate expressions on test scenes.
+pub fn test(evaluator: &mut GpuEvaluator<'_>, exprs: &[Expr]) -> Result<Vec<TestResult>> {
+    let errors = evaluator.errors(exprs)?;
+    let noisy = evaluator.noisy_relmse().to_vec();
+    Ok(exprs
+        .iter()
+        .zip(errors)
+        .map(|(e, per_scene)| {
+            let flags = per_scene.iter().fold(0, |a, s| a | s.flags);
+            let relmse: Vec<f64> = per_scene.iter().map(|s| s.relmse).collect();
+            let normalised = relmse.iter().zip(&noisy).map(|(r, n)| r / n).sum::<f64>() / relmse.len().max(1) as f64;
+            TestResult {
+                expr: e.to_string(),
+                relmse,
+                normalised,
+                invalid: (flags != 0).then(|| semantics::flag::describe(flags).join("; ")),
+            }
+        })
+        .collect())
+}
+
+/// Everything `run` needs.
+pub struct RunOptions<'a> {
+    pub settings: Settings,
+    pub config: RunConfig,
+    pub output: PathBuf,
+    pub resume: bool,
+    pub threads: usize,
+    /// Stop after this many generations in this process (for tests of resuming); `None` runs to the end.
+    pub stop_after: Option<u32>,
+    pub on_report: &'a mut dyn FnMut(&gp::Report),
+    pub on_render: render::Progress<'a>,
+}
+
+/// Run (or resume) a search; returns the summary when the last generation is done.
+pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
+    let start = Instant::now();
+    let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render } = options;
+    settings.check().map_err(anyhow::Error::msg)?;
+    std::fs::create_dir_all(&output).with_context(|| format!("creating {}", output.display()))?;
+    let existing = output.join(CHECKPOINT_FILE).is_file();
+    let resumed = match (existing, resume) {
+        (true, true) => {
+            let checkpoint = read_checkpoint(&output)?;
+            if checkpoint.settings != settings || checkpoint.run != config {
+                bail!(
+                    "{} was made with other settings or scenes; resume with the same flags, or choose another --output",
+                    output.join(CHECKPOINT_FILE).display()
+                );
+            }
+            log_upto(&output, checkpoint.state.generation)?;
+            Some(checkpoint.state)
+        }
+        (true, false) => {
+            bail!("{} holds a run already; pass --resume to continue it, or choose another --output", output.display())
+        }
+        (false, true) => bail!("nothing to resume: {} has no {CHECKPOINT_FILE}", output.display()),
+        (false, false) => {
+            let _ = std::fs::remove_file(output.join(LOG_FILE));
+            None
+        }
+    };
+
+    let training = resolve_scenes(gpu, &config.training, &config.render, &mut *on_render)?;
+    let (features, variances) = common_terminals(&training)?;
+    let seed_expr = crate::lang::parse_expr(&config.seed_expr).map_err(|e| anyhow::anyhow!("seed expression:\n{e}"))?;
+    for f in seed_expr.features() {
+        if !features.contains(&f) {
+            bail!("the seed expression reads `{f}`, which the training scenes do not all provide");
+        }
+    }
+    let scenes = load_all(&training, &features, &variances)?;
+    let mut evaluator = GpuEvaluator::new(gpu, scenes, config.radius, threads)?;
+    let terminals = gp::operators::Terminals {
+        features: features.iter().copied().collect(),
+        variables: variances.iter().copied().collect(),
+        constants: crate::lang::ops::THESIS_CONSTANTS.to_vec(),
+    };
+    let mut engine = gp::Engine::new(settings.clone(), terminals, seed_expr.clone(), &mut evaluator);
+
+    let mut state = match resumed {
+        Some(state) => state,
+        None => {
+            let (state, report) = engine.initial()?;
+            append_log(&output, &report)?;
+            write_checkpoint(
+                &output,
+                &Checkpoint { version: 1, settings: settings.clone(), run: config.clone(), state: state.clone() },
+            )?;
+            on_report(&report);
+            state
+        }
+    };
+    let mut done_here = 0;
+    while state.generation < settings.generations {
+        if stop_after.is_some_and(|n| done_here >= n) {
+            return Ok(None);
+        }
+        let (next, report) = engine.step(&state)?;
+        append_log(&output, &report)?;
+        write_checkpoint(
+            &output,
+            &Checkpoint { version: 1, settings: settings.clone(), run: config.clone(), state: next.clone() },
+        )?;
+        on_report(&report);
+        state = next;
+        done_here += 1;
+    }
+    drop(engine);
+
+    let hall = hall_of_fame_text(&state, settings.hall_of_fame);
+    crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes()).map_err(anyhow::Error::msg)?;
+    let frequencies = gp::feature_frequencies(&state);
+    crate::io::write_bytes_atomically(
+        &output.join(FEATURES_FILE),
+        serde_json::to_string_pretty(&frequencies)?.as_bytes(),
+    )
+    .map_err(anyhow::Error::msg)?;
+    let best = gp::hall_of_fame(&state, 1)
+        .into_iter()
+        .map(|(_, m)| m)
+        .min_by(|a, b| a.fitness.value.total_cmp(&b.fitness.value))
+        .expect("a non-empty population");
+
+    let test_sets = resolve_scenes(gpu, &config.test, &config.render, &mut *on_render)?;
+    let test_scenes = load_all(&test_sets, &features, &variances)?;
+    let names = test_scenes.iter().map(|s| s.name.clone()).collect();
+    let mut tester = GpuEvaluator::new(gpu, test_scenes, config.radius, threads)?;
+    let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut results = test(&mut tester, &[best_expr, seed_expr])?;
+    let test_seed = results.pop().expect("two results");
+    let test_best = results.pop().expect("two results");
+    let summary = Summary {
+        generations: state.generation,
+        best,
+        test_scenes: names,
+        test_noisy_relmse: tester.noisy_relmse().to_vec(),
+        test_best,
+        test_seed,
+        feature_frequencies: frequencies,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    crate::io::write_bytes_atomically(&output.join(SUMMARY_FILE), serde_json::to_string_pretty(&summary)?.as_bytes())
+        .map_err(anyhow::Error::msg)?;
+    Ok(Some(summary))
+}

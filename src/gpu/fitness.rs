@@ -1,0 +1,234 @@
+//! Fitness on the device: many kernels on many scenes in few submissions,
+//! each dispatch reducing its relMSE terms per workgroup; only the partial
+//! sums come back.
+
+use wgpu::util::DeviceExt;
+
+use super::filter::{rows_per_dispatch, SceneBuffers};
+use super::{Gpu, GpuError};
+use crate::jit::{KernelKind, ValidatedKernel, FIRST_INPUT_BINDING, WORKGROUP};
+use crate::scene::Scene;
+
+/// Dispatches per submission: small enough to keep each submission short.
+const DISPATCHES_PER_SUBMISSION: usize = 64;
+
+/// A scene with its reference on the device.
+pub struct FitnessScene {
+    buffers: SceneBuffers,
+    reference: wgpu::Buffer,
+    width: u32,
+    height: u32,
+}
+
+/// The error of one kernel on one scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneError {
+    /// relMSE (equation 3.5 without the m/2 factor) of the filtered image.
+    pub relmse: f64,
+    /// Union of the domain-error bits of every pixel.
+    pub flags: u32,
+    /// Whether the reduced error was finite.
+    pub finite: bool,
+}
+
+impl FitnessScene {
+    pub fn new(gpu: &Gpu, scene: &Scene) -> Result<Self, GpuError> {
+        let reference = scene.reference.as_ref().ok_or_else(|| GpuError::Runtime {
+            during: "preparing fitness",
+            message: format!("scene `{}` has no reference image", scene.name),
+        })?;
+        let rgba: Vec<[f32; 4]> = reference.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
+        let reference = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("reference"),
+            contents: bytemuck::cast_slice(&rgba),
+            usage: wgpu::BufferUsages::STORAGE,
+        });
+        Ok(FitnessScene {
+            buffers: SceneBuffers::new(gpu, scene),
+            reference,
+            width: scene.width as u32,
+            height: scene.height as u32,
+        })
+    }
+
+    fn groups(&self) -> u64 {
+        self.width.div_ceil(WORKGROUP[0]) as u64 * self.height.div_ceil(WORKGROUP[1]) as u64
+    }
+}
+
+impl Gpu {
+    /// Create the pipelines of `kernels` on up to `threads` threads (cache hits are free).
+    pub fn prepare_pipelines(&self, kernels: &[&ValidatedKernel], threads: usize) -> Result<(), GpuError> {
+        let threads = threads.clamp(1, kernels.len().max(1));
+        let chunk = kernels.len().div_ceil(threads).max(1);
+        std::thread::scope(|s| {
+            let handles: Vec<_> = kernels
+                .chunks(chunk)
+                .map(|part| s.spawn(move || part.iter().try_for_each(|k| self.pipeline(k).map(|_| ()))))
+                .collect();
+            handles.into_iter().try_for_each(|h| h.join().expect("pipeline thread panicked"))
+        })
+    }
+
+    /// Keep only the cached pipelines for which `keep` holds.
+    pub fn prune_pipelines(&self, keep: impl Fn(&crate::jit::KernelKey) -> bool) {
+        self.pipelines.lock().expect("pipeline cache lock").retain(|k, _| keep(k));
+    }
+
+    /// Evaluate every fitness kernel on every scene. `result[k][s]` is kernel k on scene s.
+    pub fn evaluate_fitness(
+        &self,
+        kernels: &[&ValidatedKernel],
+        scenes: &mut [FitnessScene],
+        data: &[&Scene],
+        radius: u32,
+    ) -> Result<Vec<Vec<SceneError>>, GpuError> {
+        assert_eq!(scenes.len(), data.len(), "one FitnessScene per Scene");
+        for k in kernels {
+            assert_eq!(k.source().kind, KernelKind::Fitness, "evaluate_fitness runs fitness kernels");
+        }
+        let device = self.device();
+        let mut pipelines = Vec::with_capacity(kernels.len());
+        for k in kernels {
+            pipelines.push(self.pipeline(k)?.0);
+            for (fs, scene) in scenes.iter_mut().zip(data) {
+                for input in &k.source().layout.inputs {
+                    fs.buffers.ensure(self, scene, *input)?;
+                }
+            }
+        }
+
+        // One region of the partials buffers per (kernel, scene), aligned for binding offsets.
+        let align = (self.limits.min_storage_buffer_offset_alignment as u64 / 4).max(1);
+        let mut offsets = Vec::new();
+        let mut total = 0u64;
+        for _ in kernels {
+            for fs in scenes.iter() {
+                offsets.push(total);
+                total += fs.groups().div_ceil(align) * align;
+            }
+        }
+        let total = total.max(1);
+        let make = |label, usage| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: total * 4,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let partials = make("partials", wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
+        let partial_flags = make("partial flags", wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("fitness readback"),
+            size: total * 8,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+
+        // Parameters per scene and band, shared by every kernel.
+        let bands: Vec<Vec<(wgpu::Buffer, u32)>> = scenes
+            .iter()
+            .map(|fs| {
+                let rows = rows_per_dispatch(fs.width, radius);
+                (0..fs.height)
+                    .step_by(rows as usize)
+                    .map(|row| {
+                        let params = [fs.width, fs.height, radius, row];
+                        let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                            label: Some("params"),
+                            contents: bytemuck::cast_slice(&params),
+                            usage: wgpu::BufferUsages::UNIFORM,
+                        });
+                        (buffer, rows.min(fs.height - row))
+                    })
+                    .collect()
+            })
+            .collect();
+
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        let mut pending = 0;
+        for (k, (kernel, pipeline)) in kernels.iter().zip(&pipelines).enumerate() {
+            let layout = pipeline.get_bind_group_layout(0);
+            for (s, fs) in scenes.iter().enumerate() {
+                let offset = offsets[k * scenes.len() + s] * 4;
+                let size = std::num::NonZeroU64::new(fs.groups() * 4);
+                for (params, rows) in &bands[s] {
+                    let mut entries = vec![
+                        wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
+                        wgpu::BindGroupEntry { binding: 1, resource: fs.buffers.color.as_entire_binding() },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                buffer: &partials,
+                                offset,
+                                size,
+                            }),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                buffer: &partial_flags,
+                                offset,
+                                size,
+                            }),
+                        },
+                    ];
+                    let inputs = &kernel.source().layout.inputs;
+                    for (n, input) in inputs.iter().enumerate() {
+                        entries.push(wgpu::BindGroupEntry {
+                            binding: FIRST_INPUT_BINDING + n as u32,
+                            resource: fs.buffers.inputs[input].as_entire_binding(),
+                        });
+                    }
+                    entries.push(wgpu::BindGroupEntry {
+                        binding: FIRST_INPUT_BINDING + inputs.len() as u32,
+                        resource: fs.reference.as_entire_binding(),
+                    });
+                    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                        label: None,
+                        layout: &layout,
+                        entries: &entries,
+                    });
+                    {
+                        let mut pass = encoder
+                            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+                        pass.set_pipeline(pipeline);
+                        pass.set_bind_group(0, &bind_group, &[]);
+                        pass.dispatch_workgroups(fs.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
+                    }
+                    pending += 1;
+                    if pending == DISPATCHES_PER_SUBMISSION {
+                        let full = std::mem::replace(&mut encoder, device.create_command_encoder(&Default::default()));
+                        self.queue().submit([full.finish()]);
+                        pending = 0;
+                    }
+                }
+            }
+        }
+        encoder.copy_buffer_to_buffer(&partials, 0, &staging, 0, total * 4);
+        encoder.copy_buffer_to_buffer(&partial_flags, 0, &staging, total * 4, total * 4);
+        self.queue().submit([encoder.finish()]);
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "evaluating fitness", message: error.to_string() });
+        }
+        let bytes = self.read(&staging)?;
+        let sums: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[..(total * 4) as usize]);
+        let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(total * 4) as usize..]);
+        let mut out = Vec::with_capacity(kernels.len());
+        for k in 0..kernels.len() {
+            let mut row = Vec::with_capacity(scenes.len());
+            for (s, fs) in scenes.iter().enumerate() {
+                let start = offsets[k * scenes.len() + s] as usize;
+                let range = start..start + fs.groups() as usize;
+                let sum: f64 = sums[range.clone()].iter().map(|v| *v as f64).sum();
+                let bits = flags[range].iter().fold(0, |a, b| a | b);
+                let pixels = (fs.width * fs.height) as f64;
+                row.push(SceneError { relmse: sum / pixels, flags: bits, finite: sum.is_finite() });
+            }
+            out.push(row);
+        }
+        Ok(out)
+    }
+}

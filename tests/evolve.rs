@@ -1,0 +1,217 @@
+//! `evolve`: determinism, exact resumption, the terminal set, invalid individuals.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use filterjit::evolve::{self, GpuEvaluator, RunConfig, RunOptions};
+use filterjit::gp::{Evaluator, Settings};
+use filterjit::lang::{parse_expr, Feature};
+use filterjit::render::{self, RenderSettings};
+use filterjit::{corpus, scene};
+
+use crate::common::{gpu, mitsuba_sample};
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("filterjit-evolve-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+/// Two tiny rendered datasets shared by the tests: (training, test).
+fn datasets() -> &'static (PathBuf, PathBuf) {
+    static SETS: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
+    SETS.get_or_init(|| {
+        let root = temp_dir("datasets");
+        let settings = RenderSettings { width: 16, height: 16, spp: 2, reference_spp: 32, seed: 0 };
+        let mut out = Vec::new();
+        for name in ["soft-shadows", "cornell"] {
+            let d = render::builtin(name).unwrap().unwrap();
+            let dir = root.join(name);
+            render::render(gpu(), &d, &settings, &mut |_, _| {}).unwrap().write(&dir, &d, &settings).unwrap();
+            out.push(dir);
+        }
+        (out[0].clone(), out[1].clone())
+    })
+}
+
+fn small() -> Settings {
+    Settings {
+        islands: 2,
+        island_size: 6,
+        generations: 4,
+        migration_interval: 2,
+        hall_of_fame: 3,
+        seed: 7,
+        ..Settings::default()
+    }
+}
+
+fn config(training: &Path, test: &Path) -> RunConfig {
+    RunConfig {
+        training: vec![training.display().to_string()],
+        test: vec![test.display().to_string()],
+        render: RenderSettings::default(),
+        radius: 2,
+        seed_expr: parse_expr(corpus::lookup("bilateral").unwrap()).unwrap().to_string(),
+    }
+}
+
+fn run(
+    dir: &Path,
+    settings: Settings,
+    config: RunConfig,
+    resume: bool,
+    stop_after: Option<u32>,
+) -> Option<evolve::Summary> {
+    evolve::run(
+        gpu(),
+        RunOptions {
+            settings,
+            config,
+            output: dir.to_path_buf(),
+            resume,
+            threads: 2,
+            stop_after,
+            on_report: &mut |_| {},
+            on_render: &mut |_, _| {},
+        },
+    )
+    .unwrap()
+}
+
+fn read(path: PathBuf) -> String {
+    std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+#[test]
+fn runs_are_deterministic_and_resume_exactly() {
+    let (training, test) = datasets();
+    let a = temp_dir("a");
+    let summary = run(&a, small(), config(training, test), false, None).expect("finished");
+    assert_eq!(summary.generations, 4);
+    assert!(summary.best.fitness.invalid.is_none());
+    assert!(
+        summary.best.fitness.value <= 1.5,
+        "filtering should not be far worse than the noisy input: {:?}",
+        summary.best
+    );
+
+    // The same seed and inputs: the same run, bit for bit.
+    let b = temp_dir("b");
+    run(&b, small(), config(training, test), false, None).expect("finished");
+    let state = |dir: &Path| {
+        serde_json::from_str::<serde_json::Value>(&read(dir.join(evolve::CHECKPOINT_FILE))).unwrap()["state"].clone()
+    };
+    assert_eq!(state(&a), state(&b));
+    assert_eq!(read(a.join(evolve::HALL_OF_FAME_FILE)), read(b.join(evolve::HALL_OF_FAME_FILE)));
+
+    // Interrupted after two generations, then resumed: the same end.
+    let c = temp_dir("c");
+    assert!(run(&c, small(), config(training, test), false, Some(2)).is_none());
+    let log_lines = read(c.join(evolve::LOG_FILE)).lines().count();
+    assert_eq!(log_lines, 3, "generations 0, 1 and 2 are logged");
+    run(&c, small(), config(training, test), true, None).expect("finished");
+    assert_eq!(state(&a), state(&c));
+    assert_eq!(read(a.join(evolve::HALL_OF_FAME_FILE)), read(c.join(evolve::HALL_OF_FAME_FILE)));
+    assert_eq!(read(c.join(evolve::LOG_FILE)).lines().count(), 5);
+
+    // Starting over an existing run, or resuming with other settings, is refused.
+    let err = evolve::run(
+        gpu(),
+        RunOptions {
+            settings: small(),
+            config: config(training, test),
+            output: a.clone(),
+            resume: false,
+            threads: 1,
+            stop_after: None,
+            on_report: &mut |_| {},
+            on_render: &mut |_, _| {},
+        },
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("--resume"), "{err}");
+    let other = Settings { seed: 8, ..small() };
+    let err = evolve::run(
+        gpu(),
+        RunOptions {
+            settings: other,
+            config: config(training, test),
+            output: a.clone(),
+            resume: true,
+            threads: 1,
+            stop_after: None,
+            on_report: &mut |_| {},
+            on_render: &mut |_, _| {},
+        },
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("other settings"), "{err}");
+}
+
+#[test]
+fn the_hall_of_fame_reads_back_through_the_grammar() {
+    let (training, test) = datasets();
+    let dir = temp_dir("hof");
+    run(&dir, Settings { generations: 1, ..small() }, config(training, test), false, None).expect("finished");
+    let text = read(dir.join(evolve::HALL_OF_FAME_FILE));
+    let entries = corpus::parse_named(&text);
+    assert!(!entries.is_empty() && entries.len() <= 2 * 3, "{text}");
+    for (name, expr) in entries {
+        assert!(name.starts_with("island"), "{name}");
+        parse_expr(expr).unwrap_or_else(|e| panic!("{name}: {e}"));
+    }
+    let features: serde_json::Value = serde_json::from_str(&read(dir.join(evolve::FEATURES_FILE))).unwrap();
+    assert!(features["color"].as_u64().unwrap() > 0, "the bilateral seed compares colours: {features}");
+}
+
+#[test]
+fn the_terminal_set_is_what_the_training_scenes_provide() {
+    let sample = mitsuba_sample();
+    let (features, variances) = evolve::common_terminals(std::slice::from_ref(&sample)).unwrap();
+    assert!(!features.contains(&Feature::SecondaryTexture) && !features.contains(&Feature::DirectIllumination));
+    assert!(features.contains(&Feature::Normal) && features.contains(&Feature::WpGradient));
+    let dir = temp_dir("mitsuba");
+    let mut settings = small();
+    settings.generations = 3;
+    settings.mutation_weights = vec![1.0, 1.0, 0.0, 0.0]; // insert and replace: the ways new terminals come in
+    let config = RunConfig {
+        training: vec![sample.display().to_string()],
+        test: vec![sample.display().to_string()],
+        ..config(&sample, &sample)
+    };
+    run(&dir, settings, config, false, None).expect("finished");
+    let checkpoint = evolve::read_checkpoint(&dir).unwrap();
+    let mut seen = std::collections::BTreeSet::new();
+    for m in checkpoint.state.islands.iter().flatten() {
+        let e = parse_expr(&m.expr).unwrap();
+        seen.extend(e.features());
+        for v in e.variables() {
+            assert!(variances.contains(&v), "`{v}` is not in the Mitsuba sample");
+        }
+    }
+    assert!(seen.is_subset(&features), "proposed {seen:?}, provided {features:?}");
+    assert!(seen.len() > 2, "mutations brought in features beyond the seed's: {seen:?}");
+}
+
+#[test]
+fn invalid_individuals_get_the_worst_fitness_and_a_reason() {
+    let (training, _) = datasets();
+    let request = scene::Request::for_expr(&parse_expr("distance2(color)").unwrap());
+    let scenes = vec![scene::load(training, &request).unwrap()];
+    let mut evaluator = GpuEvaluator::new(gpu(), scenes, 2, 2).unwrap();
+    let exprs: Vec<_> = ["sqrt(distance2(color) - 1)", "exp(-distance2(color))", "asin(2 + distance2(color))", "1"]
+        .iter()
+        .map(|t| parse_expr(t).unwrap())
+        .collect();
+    let fitness = evaluator.evaluate(&exprs).unwrap();
+    assert_eq!(fitness[0].value, filterjit::gp::WORST);
+    assert!(fitness[0].invalid.as_deref().unwrap().contains("sqrt"), "{:?}", fitness[0]);
+    assert!(fitness[1].invalid.is_none() && fitness[1].value < 1.0, "{:?}", fitness[1]);
+    assert!(fitness[2].invalid.as_deref().unwrap().contains("asin"), "{:?}", fitness[2]);
+    // Constant weights are a box filter: valid, and comparable with the CPU.
+    let box_filter = filterjit::cpu::filter(&exprs[3], &evaluator.scenes()[0], 2).unwrap();
+    let reference = evaluator.scenes()[0].reference.clone().unwrap();
+    let cpu = filterjit::metrics::errors(&box_filter.color, &reference, None).relmse / evaluator.noisy_relmse()[0];
+    assert!((fitness[3].value - cpu).abs() < 1e-4 * cpu.max(1.0), "GPU fitness {} vs CPU {cpu}", fitness[3].value);
+}
