@@ -268,6 +268,8 @@ pub struct Summary {
     pub test_noisy_relmse: Vec<f64>,
     pub test_best: TestResult,
     pub test_seed: TestResult,
+    /// Other filters on the same test scenes, for comparison (those whose features the scenes have).
+    pub test_baselines: Vec<TestResult>,
     pub feature_frequencies: std::collections::BTreeMap<String, usize>,
     pub seconds: f64,
 }
@@ -304,12 +306,14 @@ pub struct RunOptions<'a> {
     pub stop_after: Option<u32>,
     pub on_report: &'a mut dyn FnMut(&gp::Report),
     pub on_render: render::Progress<'a>,
+    /// Expressions to compare with on the test scenes (they do not affect the search).
+    pub baselines: Vec<Expr>,
 }
 
 /// Run (or resume) a search; returns the summary when the last generation is done.
 pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     let start = Instant::now();
-    let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render } = options;
+    let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render, baselines } = options;
     settings.check().map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(&output).with_context(|| format!("creating {}", output.display()))?;
     let existing = output.join(CHECKPOINT_FILE).is_file();
@@ -401,9 +405,12 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     let names = test_scenes.iter().map(|s| s.name.clone()).collect();
     let mut tester = GpuEvaluator::new(gpu, test_scenes, config.radius, threads)?;
     let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let mut results = test(&mut tester, &[best_expr, seed_expr])?;
-    let test_seed = results.pop().expect("two results");
-    let test_best = results.pop().expect("two results");
+    let mut compared = vec![best_expr, seed_expr];
+    compared.extend(baselines.into_iter().filter(|b| b.features().is_subset(&features) && b.variables().is_subset(&variances)));
+    let mut results = test(&mut tester, &compared)?.into_iter();
+    let test_best = results.next().expect("best");
+    let test_seed = results.next().expect("seed");
+    let test_baselines = results.collect();
     let summary = Summary {
         generations: state.generation,
         best,
@@ -411,6 +418,7 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
         test_noisy_relmse: tester.noisy_relmse().to_vec(),
         test_best,
         test_seed,
+        test_baselines,
         feature_frequencies: frequencies,
         seconds: start.elapsed().as_secs_f64(),
     };

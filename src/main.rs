@@ -170,6 +170,9 @@ struct EvolveArgs {
     /// Threads that compile kernels [default: the number of cores].
     #[arg(long)]
     threads: Option<usize>,
+    /// Filters to compare with on the test scenes at the end (repeatable).
+    #[arg(long, default_value = "@crossBilateral")]
+    baseline: Vec<String>,
 }
 
 fn main() -> ExitCode {
@@ -537,6 +540,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
             stop_after: None,
             on_report: &mut on_report,
             on_render: &mut on_render,
+            baselines: args.baseline.iter().map(|b| resolve_expr(b)).collect::<Result<_>>()?,
         },
     )?
     .expect("runs to the end");
@@ -547,17 +551,36 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         summary.best.fitness.value,
         lang::parse_expr(&summary.best.expr).map(|e| e.len()).unwrap_or(0)
     );
-    println!("test      {:<16} {:>12} {:>12} {:>12}", "scene", "noisy", "seed", "best");
+    let baseline_names: Vec<String> = (0..summary.test_baselines.len()).map(|k| format!("baseline{}", k + 1)).collect();
+    println!(
+        "test      {:<16} {:>12} {:>12} {:>12}{}",
+        "relMSE",
+        "noisy",
+        "seed",
+        "best",
+        baseline_names.iter().map(|n| format!(" {n:>12}")).collect::<String>()
+    );
     for (k, name) in summary.test_scenes.iter().enumerate() {
         println!(
-            "          {:<16} {:>12.5} {:>12.5} {:>12.5}",
-            name, summary.test_noisy_relmse[k], summary.test_seed.relmse[k], summary.test_best.relmse[k]
+            "          {:<16} {:>12.5} {:>12.5} {:>12.5}{}",
+            name,
+            summary.test_noisy_relmse[k],
+            summary.test_seed.relmse[k],
+            summary.test_best.relmse[k],
+            summary.test_baselines.iter().map(|b| format!(" {:>12.5}", b.relmse[k])).collect::<String>()
         );
     }
     println!(
-        "          {:<16} {:>12} {:>12.5} {:>12.5}   (mean relMSE / noisy relMSE)",
-        "normalised", "1", summary.test_seed.normalised, summary.test_best.normalised
+        "          {:<16} {:>12} {:>12.5} {:>12.5}{}   (mean of relMSE / noisy relMSE)",
+        "normalised",
+        "1",
+        summary.test_seed.normalised,
+        summary.test_best.normalised,
+        summary.test_baselines.iter().map(|b| format!(" {:>12.5}", b.normalised)).collect::<String>()
     );
+    for (name, b) in baseline_names.iter().zip(&summary.test_baselines) {
+        println!("          {name} = {}", b.expr);
+    }
     let mut used: Vec<(&String, &usize)> = summary.feature_frequencies.iter().filter(|(_, n)| **n > 0).collect();
     used.sort_by(|a, b| b.1.cmp(a.1));
     println!("features  {}", used.iter().map(|(f, n)| format!("{f} {n}")).collect::<Vec<_>>().join(", "));

@@ -74,6 +74,7 @@ fn run(
             stop_after,
             on_report: &mut |_| {},
             on_render: &mut |_, _| {},
+            baselines: Vec::new(),
         },
     )
     .unwrap()
@@ -127,6 +128,7 @@ fn runs_are_deterministic_and_resume_exactly() {
             stop_after: None,
             on_report: &mut |_| {},
             on_render: &mut |_, _| {},
+            baselines: Vec::new(),
         },
     )
     .unwrap_err();
@@ -143,6 +145,7 @@ fn runs_are_deterministic_and_resume_exactly() {
             stop_after: None,
             on_report: &mut |_| {},
             on_render: &mut |_, _| {},
+            baselines: Vec::new(),
         },
     )
     .unwrap_err();
