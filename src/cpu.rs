@@ -35,7 +35,12 @@ impl Pixels<'_> {
             Feature::Pixel => [(index % self.width) as f64, (index / self.width) as f64, 0.0],
             _ => {
                 let v = self.scene.feature(f).expect("checked before filtering")[index];
-                [v[0] as f64, v[1] as f64, v[2] as f64]
+                // 1-D features are (v, 0, 0) whatever the buffer holds beyond v, as on the GPU.
+                if f.dimension() == 1 {
+                    [v[0] as f64, 0.0, 0.0]
+                } else {
+                    [v[0] as f64, v[1] as f64, v[2] as f64]
+                }
             }
         }
     }
@@ -86,19 +91,20 @@ pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, Mi
         for x in 0..w {
             let i = (y * w + x) as usize;
             let mut pixel_flags = 0u32;
-            let (mut sum_w, mut sum_c) = (0.0f64, [0.0f64; 3]);
+            let (mut sum_w, mut sum_c) = (Neumaier::default(), [Neumaier::default(); 3]);
             for yj in (y - r).max(0)..=(y + r).min(h - 1) {
                 for xj in (x - r).max(0)..=(x + r).min(w - 1) {
                     let j = (yj * w + xj) as usize;
                     let px = Pixels { scene, i, j, width: scene.width };
                     let weight = semantics::weight(eval(expr, &px, &mut pixel_flags));
-                    sum_w += weight;
+                    sum_w.add(weight);
                     for (sum, c) in sum_c.iter_mut().zip(scene.color[j]) {
-                        *sum += weight * c as f64;
+                        sum.add(weight * c as f64);
                     }
                 }
             }
             let centre = scene.color[i];
+            let (sum_w, sum_c) = (sum_w.total(), sum_c.map(|s| s.total()));
             color.push(if sum_w > 0.0 {
                 [sum_c[0] / sum_w, sum_c[1] / sum_w, sum_c[2] / sum_w]
             } else {
@@ -108,6 +114,30 @@ pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, Mi
         }
     }
     Ok(CpuFiltered { color, flags })
+}
+
+/// Neumaier's compensated sum: the reference keeps its sums exact to about
+/// one rounding, however large the window.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Neumaier {
+    sum: f64,
+    compensation: f64,
+}
+
+impl Neumaier {
+    pub fn add(&mut self, x: f64) {
+        let t = self.sum + x;
+        if self.sum.abs() >= x.abs() {
+            self.compensation += (self.sum - t) + x;
+        } else {
+            self.compensation += (x - t) + self.sum;
+        }
+        self.sum = t;
+    }
+
+    pub fn total(&self) -> f64 {
+        self.sum + self.compensation
+    }
 }
 
 /// Evaluate the weight expression once, for tests of single operators.

@@ -316,6 +316,7 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render, baselines } = options;
     settings.check().map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(&output).with_context(|| format!("creating {}", output.display()))?;
+    crate::io::remove_stale_temporaries(&output);
     let existing = output.join(CHECKPOINT_FILE).is_file();
     let resumed = match (existing, resume) {
         (true, true) => {

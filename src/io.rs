@@ -27,8 +27,20 @@ pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<(), String> {
     write_atomically(path, |tmp| std::fs::write(tmp, bytes))
 }
 
+const TEMPORARY_PREFIX: &str = ".filterjit.tmp-";
+
 fn temporary_beside(path: &Path) -> PathBuf {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     // Keep the extension last: some writers pick the format from it.
-    path.with_file_name(format!(".{}.tmp-{}-{name}", "filterjit", std::process::id()))
+    path.with_file_name(format!("{TEMPORARY_PREFIX}{}-{name}", std::process::id()))
+}
+
+/// Remove temporary files a killed process left in `dir` (never a final file).
+pub fn remove_stale_temporaries(dir: &Path) {
+    let Ok(entries) = std::fs::read_dir(dir) else { return };
+    for entry in entries.flatten() {
+        if entry.file_name().to_string_lossy().starts_with(TEMPORARY_PREFIX) {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
 }

@@ -218,3 +218,62 @@ fn invalid_individuals_get_the_worst_fitness_and_a_reason() {
     let cpu = filterjit::metrics::errors(&box_filter.color, &reference, None).relmse / evaluator.noisy_relmse()[0];
     assert!((fitness[3].value - cpu).abs() < 1e-4 * cpu.max(1.0), "GPU fitness {} vs CPU {cpu}", fitness[3].value);
 }
+
+/// SIGKILL `filterjit evolve` at random moments, resume until it finishes:
+/// the hall of fame is always the uninterrupted run's, and the checkpoint is
+/// never half-written.
+#[test]
+fn killed_runs_resume_to_the_same_hall_of_fame() {
+    use std::process::{Command, Stdio};
+    let (training, test) = datasets();
+    let trials = crate::common::env_usize("FILTERJIT_KILL_TRIALS", 5);
+    let args = |dir: &Path| -> Vec<String> {
+        [
+            "evolve", "--scenes", &training.display().to_string(), "--test-scenes", &test.display().to_string(),
+            "--islands", "2", "--island-size", "6", "--generations", "6", "--radius", "2", "--seed", "5",
+            "-o", &dir.display().to_string(),
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect()
+    };
+    let bin = env!("CARGO_BIN_EXE_filterjit");
+    let reference = temp_dir("kill-reference");
+    let status = Command::new(bin).args(args(&reference)).stdout(Stdio::null()).stderr(Stdio::null()).status().unwrap();
+    assert!(status.success());
+    let expected = read(reference.join(evolve::HALL_OF_FAME_FILE));
+    let mut rng = filterjit::rng::Rng::seeded(2024);
+    let mut kills = 0;
+    for trial in 0..trials {
+        let dir = temp_dir(&format!("kill-{trial}"));
+        let mut resume = false;
+        loop {
+            let mut a = args(&dir);
+            if resume {
+                a.push("--resume".into());
+            }
+            let mut child = Command::new(bin).args(&a).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+            let delay = std::time::Duration::from_millis(20 + rng.below(700) as u64);
+            std::thread::sleep(delay);
+            match child.try_wait().unwrap() {
+                Some(status) => {
+                    assert!(status.success(), "trial {trial}: evolve failed");
+                    break;
+                }
+                None => {
+                    child.kill().unwrap(); // SIGKILL
+                    child.wait().unwrap();
+                    kills += 1;
+                    // Whatever the moment, a checkpoint present is complete.
+                    if dir.join(evolve::CHECKPOINT_FILE).is_file() {
+                        evolve::read_checkpoint(&dir).unwrap_or_else(|e| panic!("trial {trial}: {e:#}"));
+                        resume = true;
+                    }
+                }
+            }
+        }
+        assert_eq!(read(dir.join(evolve::HALL_OF_FAME_FILE)), expected, "trial {trial}");
+    }
+    eprintln!("{kills} kills over {trials} trials");
+    assert!(kills > 0, "no run was interrupted");
+}

@@ -9,3 +9,4 @@ mod lang;
 mod render;
 mod scenes;
 mod snapshots;
+mod stability;
