@@ -53,7 +53,7 @@ impl Pixels<'_> {
 /// Evaluate `expr` for centre pixel `i` and neighbour `j`.
 fn eval(expr: &Expr, px: &Pixels<'_>, flags: &mut u32) -> f64 {
     match expr {
-        Expr::Const(c) => semantics::fin(*c),
+        Expr::Const(c) => semantics::literal(*c),
         Expr::Var(v) => px.variance(*v),
         Expr::Unary(op, a) => op.eval(eval(a, px, flags), flags),
         Expr::Binary(op, a, b) => {

@@ -407,7 +407,9 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     let mut tester = GpuEvaluator::new(gpu, test_scenes, config.radius, threads)?;
     let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut compared = vec![best_expr, seed_expr];
-    compared.extend(baselines.into_iter().filter(|b| b.features().is_subset(&features) && b.variables().is_subset(&variances)));
+    compared.extend(
+        baselines.into_iter().filter(|b| b.features().is_subset(&features) && b.variables().is_subset(&variances)),
+    );
     let mut results = test(&mut tester, &compared)?.into_iter();
     let test_best = results.next().expect("best");
     let test_seed = results.next().expect("seed");

@@ -61,6 +61,13 @@ pub fn fin(x: f64) -> f64 {
     }
 }
 
+/// A literal's value: rounded to f32, as the GPU holds it, then `fin`.
+/// (Without the rounding, tan(pi / 2) would be +1.6e16 on the CPU and
+/// −2.3e7 on the GPU: f32's π/2 lies past the pole.)
+pub fn literal(c: f64) -> f64 {
+    fin(c as f32 as f64)
+}
+
 /// `x - floor(x)`, as WGSL's `fract`.
 fn fract(x: f64) -> f64 {
     x - x.floor()

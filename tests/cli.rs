@@ -122,3 +122,29 @@ fn render_then_filter_a_builtin_scene_with_every_thesis_expression() {
     let run = filterjit(&["render", "no-such-scene"]);
     assert!(!run.status.success() && text(&run.stderr).contains("built-in"), "{}", text(&run.stderr));
 }
+
+#[test]
+fn bad_hall_of_fame_and_checkpoint_files_are_refused_clearly() {
+    let dir = std::env::temp_dir().join(format!("filterjit-cli-bad-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let hof = dir.join("hall_of_fame.txt");
+    std::fs::write(&hof, "# a damaged hall of fame\nisland0_rank1 = exp(-distance2(normal) +\n").unwrap();
+    let run = filterjit(&["compile", &format!("@{}", hof.display())]);
+    assert!(!run.status.success());
+    assert!(
+        text(&run.stderr).contains("invalid expression") && text(&run.stderr).contains("expected"),
+        "{}",
+        text(&run.stderr)
+    );
+    std::fs::write(&hof, "# nothing in here\n").unwrap();
+    let run = filterjit(&["compile", &format!("@{}:island0_rank1", hof.display())]);
+    assert!(!run.status.success() && text(&run.stderr).contains("island0_rank1"), "{}", text(&run.stderr));
+
+    let run_dir = dir.join("run");
+    std::fs::create_dir_all(&run_dir).unwrap();
+    std::fs::write(run_dir.join("checkpoint.json"), "{\"version\": 1, \"settings\": ").unwrap();
+    let run = filterjit(&["evolve", "--resume", "-o", run_dir.to_str().unwrap()]);
+    assert!(!run.status.success());
+    let stderr = text(&run.stderr);
+    assert!(stderr.contains("checkpoint.json") && !stderr.contains("panicked"), "{stderr}");
+}

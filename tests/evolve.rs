@@ -229,9 +229,23 @@ fn killed_runs_resume_to_the_same_hall_of_fame() {
     let trials = crate::common::env_usize("FILTERJIT_KILL_TRIALS", 5);
     let args = |dir: &Path| -> Vec<String> {
         [
-            "evolve", "--scenes", &training.display().to_string(), "--test-scenes", &test.display().to_string(),
-            "--islands", "2", "--island-size", "6", "--generations", "6", "--radius", "2", "--seed", "5",
-            "-o", &dir.display().to_string(),
+            "evolve",
+            "--scenes",
+            &training.display().to_string(),
+            "--test-scenes",
+            &test.display().to_string(),
+            "--islands",
+            "2",
+            "--island-size",
+            "6",
+            "--generations",
+            "6",
+            "--radius",
+            "2",
+            "--seed",
+            "5",
+            "-o",
+            &dir.display().to_string(),
         ]
         .iter()
         .map(|s| s.to_string())

@@ -12,7 +12,13 @@ use filterjit::{corpus, Scene};
 use crate::common::{env_usize, gpu, synthetic_scene};
 
 /// A scene with every feature and variance, from a colour image and a feature generator.
-fn scene_with(name: &str, width: usize, height: usize, color: impl Fn(usize) -> [f32; 3], feature: impl Fn(usize) -> [f32; 3]) -> Scene {
+fn scene_with(
+    name: &str,
+    width: usize,
+    height: usize,
+    color: impl Fn(usize) -> [f32; 3],
+    feature: impl Fn(usize) -> [f32; 3],
+) -> Scene {
     let n = width * height;
     let mut scene = Scene::from_color(name, width, height, (0..n).map(&color).collect());
     scene.reference = Some(scene.color.clone());
@@ -58,11 +64,17 @@ fn degenerate_scenes_filter_to_finite_images_that_match_the_cpu() {
         (scene_with("one-row", 37, 1, |p| [(p % 3) as f32, 1.0, 0.0], smooth), 4),
         (scene_with("one-column", 1, 29, |p| [(p % 3) as f32, 1.0, 0.0], smooth), 4),
         (scene_with("window-larger-than-image", 3, 3, |p| [p as f32, 1.0, 0.0], smooth), 50),
+        (scene_with("fireflies", 16, 16, |p| if p % 37 == 0 { [1e4, 1e4, 1e4] } else { [0.5, 0.4, 0.3] }, smooth), 3),
         (
-            scene_with("fireflies", 16, 16, |p| if p % 37 == 0 { [1e4, 1e4, 1e4] } else { [0.5, 0.4, 0.3] }, smooth),
+            scene_with(
+                "outlier-features",
+                12,
+                12,
+                |p| [(p % 4) as f32, 0.5, 0.5],
+                |p| if p == 5 { [1.0, 1.0, 1.0] } else { [0.0, 0.01, 0.0] },
+            ),
             3,
         ),
-        (scene_with("outlier-features", 12, 12, |p| [(p % 4) as f32, 0.5, 0.5], |p| if p == 5 { [1.0, 1.0, 1.0] } else { [0.0, 0.01, 0.0] }), 3),
     ];
     for (scene, radius) in &cases {
         for (name, expr) in shipped() {
@@ -77,7 +89,10 @@ fn degenerate_scenes_filter_to_finite_images_that_match_the_cpu() {
                         }
                     }
                 }
-                "fireflies" => assert!(out.iter().flatten().all(|v| *v <= 1e4 && *v >= 0.0), "@{name} stays within the window's range"),
+                "fireflies" => assert!(
+                    out.iter().flatten().all(|v| *v <= 1e4 && *v >= 0.0),
+                    "@{name} stays within the window's range"
+                ),
                 _ => {}
             }
         }
@@ -149,7 +164,12 @@ fn the_parser_survives_random_and_mutated_text() {
             Ok(e) => assert_eq!(parse_expr(&e.to_string()).unwrap(), e, "round trip of `{text}`"),
             Err(err) => {
                 let lines = text.split('\n').count();
-                assert!(err.line >= 1 && err.line <= lines && err.column >= 1, "position {}:{} in `{text:?}`", err.line, err.column);
+                assert!(
+                    err.line >= 1 && err.line <= lines && err.column >= 1,
+                    "position {}:{} in `{text:?}`",
+                    err.line,
+                    err.column
+                );
                 assert!(err.offset <= text.len());
                 assert!(!err.message.is_empty() && err.to_string().contains(&format!("{}:{}", err.line, err.column)));
             }
@@ -169,5 +189,24 @@ fn random_expressions_far_past_the_length_limit_compile_and_run() {
         let kernel = jit::compile(&expr).unwrap_or_else(|e| panic!("length {length}: {e}"));
         let out = gpu().filter(&kernel, &mut buffers, &scene, 1).unwrap();
         assert!(out.rgb().iter().flatten().all(|v| v.is_finite()), "length {}", expr.len());
+    }
+}
+
+#[test]
+fn deeply_nested_overflows_saturate_identically_on_cpu_and_gpu() {
+    let scene = synthetic_scene(8, 6, 21);
+    for text in [
+        "exp(exp(exp(exp(exp(distance2(color))))))",
+        "pow(pow(10, 10), pow(10, 10)) * pow(pow(10, 10), pow(10, 10))",
+        "1 / (1 / (1 / (0 * distance2(normal))))",
+        "tan(pi / 2) * tan(pi / 2) * tan(pi / 2)",
+        "exp(-exp(exp(exp(distance2(color) * 100))))",
+        "sqrt(-pow(-2, 0.5) * 1e15 * 1e15)",
+        "mitchell(1e15 * 1e15) + sinc(1e15) + tricube(-1e15) + biweight(1e15) + epanechnikov(1e15)",
+        "pow(0, -distance2(color) - 1) / pow(0, -1)",
+    ] {
+        let expr = parse_expr(text).unwrap();
+        let out = check(&scene, &expr, 2);
+        assert!(out.iter().flatten().all(|v| v.is_finite()), "`{text}`");
     }
 }

@@ -328,7 +328,9 @@ impl<'e> Engine<'e> {
         let gp = start.elapsed();
         let evaluated = self.evaluate(&mut next)?;
         let migrate_start = Instant::now();
-        if self.settings.migration_interval > 0 && generation.is_multiple_of(self.settings.migration_interval) && next.len() > 1
+        if self.settings.migration_interval > 0
+            && generation.is_multiple_of(self.settings.migration_interval)
+            && next.len() > 1
         {
             let best: Vec<Member> = next.iter().map(|island| best_of(island).clone()).collect();
             let count = next.len();

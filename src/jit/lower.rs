@@ -341,7 +341,7 @@ impl Body {
 
     fn emit(&mut self, e: &Expr) -> String {
         match e {
-            Expr::Const(c) => wgsl_f32(semantics::fin(*c)),
+            Expr::Const(c) => wgsl_f32(semantics::literal(*c)),
             Expr::Var(v) => var_ident(*v),
             Expr::Unary(op, a) => {
                 let a = self.emit(a);
