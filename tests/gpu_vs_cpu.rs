@@ -303,3 +303,42 @@ fn equal_canonical_text_hits_the_pipeline_cache() {
     assert!(!first.cache_hit || second.cache_hit);
     assert!(second.cache_hit, "the same canonical text reuses the pipeline");
 }
+
+#[test]
+fn each_optimisation_gives_the_plain_kernels_results() {
+    use filterjit::jit::LowerOptions;
+    let scene = synthetic_scene(16, 12, 8);
+    let mut buffers = SceneBuffers::new(gpu(), &scene);
+    let mut exprs: Vec<Expr> = corpus::named().iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
+    exprs.extend(corpus::parse_named(include_str!("data/corpus.txt")).iter().map(|(_, t)| parse_expr(t).unwrap()));
+    let alphabet = Alphabet::full();
+    let mut rng = Rng::seeded(404);
+    for _ in 0..env_usize("FILTERJIT_RANDOM_EXPRS", 40) / 4 {
+        let depth = 3 + rng.below(4);
+        exprs.push(alphabet.grow(&mut rng, depth));
+    }
+    let variants = [
+        ("fold", LowerOptions { fold_constants: true, ..LowerOptions::NONE }),
+        ("cse", LowerOptions { common_subexpressions: true, ..LowerOptions::NONE }),
+        ("hoist", LowerOptions { hoist_centre_terms: true, ..LowerOptions::NONE }),
+        ("all", LowerOptions::ALL),
+    ];
+    let run = |e: &Expr, options: LowerOptions, buffers: &mut SceneBuffers| {
+        let kernel = jit::validate(jit::lower_with(e, KernelKind::Filter, options).unwrap()).unwrap();
+        gpu().filter(&kernel, buffers, &scene, 2).unwrap()
+    };
+    for e in &exprs {
+        let plain = run(e, LowerOptions::NONE, &mut buffers);
+        for (name, options) in variants {
+            let optimised = run(e, options, &mut buffers);
+            let plain_rgb = plain.rgb();
+            for (k, (a, b)) in optimised.rgb().iter().zip(&plain_rgb).enumerate() {
+                for q in 0..3 {
+                    let err = (a[q] - b[q]).abs() / (b[q].abs() + 0.01);
+                    assert!(err <= 1e-4, "{name} changes `{e}` at pixel {k}: {} vs {}", a[q], b[q]);
+                }
+            }
+            assert_eq!(optimised.flags, plain.flags, "{name} changes the domain flags of `{e}`");
+        }
+    }
+}

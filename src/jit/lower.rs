@@ -106,10 +106,41 @@ impl KernelKind {
     }
 }
 
+/// What the lowering may do beyond a literal translation. Every switch keeps
+/// the kernel's results (tests compare each against the plain kernel); the
+/// benchmark shows what each is worth.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct LowerOptions {
+    /// Evaluate operators whose operands are all literals at compile time
+    /// (not those that would raise a domain error).
+    pub fold_constants: bool,
+    /// Compute identical subexpressions once (`distance2(normal)` used twice).
+    pub common_subexpressions: bool,
+    /// Compute terms that depend only on the centre pixel once per pixel,
+    /// outside the neighbour loop.
+    pub hoist_centre_terms: bool,
+}
+
+impl LowerOptions {
+    /// Everything on: what filterjit uses.
+    pub const ALL: LowerOptions =
+        LowerOptions { fold_constants: true, common_subexpressions: true, hoist_centre_terms: true };
+    /// A literal translation: one SSA value per node, all inside the loop.
+    pub const NONE: LowerOptions =
+        LowerOptions { fold_constants: false, common_subexpressions: false, hoist_centre_terms: false };
+}
+
+impl Default for LowerOptions {
+    fn default() -> Self {
+        LowerOptions::ALL
+    }
+}
+
 /// WGSL text of a kernel, not yet validated.
 #[derive(Clone, Debug)]
 pub struct KernelSource {
     pub kind: KernelKind,
+    pub options: LowerOptions,
     pub expr: Expr,
     /// The expression's canonical text.
     pub canonical: String,
@@ -132,12 +163,17 @@ pub fn lower(expr: &Expr) -> Result<KernelSource, LowerError> {
 
 /// Lower an expression into a kernel of the given kind.
 pub fn lower_kind(expr: &Expr, kind: KernelKind) -> Result<KernelSource, LowerError> {
+    lower_with(expr, kind, LowerOptions::default())
+}
+
+/// Lower with explicit optimisation switches.
+pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Result<KernelSource, LowerError> {
     expr.validate().map_err(LowerError::Literal)?;
     let layout = KernelLayout::of(expr);
-    let mut body = Body::default();
+    let mut body = Body { options, ..Body::default() };
     let result = body.emit(expr);
 
-    let centre_lines = centre_loads(expr);
+    let centre_lines: Vec<String> = centre_loads(expr).into_iter().chain(body.centre).collect();
     let neighbour_lines: Vec<String> = neighbour_loads(expr).into_iter().chain(body.lines).collect();
 
     #[derive(Serialize)]
@@ -174,7 +210,7 @@ pub fn lower_kind(expr: &Expr, kind: KernelKind) -> Result<KernelSource, LowerEr
     context.insert("result", &result);
     context.insert("reference_binding", &(FIRST_INPUT_BINDING + layout.inputs.len() as u32));
     let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
-    Ok(KernelSource { kind, expr: expr.clone(), canonical, layout, wgsl })
+    Ok(KernelSource { kind, options, expr: expr.clone(), canonical, layout, wgsl })
 }
 
 /// The operator helpers, verbatim.
@@ -329,32 +365,114 @@ fn neighbour_loads(expr: &Expr) -> Vec<String> {
 /// Straight-line SSA for the expression body.
 #[derive(Default)]
 struct Body {
+    options: LowerOptions,
+    /// Values computed once per pixel, before the neighbour loop.
+    centre: Vec<String>,
+    /// Values computed for every neighbour.
     lines: Vec<String>,
+    /// Canonical text of a subexpression → the value that holds it.
+    known: std::collections::HashMap<String, String>,
+    temps: usize,
+}
+
+/// Whether a subexpression reads the neighbour j (only feature pairs do).
+fn reads_neighbour(e: &Expr) -> bool {
+    let mut found = false;
+    e.visit(&mut |n| found |= matches!(n, Expr::Pair(..)));
+    found
 }
 
 impl Body {
-    fn temp(&mut self, value: String) -> String {
-        let name = format!("_e{}", self.lines.len());
-        self.lines.push(format!("let {name} = {value};"));
+    fn temp(&mut self, value: String, per_pixel: bool) -> String {
+        let name = format!("_e{}", self.temps);
+        self.temps += 1;
+        let line = format!("let {name} = {value};");
+        if per_pixel {
+            self.centre.push(line);
+        } else {
+            self.lines.push(line);
+        }
         name
     }
 
+    /// The literal a constant subexpression folds to, unless folding is off
+    /// or the operation raises a domain error (the flag must stay).
+    fn fold(&self, e: &Expr) -> Option<f64> {
+        if !self.options.fold_constants {
+            return None;
+        }
+        // A literal, or the negation of one (how folded negative values are stored).
+        fn constant(e: &Expr) -> Option<f64> {
+            match e {
+                Expr::Const(c) => Some(semantics::literal(*c)),
+                Expr::Unary(crate::lang::UnaryOp::Neg, a) => match **a {
+                    Expr::Const(c) => Some(-semantics::literal(c)),
+                    _ => None,
+                },
+                _ => None,
+            }
+        }
+        let mut flags = 0;
+        let value = match e {
+            Expr::Unary(op, a) => op.eval(constant(a)?, &mut flags),
+            Expr::Binary(op, a, b) => op.eval(constant(a)?, constant(b)?, &mut flags),
+            _ => return None,
+        };
+        (flags == 0).then_some(value)
+    }
+
     fn emit(&mut self, e: &Expr) -> String {
-        match e {
-            Expr::Const(c) => wgsl_f32(semantics::literal(*c)),
-            Expr::Var(v) => var_ident(*v),
+        let key = self.options.common_subexpressions.then(|| e.to_string());
+        if let Some(name) = key.as_ref().and_then(|k| self.known.get(k)) {
+            return name.clone();
+        }
+        let per_pixel = self.options.hoist_centre_terms && !reads_neighbour(e);
+        let value = match e {
+            Expr::Const(c) => return wgsl_f32(semantics::literal(*c)),
+            Expr::Var(v) => return var_ident(*v),
             Expr::Unary(op, a) => {
-                let a = self.emit(a);
-                self.temp(format!("{}({a})", op.wgsl_helper()))
+                let folded_child = self.folded(a);
+                if let Some(v) = self.fold(&Expr::unary(*op, folded_child.clone())) {
+                    return wgsl_f32(semantics::fin(v));
+                }
+                let a = self.emit(&folded_child);
+                format!("{}({a})", op.wgsl_helper())
             }
             Expr::Binary(op, a, b) => {
-                let a = self.emit(a);
-                let b = self.emit(b);
-                self.temp(format!("{}({a}, {b})", op.wgsl_helper()))
+                let (fa, fb) = (self.folded(a), self.folded(b));
+                if let Some(v) = self.fold(&Expr::binary(*op, fa.clone(), fb.clone())) {
+                    return wgsl_f32(semantics::fin(v));
+                }
+                let a = self.emit(&fa);
+                let b = self.emit(&fb);
+                format!("{}({a}, {b})", op.wgsl_helper())
             }
             Expr::Pair(op, i, j) => {
-                self.temp(format!("{}({}, {})", op.wgsl_helper(), feature_ident('i', *i), feature_ident('j', *j)))
+                format!("{}({}, {})", op.wgsl_helper(), feature_ident('i', *i), feature_ident('j', *j))
             }
+        };
+        let name = self.temp(value, per_pixel);
+        if let Some(k) = key {
+            self.known.insert(k, name.clone());
+        }
+        name
+    }
+
+    /// `e` with its constant subexpressions folded into literals (when folding is on).
+    fn folded(&self, e: &Expr) -> Expr {
+        if !self.options.fold_constants {
+            return e.clone();
+        }
+        let e = match e {
+            Expr::Unary(op, a) => Expr::unary(*op, self.folded(a)),
+            Expr::Binary(op, a, b) => Expr::binary(*op, self.folded(a), self.folded(b)),
+            other => return other.clone(),
+        };
+        match self.fold(&e) {
+            // Folded values are stored as literals; the emitter rounds them to f32 like any literal.
+            Some(v) if v >= 0.0 => Expr::Const(semantics::fin(v)),
+            Some(v) => Expr::unary(crate::lang::UnaryOp::Neg, Expr::Const(semantics::fin(-v))),
+            None => e,
         }
     }
 }

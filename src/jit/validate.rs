@@ -33,7 +33,7 @@ impl KernelKey {
         let mut hasher = Sha256::new();
         hasher.update(b"filterjit-kernel\0");
         hasher.update(TEMPLATE_VERSION.to_le_bytes());
-        hasher.update(format!("{:?}", source.kind).as_bytes());
+        hasher.update(format!("{:?} {:?}", source.kind, source.options).as_bytes());
         hasher.update(source.canonical.as_bytes());
         hasher.update(b"\0");
         hasher.update(source.layout.describe().as_bytes());
