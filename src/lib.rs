@@ -4,6 +4,7 @@
 //! The stages, each its own module (see ARCHITECTURE.md):
 //! text → [`lang::parse`] → [`lang::check`] → [`jit::lower`] → [`jit::validate`] → [`gpu::Gpu::pipeline`].
 
+pub mod bench;
 pub mod corpus;
 pub mod cpu;
 pub mod evolve;

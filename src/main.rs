@@ -83,6 +83,31 @@ enum Command {
     /// individual compiled into its own kernel. With no arguments: the built-in
     /// training scenes, settings that finish in minutes on a 2-core CPU.
     Evolve(Box<EvolveArgs>),
+    /// Measure the JIT: compile latency, throughput, against a stack interpreter
+    /// and a hand-written kernel, and one GP generation. Prints a table, writes JSON.
+    Bench {
+        /// Size of the benchmark scene (a render of glossy-floor).
+        #[arg(long, default_value = "64x64", value_parser = parse_size)]
+        size: (u32, u32),
+        #[arg(long, default_value_t = 5)]
+        radius: u32,
+        /// Repeats of every timing.
+        #[arg(long, default_value_t = 5)]
+        repeats: usize,
+        /// Individuals compiled together for the amortised compile cost, and in the generation.
+        #[arg(long, default_value_t = 400)]
+        population: usize,
+        /// Expression lengths of the corpus (two random expressions each).
+        #[arg(long, value_delimiter = ',', default_value = "5,10,20,40,75,100,150")]
+        lengths: Vec<usize>,
+        /// Square sizes of the one-generation measurement; empty to skip it.
+        #[arg(long, value_delimiter = ',', default_value = "64,128,256")]
+        generation_sizes: Vec<u32>,
+        #[arg(long, default_value_t = 10)]
+        generation_radius: u32,
+        #[arg(short, long, default_value = "bench.json")]
+        output: PathBuf,
+    },
     /// List the built-in scenes.
     Scenes,
     /// List the shipped expressions.
@@ -183,6 +208,11 @@ fn main() -> ExitCode {
         std::env::set_var("NODEVICE_SELECT", "1");
     }
     let cli = Cli::parse();
+    // Compile timings must include the driver's compilation: Mesa would
+    // otherwise answer from its on-disk shader cache.
+    if matches!(cli.command, Command::Bench { .. }) && std::env::var_os("MESA_SHADER_CACHE_DISABLE").is_none() {
+        std::env::set_var("MESA_SHADER_CACHE_DISABLE", "true");
+    }
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -224,6 +254,18 @@ fn run(cli: Cli) -> Result<()> {
             render(&scene, spp, reference_spp, size, seed, output.as_deref())
         }
         Command::Evolve(args) => evolve(*args),
+        Command::Bench { size, radius, repeats, population, lengths, generation_sizes, generation_radius, output } => {
+            let settings = filterjit::bench::BenchSettings {
+                radius,
+                repeats: repeats.max(1),
+                population: population.max(4),
+                lengths,
+                generation_sizes: generation_sizes.into_iter().filter(|s| *s > 0).collect(),
+                generation_radius,
+                seed: 0,
+            };
+            bench(size, &settings, &output)
+        }
         Command::Scenes => {
             for (name, _) in render::BUILTIN {
                 let d = render::builtin(name).expect("listed")?;
@@ -594,6 +636,32 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         ev::FEATURES_FILE,
         ev::SUMMARY_FILE
     );
+    Ok(())
+}
+
+fn bench(size: (u32, u32), settings: &filterjit::bench::BenchSettings, output: &Path) -> Result<()> {
+    let gpu = gpu::Gpu::open()?;
+    let scene_at = |gpu: &gpu::Gpu, w: u32, h: u32| -> Result<filterjit::Scene> {
+        let d = render::builtin("glossy-floor").expect("built in")?;
+        let rs = render::RenderSettings { width: w, height: h, spp: 4, reference_spp: 64, seed: 0 };
+        let dir = render::cached(gpu, &render::cache_root(), &d, &rs, &mut |_, _| {})?;
+        let request = scene::Request {
+            features: lang::Feature::ALL.iter().copied().collect(),
+            variances: lang::ScalarVar::ALL.iter().copied().collect(),
+            reference: true,
+            ..Default::default()
+        };
+        Ok(scene::load(&dir, &request)?)
+    };
+    eprintln!("bench     on {}", gpu.describe());
+    let scene = scene_at(&gpu, size.0, size.1)?;
+    let mut generation_scene = |s: u32| scene_at(&gpu, s, s);
+    let mut progress = |what: &str| eprintln!("          {what}");
+    let report = filterjit::bench::run(&gpu, &scene, &mut generation_scene, settings, &mut progress)?;
+    print!("{}", filterjit::bench::table(&report));
+    filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())
+        .map_err(anyhow::Error::msg)?;
+    println!("wrote     {}", output.display());
     Ok(())
 }
 

@@ -128,6 +128,11 @@ fn fj_distance2(u: vec3<f32>, v: vec3<f32>) -> f32 {
     let d = u - v;
     return fj_fin(sqrt(d.x * d.x + d.y * d.y + d.z * d.z));
 }
+// pow(distance2(u, v), 2) without the square root (strength reduction).
+fn fj_distance2sq(u: vec3<f32>, v: vec3<f32>) -> f32 {
+    let d = u - v;
+    return fj_fin(d.x * d.x + d.y * d.y + d.z * d.z);
+}
 fn fj_distance1(u: vec3<f32>, v: vec3<f32>) -> f32 {
     let d = abs(u - v);
     return fj_fin(d.x + d.y + d.z);

@@ -321,6 +321,7 @@ fn each_optimisation_gives_the_plain_kernels_results() {
         ("fold", LowerOptions { fold_constants: true, ..LowerOptions::NONE }),
         ("cse", LowerOptions { common_subexpressions: true, ..LowerOptions::NONE }),
         ("hoist", LowerOptions { hoist_centre_terms: true, ..LowerOptions::NONE }),
+        ("strength", LowerOptions { strength_reduction: true, ..LowerOptions::NONE }),
         ("all", LowerOptions::ALL),
     ];
     let run = |e: &Expr, options: LowerOptions, buffers: &mut SceneBuffers| {

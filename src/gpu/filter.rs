@@ -217,7 +217,7 @@ impl Gpu {
         Ok((out.color.iter().map(|c| c[0]).collect(), out.flags))
     }
 
-    fn wait(&self, during: &'static str) -> Result<(), GpuError> {
+    pub(super) fn wait(&self, during: &'static str) -> Result<(), GpuError> {
         self.device()
             .poll(wgpu::PollType::wait_indefinitely())
             .map(|_| ())

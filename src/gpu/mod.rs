@@ -4,6 +4,7 @@
 pub mod adapter;
 mod filter;
 mod fitness;
+mod raw;
 mod trace;
 
 use std::collections::HashMap;
@@ -12,6 +13,7 @@ use std::time::{Duration, Instant};
 
 pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
 pub use fitness::{FitnessScene, SceneError as FitnessError};
+pub use raw::{RawBuffer, RawKernel};
 pub use trace::{TraceScene, PATHTRACE_WGSL};
 
 use crate::jit::{KernelKey, ValidatedKernel, FIRST_INPUT_BINDING};

@@ -119,15 +119,26 @@ pub struct LowerOptions {
     /// Compute terms that depend only on the centre pixel once per pixel,
     /// outside the neighbour loop.
     pub hoist_centre_terms: bool,
+    /// Square by multiplying: pow(x, 2) becomes x·x, and pow(distance2(f), 2)
+    /// the squared distance without its square root.
+    pub strength_reduction: bool,
 }
 
 impl LowerOptions {
     /// Everything on: what filterjit uses.
-    pub const ALL: LowerOptions =
-        LowerOptions { fold_constants: true, common_subexpressions: true, hoist_centre_terms: true };
+    pub const ALL: LowerOptions = LowerOptions {
+        fold_constants: true,
+        common_subexpressions: true,
+        hoist_centre_terms: true,
+        strength_reduction: true,
+    };
     /// A literal translation: one SSA value per node, all inside the loop.
-    pub const NONE: LowerOptions =
-        LowerOptions { fold_constants: false, common_subexpressions: false, hoist_centre_terms: false };
+    pub const NONE: LowerOptions = LowerOptions {
+        fold_constants: false,
+        common_subexpressions: false,
+        hoist_centre_terms: false,
+        strength_reduction: false,
+    };
 }
 
 impl Default for LowerOptions {
@@ -442,6 +453,25 @@ impl Body {
                 let (fa, fb) = (self.folded(a), self.folded(b));
                 if let Some(v) = self.fold(&Expr::binary(*op, fa.clone(), fb.clone())) {
                     return wgsl_f32(semantics::fin(v));
+                }
+                let square = self.options.strength_reduction
+                    && *op == crate::lang::BinaryOp::Pow
+                    && matches!(fb, Expr::Const(c) if semantics::literal(c) == 2.0);
+                if square {
+                    let value = match fa {
+                        Expr::Pair(crate::lang::PairOp::Distance2, i, j) => {
+                            format!("fj_distance2sq({}, {})", feature_ident('i', i), feature_ident('j', j))
+                        }
+                        _ => {
+                            let a = self.emit(&fa);
+                            format!("fj_mul({a}, {a})")
+                        }
+                    };
+                    let name = self.temp(value, per_pixel);
+                    if let Some(k) = key {
+                        self.known.insert(k, name.clone());
+                    }
+                    return name;
                 }
                 let a = self.emit(&fa);
                 let b = self.emit(&fb);

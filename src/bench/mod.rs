@@ -1,0 +1,506 @@
+//! `filterjit bench`: the JIT measured against the alternatives, in one run
+//! on one device. Every figure is a median over repeats, with its spread.
+
+pub mod interpreter;
+
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+use crate::gp::{self, Evaluator};
+use crate::gpu::{Gpu, RawBuffer, SceneBuffers};
+use crate::jit::{self, KernelKind, KernelLayout, KernelSource, LowerOptions};
+use crate::lang::random::Alphabet;
+use crate::lang::{parse_expr, Expr, Feature, FeatureSource, ScalarVar};
+use crate::rng::Rng;
+use crate::scene::Scene;
+
+/// Bench settings.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchSettings {
+    pub radius: u32,
+    pub repeats: usize,
+    /// Individuals compiled together for the amortised compile cost.
+    pub population: usize,
+    /// Expression lengths of the corpus.
+    pub lengths: Vec<usize>,
+    /// Image sizes of the one-generation measurement (square).
+    pub generation_sizes: Vec<u32>,
+    pub generation_radius: u32,
+    pub seed: u64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Stat {
+    pub median: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+fn stat(mut v: Vec<f64>) -> Stat {
+    v.sort_by(f64::total_cmp);
+    Stat { median: v[v.len() / 2], min: v[0], max: v[v.len() - 1] }
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ExpressionResult {
+    pub expr: String,
+    pub length: usize,
+    pub lower_ms: f64,
+    pub validate_ms: f64,
+    pub pipeline_ms: f64,
+    /// The first dispatch, where software drivers compile the pipeline.
+    pub first_dispatch_ms: f64,
+    /// Warm dispatches, generated kernel (all optimisations).
+    pub jit_ms: Stat,
+    /// Warm dispatches, generated kernel without optimisations.
+    pub jit_plain_ms: Stat,
+    pub interpreter_ms: Option<Stat>,
+    /// interpreter / JIT, median times.
+    pub interpreter_ratio: Option<f64>,
+    pub weights_per_second: f64,
+    pub gp_ops_per_second: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct PopulationResult {
+    pub individuals: usize,
+    pub distinct: usize,
+    pub lower_validate_ms: f64,
+    pub pipelines_ms: f64,
+    /// The first evaluation of all of them: software drivers compile here.
+    pub first_evaluation_ms: f64,
+    pub per_individual_ms: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct HandWrittenResult {
+    pub handwritten_ms: Stat,
+    pub generated_ms: Stat,
+    pub generated_plain_ms: Stat,
+    /// generated / hand-written.
+    pub ratio: f64,
+    pub plain_ratio: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct GenerationResult {
+    pub size: u32,
+    pub radius: u32,
+    pub population: usize,
+    pub compile_s: f64,
+    pub evaluate_s: f64,
+    pub gp_s: f64,
+    pub total_s: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Report {
+    pub device: String,
+    pub scene: String,
+    pub width: usize,
+    pub height: usize,
+    pub settings: BenchSettings,
+    pub expressions: Vec<ExpressionResult>,
+    pub interpreter_ratio_median: f64,
+    pub optimisation_ratio_median: f64,
+    pub weights_per_second_median: f64,
+    pub gp_ops_per_second_median: f64,
+    pub population: PopulationResult,
+    pub handwritten: HandWrittenResult,
+    pub generations: Vec<GenerationResult>,
+}
+
+/// The hand-written cross-bilateral kernel a person would write for `@bilateral`.
+pub const HANDWRITTEN_BILATERAL: &str = include_str!("../../templates/handwritten_bilateral.wgsl");
+
+/// Neighbour evaluations of one filter pass (windows clipped to the image).
+fn weights(width: usize, height: usize, radius: u32) -> f64 {
+    let r = radius as i64;
+    let span = |n: usize, p: i64| ((p + r).min(n as i64 - 1) - (p - r).max(0) + 1) as f64;
+    let xs: f64 = (0..width as i64).map(|x| span(width, x)).sum();
+    let ys: f64 = (0..height as i64).map(|y| span(height, y)).sum();
+    xs * ys
+}
+
+fn warm(
+    gpu: &Gpu,
+    kernel: &jit::ValidatedKernel,
+    buffers: &mut SceneBuffers,
+    scene: &Scene,
+    radius: u32,
+    repeats: usize,
+) -> anyhow::Result<Stat> {
+    let mut times = Vec::new();
+    for _ in 0..repeats {
+        times.push(ms(gpu.filter(kernel, buffers, scene, radius)?.dispatch));
+    }
+    Ok(stat(times))
+}
+
+/// The interpreter's inputs for a scene: features and variances packed by slot.
+struct Packed {
+    features: Vec<Feature>,
+    variances: Vec<ScalarVar>,
+    feature_data: Vec<u8>,
+    variance_data: Vec<u8>,
+}
+
+fn pack(scene: &Scene) -> Packed {
+    let features: Vec<Feature> = scene
+        .features
+        .keys()
+        .copied()
+        .filter(|f| matches!(f.source(), FeatureSource::Stored(_) | FeatureSource::Gradient(_)))
+        .collect();
+    let variances: Vec<ScalarVar> = scene.variances.keys().copied().collect();
+    let mut fdata: Vec<[f32; 4]> = Vec::new();
+    for f in &features {
+        fdata.extend(scene.features[f].iter().map(|v| {
+            if f.dimension() == 1 {
+                [v[0], 0.0, 0.0, 0.0]
+            } else {
+                [v[0], v[1], v[2], 0.0]
+            }
+        }));
+    }
+    if fdata.is_empty() {
+        fdata.push([0.0; 4]);
+    }
+    let mut vdata: Vec<f32> = variances.iter().flat_map(|v| scene.variances[v].iter().copied()).collect();
+    if vdata.is_empty() {
+        vdata.push(0.0);
+    }
+    Packed {
+        features,
+        variances,
+        feature_data: bytemuck::cast_slice(&fdata).to_vec(),
+        variance_data: bytemuck::cast_slice(&vdata).to_vec(),
+    }
+}
+
+fn interpret(
+    gpu: &Gpu,
+    kernel: &crate::gpu::RawKernel,
+    packed: &Packed,
+    expr: &Expr,
+    scene: &Scene,
+    radius: u32,
+    repeats: usize,
+) -> anyhow::Result<Option<Stat>> {
+    let slot = |f: Feature| packed.features.iter().position(|g| *g == f).expect("the scene has it") as u32;
+    let variance = |v: ScalarVar| packed.variances.iter().position(|w| *w == v).expect("the scene has it") as u32;
+    let program = interpreter::encode(expr, &slot, &variance);
+    if program.max_depth > interpreter::STACK {
+        return Ok(None);
+    }
+    let (w, h) = (scene.width as u32, scene.height as u32);
+    let params: [u32; 8] = [w, h, radius, 0, program.code.len() as u32, w * h, 0, 0];
+    let color: Vec<[f32; 4]> = scene.color.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
+    let constants = if program.constants.is_empty() { vec![0.0] } else { program.constants.clone() };
+    let pixels = (w * h) as u64;
+    let mut times = Vec::new();
+    for _ in 0..repeats + 1 {
+        let buffers = [
+            RawBuffer::Read(bytemuck::cast_slice(&color)),
+            RawBuffer::Write(pixels * 16),
+            RawBuffer::Write(pixels * 4),
+            RawBuffer::Read(bytemuck::cast_slice(&program.code)),
+            RawBuffer::Read(bytemuck::cast_slice(&constants)),
+            RawBuffer::Read(&packed.feature_data),
+            RawBuffer::Read(&packed.variance_data),
+        ];
+        let (t, _) = gpu.run_raw(kernel, bytemuck::cast_slice(&params), &buffers, (w.div_ceil(8), h.div_ceil(8)))?;
+        times.push(ms(t));
+    }
+    times.remove(0); // the first dispatch compiles
+    Ok(Some(stat(times)))
+}
+
+/// The benchmark corpus: random expressions of each length over the scene's features.
+pub fn corpus(settings: &BenchSettings) -> Vec<Expr> {
+    let alphabet = Alphabet::with(
+        &[
+            Feature::Normal,
+            Feature::Texture,
+            Feature::WorldPosition,
+            Feature::Depth,
+            Feature::Color,
+            Feature::Pixel,
+            Feature::NGradient,
+        ],
+        &[ScalarVar::ColorVariance, ScalarVar::NVariance],
+    );
+    let mut rng = Rng::seeded(settings.seed);
+    let mut out = Vec::new();
+    for &length in &settings.lengths {
+        for _ in 0..2 {
+            out.push(alphabet.of_length(&mut rng, length));
+        }
+    }
+    out
+}
+
+/// Run everything on `scene` (which must carry the corpus's features and a reference).
+pub fn run(
+    gpu: &Gpu,
+    scene: &Scene,
+    generation_scenes: &mut dyn FnMut(u32) -> anyhow::Result<Scene>,
+    settings: &BenchSettings,
+    progress: &mut dyn FnMut(&str),
+) -> anyhow::Result<Report> {
+    let mut buffers = SceneBuffers::new(gpu, scene);
+    let interpreter_kernel = gpu.raw_kernel(&interpreter::source())?;
+    let packed = pack(scene);
+    let per_pass = weights(scene.width, scene.height, settings.radius);
+
+    let mut expressions = Vec::new();
+    for (k, expr) in corpus(settings).iter().enumerate() {
+        progress(&format!("expression {}/{} (length {})", k + 1, settings.lengths.len() * 2, expr.len()));
+        let t = Instant::now();
+        let source = jit::lower_with(expr, KernelKind::Filter, LowerOptions::ALL)?;
+        let lower = t.elapsed();
+        let t = Instant::now();
+        let kernel = jit::validate(source)?;
+        let validate = t.elapsed();
+        let first = gpu.filter(&kernel, &mut buffers, scene, settings.radius)?;
+        let jit_ms = warm(gpu, &kernel, &mut buffers, scene, settings.radius, settings.repeats)?;
+        let plain = jit::validate(jit::lower_with(expr, KernelKind::Filter, LowerOptions::NONE)?)?;
+        gpu.filter(&plain, &mut buffers, scene, settings.radius)?;
+        let jit_plain_ms = warm(gpu, &plain, &mut buffers, scene, settings.radius, settings.repeats)?;
+        let interpreter_ms =
+            interpret(gpu, &interpreter_kernel, &packed, expr, scene, settings.radius, settings.repeats)?;
+        let seconds = jit_ms.median / 1e3;
+        expressions.push(ExpressionResult {
+            expr: expr.to_string(),
+            length: expr.len(),
+            lower_ms: ms(lower),
+            validate_ms: ms(validate),
+            pipeline_ms: ms(first.pipeline.create),
+            first_dispatch_ms: ms(first.dispatch),
+            interpreter_ratio: interpreter_ms.as_ref().map(|i| i.median / jit_ms.median),
+            jit_plain_ms,
+            interpreter_ms,
+            weights_per_second: per_pass / seconds,
+            gp_ops_per_second: per_pass * expr.len() as f64 / seconds,
+            jit_ms,
+        });
+        gpu.prune_pipelines(|_| false);
+    }
+    let median = |v: Vec<f64>| stat(v).median;
+    let interpreter_ratio_median = median(expressions.iter().filter_map(|e| e.interpreter_ratio).collect());
+    let optimisation_ratio_median =
+        median(expressions.iter().map(|e| e.jit_plain_ms.median / e.jit_ms.median).collect());
+    let weights_per_second_median = median(expressions.iter().map(|e| e.weights_per_second).collect());
+    let gp_ops_per_second_median = median(expressions.iter().map(|e| e.gp_ops_per_second).collect());
+
+    // A whole population compiled at once, as evolve does.
+    progress(&format!("population of {}", settings.population));
+    let alphabet = Alphabet::with(&[Feature::Normal, Feature::Texture, Feature::Color, Feature::Pixel], &[]);
+    let mut rng = Rng::seeded(settings.seed ^ 1);
+    let population: Vec<Expr> = (0..settings.population)
+        .map(|_| {
+            let length = 10 + rng.below(40);
+            alphabet.of_length(&mut rng, length)
+        })
+        .collect();
+    let mut distinct: Vec<Expr> = Vec::new();
+    let mut seen = std::collections::HashSet::new();
+    for e in &population {
+        if seen.insert(e.to_string()) {
+            distinct.push(e.clone());
+        }
+    }
+    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let t = Instant::now();
+    let chunk = distinct.len().div_ceil(threads).max(1);
+    let kernels: Vec<jit::ValidatedKernel> = std::thread::scope(|s| {
+        let handles: Vec<_> = distinct
+            .chunks(chunk)
+            .map(|part| {
+                s.spawn(move || {
+                    part.iter().map(|e| jit::compile_kind(e, KernelKind::Fitness)).collect::<Result<Vec<_>, _>>()
+                })
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().expect("compile thread")).collect::<Result<Vec<Vec<_>>, _>>()
+    })?
+    .into_iter()
+    .flatten()
+    .collect();
+    let lower_validate = t.elapsed();
+    let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
+    let t = Instant::now();
+    gpu.prepare_pipelines(&refs, threads)?;
+    let pipelines = t.elapsed();
+    let mut fitness_scene = [crate::gpu::FitnessScene::new(gpu, scene)?];
+    let t = Instant::now();
+    gpu.evaluate_fitness(&refs, &mut fitness_scene, &[scene], settings.radius)?;
+    let first_evaluation = t.elapsed();
+    gpu.prune_pipelines(|_| false);
+    let population_result = PopulationResult {
+        individuals: population.len(),
+        distinct: distinct.len(),
+        lower_validate_ms: ms(lower_validate),
+        pipelines_ms: ms(pipelines),
+        first_evaluation_ms: ms(first_evaluation),
+        per_individual_ms: ms(lower_validate + pipelines + first_evaluation) / population.len() as f64,
+    };
+
+    // Generated against hand-written, for the bilateral seed's formula.
+    progress("hand-written bilateral");
+    let bilateral = parse_expr(crate::corpus::lookup("bilateral").expect("shipped"))?;
+    let handwritten = jit::validate(KernelSource {
+        kind: KernelKind::Filter,
+        options: LowerOptions::NONE,
+        canonical: "<hand-written bilateral>".into(),
+        layout: KernelLayout::of(&bilateral),
+        expr: bilateral.clone(),
+        wgsl: HANDWRITTEN_BILATERAL.to_string(),
+    })?;
+    let generated = jit::compile(&bilateral)?;
+    let generated_plain = jit::validate(jit::lower_with(&bilateral, KernelKind::Filter, LowerOptions::NONE)?)?;
+    for k in [&handwritten, &generated, &generated_plain] {
+        gpu.filter(k, &mut buffers, scene, settings.radius)?;
+    }
+    let handwritten_ms = warm(gpu, &handwritten, &mut buffers, scene, settings.radius, settings.repeats * 2)?;
+    let generated_ms = warm(gpu, &generated, &mut buffers, scene, settings.radius, settings.repeats * 2)?;
+    let generated_plain_ms = warm(gpu, &generated_plain, &mut buffers, scene, settings.radius, settings.repeats * 2)?;
+    let handwritten_result = HandWrittenResult {
+        ratio: generated_ms.median / handwritten_ms.median,
+        plain_ratio: generated_plain_ms.median / handwritten_ms.median,
+        handwritten_ms,
+        generated_ms,
+        generated_plain_ms,
+    };
+
+    // One GP generation of the thesis's size.
+    let mut generations = Vec::new();
+    for &size in &settings.generation_sizes {
+        progress(&format!("one generation at {size}x{size}"));
+        let gscene = generation_scenes(size)?;
+        let seed_expr = bilateral.clone();
+        let features: Vec<Feature> = gscene.features.keys().copied().chain([Feature::Color, Feature::Pixel]).collect();
+        let variances: Vec<ScalarVar> = gscene.variances.keys().copied().collect();
+        let mut evaluator = crate::evolve::GpuEvaluator::new(gpu, vec![gscene], settings.generation_radius, threads)?;
+        let gp_settings = gp::Settings {
+            islands: 4,
+            island_size: settings.population / 4,
+            seed: settings.seed,
+            ..Default::default()
+        };
+        let terminals = gp::operators::Terminals {
+            features,
+            variables: variances,
+            constants: crate::lang::ops::THESIS_CONSTANTS.to_vec(),
+        };
+        let mut engine = gp::Engine::new(gp_settings, terminals, seed_expr, &mut evaluator);
+        let (state, _) = engine.initial()?;
+        let t = Instant::now();
+        let (_, report) = engine.step(&state)?;
+        let total = t.elapsed().as_secs_f64();
+        drop(engine);
+        let _ = evaluator.take_time();
+        generations.push(GenerationResult {
+            size,
+            radius: settings.generation_radius,
+            population: settings.population,
+            compile_s: report.compile_s,
+            evaluate_s: report.evaluate_s,
+            gp_s: report.gp_s,
+            total_s: total,
+        });
+    }
+
+    Ok(Report {
+        device: gpu.describe(),
+        scene: scene.name.clone(),
+        width: scene.width,
+        height: scene.height,
+        settings: settings.clone(),
+        expressions,
+        interpreter_ratio_median,
+        optimisation_ratio_median,
+        weights_per_second_median,
+        gp_ops_per_second_median,
+        population: population_result,
+        handwritten: handwritten_result,
+        generations,
+    })
+}
+
+/// The thesis's Table 4.1 (GTX 980 Ti, population 200), for the side-by-side view.
+pub const THESIS_TABLE_4_1: &[(u32, f64, f64)] =
+    &[(32, 0.457, 2.667), (128, 6.799, 734.623), (256, 22.038, 3165.72), (512, 183.14, 27501.9)];
+
+/// The report as a text table.
+pub fn table(r: &Report) -> String {
+    let mut t = String::new();
+    t += &format!(
+        "device  {}\nscene   {} ({}x{}), radius {}, {} repeats per figure (median [min, max])\n\n",
+        r.device, r.scene, r.width, r.height, r.settings.radius, r.settings.repeats
+    );
+    t += "compile latency and throughput per expression (ms)\n";
+    t += &format!(
+        "{:>4} {:>7} {:>8} {:>9} {:>9} {:>10} {:>10} {:>11} {:>9} {:>10}\n",
+        "len", "lower", "validate", "pipeline", "1st disp", "jit", "jit plain", "interpreter", "interp/jit", "Gops/s"
+    );
+    for e in &r.expressions {
+        t += &format!(
+            "{:>4} {:>7.2} {:>8.2} {:>9.2} {:>9.1} {:>10.2} {:>10.2} {:>11} {:>9} {:>10.2}\n",
+            e.length,
+            e.lower_ms,
+            e.validate_ms,
+            e.pipeline_ms,
+            e.first_dispatch_ms,
+            e.jit_ms.median,
+            e.jit_plain_ms.median,
+            e.interpreter_ms.as_ref().map_or("-".into(), |s| format!("{:.2}", s.median)),
+            e.interpreter_ratio.map_or("-".into(), |x| format!("{x:.1}x")),
+            e.gp_ops_per_second / 1e9
+        );
+    }
+    t += &format!(
+        "\nmedian: interpreter / JIT {:.1}x; unoptimised / optimised {:.2}x; {:.3} G weights/s; {:.2} G GP ops/s\n",
+        r.interpreter_ratio_median,
+        r.optimisation_ratio_median,
+        r.weights_per_second_median / 1e9,
+        r.gp_ops_per_second_median / 1e9
+    );
+    let p = &r.population;
+    t += &format!(
+        "\npopulation of {} ({} distinct) compiled together: lower+validate {:.0} ms, pipelines {:.0} ms, first evaluation {:.0} ms => {:.2} ms per individual\n",
+        p.individuals, p.distinct, p.lower_validate_ms, p.pipelines_ms, p.first_evaluation_ms, p.per_individual_ms
+    );
+    let h = &r.handwritten;
+    t += &format!(
+        "\nbilateral: hand-written {:.3} ms, generated {:.3} ms ({:.2}x), generated unoptimised {:.3} ms ({:.2}x)\n",
+        h.handwritten_ms.median, h.generated_ms.median, h.ratio, h.generated_plain_ms.median, h.plain_ratio
+    );
+    if !r.generations.is_empty() {
+        t += "\none GP generation (this device) next to the thesis's Table 4.1 (GTX 980 Ti, population 200: another machine)\n";
+        t += &format!(
+            "{:>8} {:>6} {:>10} {:>10} {:>8} {:>9}   {:>12} {:>12}\n",
+            "size", "pop", "compile s", "evaluate s", "gp s", "total s", "thesis GPU s", "thesis CPU s"
+        );
+        for g in &r.generations {
+            let thesis = THESIS_TABLE_4_1.iter().find(|(s, ..)| *s == g.size);
+            t += &format!(
+                "{:>8} {:>6} {:>10.2} {:>10.2} {:>8.3} {:>9.2}   {:>12} {:>12}\n",
+                format!("{0}x{0}", g.size),
+                g.population,
+                g.compile_s,
+                g.evaluate_s,
+                g.gp_s,
+                g.total_s,
+                thesis.map_or("-".into(), |t| format!("{:.3}", t.1)),
+                thesis.map_or("-".into(), |t| format!("{:.1}", t.2))
+            );
+        }
+    }
+    t
+}

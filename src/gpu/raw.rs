@@ -1,0 +1,126 @@
+//! Dispatch of a WGSL module that is not a filterjit kernel (the benchmark's
+//! stack interpreter). naga validates it first, like every module.
+
+use std::time::{Duration, Instant};
+
+use wgpu::util::DeviceExt;
+
+use super::{Gpu, GpuError};
+
+/// A validated, compiled WGSL module with entry point `main`.
+pub struct RawKernel {
+    pipeline: wgpu::ComputePipeline,
+}
+
+/// One binding of a raw dispatch, in binding order after the uniform at 0.
+pub enum RawBuffer<'a> {
+    Read(&'a [u8]),
+    /// A zeroed read-write buffer of this many bytes, read back after the dispatch.
+    Write(u64),
+}
+
+impl Gpu {
+    pub fn raw_kernel(&self, wgsl: &str) -> Result<RawKernel, GpuError> {
+        let invalid =
+            |message: String| GpuError::Pipeline { expression: "<raw kernel>".into(), message, wgsl: wgsl.to_string() };
+        let module = naga::front::wgsl::parse_str(wgsl).map_err(|e| invalid(e.emit_to_string(wgsl)))?;
+        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+            .validate(&module)
+            .map_err(|e| invalid(e.emit_to_string(wgsl)))?;
+        let scope = self.device().push_error_scope(wgpu::ErrorFilter::Validation);
+        let shader = self.device().create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("raw"),
+            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),
+        });
+        let pipeline = self.device().create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some("raw"),
+            layout: None,
+            module: &shader,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(invalid(e.to_string()));
+        }
+        Ok(RawKernel { pipeline })
+    }
+
+    /// One dispatch of `groups` workgroups; returns its wall time (submission
+    /// to completion) and the contents of the `Write` buffers.
+    pub fn run_raw(
+        &self,
+        kernel: &RawKernel,
+        uniform: &[u8],
+        buffers: &[RawBuffer<'_>],
+        groups: (u32, u32),
+    ) -> Result<(Duration, Vec<Vec<u8>>), GpuError> {
+        let device = self.device();
+        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents: uniform,
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let made: Vec<(wgpu::Buffer, Option<u64>)> = buffers
+            .iter()
+            .map(|b| match b {
+                RawBuffer::Read(data) => (
+                    device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: None,
+                        contents: data,
+                        usage: wgpu::BufferUsages::STORAGE,
+                    }),
+                    None,
+                ),
+                RawBuffer::Write(size) => (
+                    device.create_buffer(&wgpu::BufferDescriptor {
+                        label: None,
+                        size: *size,
+                        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                        mapped_at_creation: false,
+                    }),
+                    Some(*size),
+                ),
+            })
+            .collect();
+        let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }];
+        for (k, (buffer, _)) in made.iter().enumerate() {
+            entries.push(wgpu::BindGroupEntry { binding: k as u32 + 1, resource: buffer.as_entire_binding() });
+        }
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &kernel.pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&kernel.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
+        }
+        let start = Instant::now();
+        self.queue().submit([encoder.finish()]);
+        self.wait("running a raw kernel")?;
+        let elapsed = start.elapsed();
+        if let Some(e) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "running a raw kernel", message: e.to_string() });
+        }
+        let mut outputs = Vec::new();
+        for (buffer, size) in &made {
+            let Some(size) = size else { continue };
+            let staging = device.create_buffer(&wgpu::BufferDescriptor {
+                label: None,
+                size: *size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut encoder = device.create_command_encoder(&Default::default());
+            encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, *size);
+            self.queue().submit([encoder.finish()]);
+            outputs.push(self.read(&staging)?);
+        }
+        Ok((elapsed, outputs))
+    }
+}
