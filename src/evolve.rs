@@ -20,8 +20,13 @@ use crate::{metrics, semantics};
 /// Fitness of expressions on a set of scenes, on the GPU.
 pub struct GpuEvaluator<'g> {
     gpu: &'g Gpu,
+    /// Further devices on the same adapter, opened by the evaluator: software
+    /// drivers compile a pipeline at its first dispatch on their queue's
+    /// thread, so a queue per core compiles a generation's kernels in parallel.
+    more: Vec<Gpu>,
     scenes: Vec<Scene>,
-    device_scenes: Vec<FitnessScene>,
+    /// The scenes on each device, `gpu` first.
+    device_scenes: Vec<Vec<FitnessScene>>,
     /// relMSE of each scene's noisy input: fitness divides by it (thesis 3.2.3).
     noisy: Vec<f64>,
     radius: u32,
@@ -30,16 +35,29 @@ pub struct GpuEvaluator<'g> {
 }
 
 impl<'g> GpuEvaluator<'g> {
+    /// An evaluator on `gpu`, plus one device per further core when `gpu` is a software adapter.
     pub fn new(gpu: &'g Gpu, scenes: Vec<Scene>, radius: u32, threads: usize) -> Result<Self> {
+        let devices = if gpu.is_software() { threads.max(1) } else { 1 };
+        Self::with_devices(gpu, scenes, radius, threads, devices)
+    }
+
+    /// An evaluator spreading each batch over `devices` devices (at least one, `gpu`).
+    pub fn with_devices(gpu: &'g Gpu, scenes: Vec<Scene>, radius: u32, threads: usize, devices: usize) -> Result<Self> {
+        let mut more = Vec::new();
+        for _ in 1..devices.max(1) {
+            more.push(Gpu::open_like(gpu)?);
+        }
         let mut device_scenes = Vec::new();
+        for device in std::iter::once(gpu).chain(more.iter()) {
+            device_scenes.push(scenes.iter().map(|s| FitnessScene::new(device, s)).collect::<Result<Vec<_>, _>>()?);
+        }
         let mut noisy = Vec::new();
         for s in &scenes {
-            device_scenes.push(FitnessScene::new(gpu, s)?);
             let reference =
                 s.reference.as_ref().with_context(|| format!("scene `{}` has no reference image", s.name))?;
             noisy.push(metrics::errors(&s.color, reference, s.spp).relmse.max(1e-12));
         }
-        Ok(GpuEvaluator { gpu, scenes, device_scenes, noisy, radius, threads, time: EvalTime::default() })
+        Ok(GpuEvaluator { gpu, more, scenes, device_scenes, noisy, radius, threads, time: EvalTime::default() })
     }
 
     pub fn scenes(&self) -> &[Scene] {
@@ -62,13 +80,38 @@ impl<'g> GpuEvaluator<'g> {
         });
         let kernels: Vec<jit::ValidatedKernel> = compiled.into_iter().collect::<Result<_, _>>()?;
         let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
-        self.gpu.prepare_pipelines(&refs, threads)?;
+        let devices: Vec<&Gpu> = std::iter::once(self.gpu).chain(self.more.iter()).collect();
+        // Contiguous shares, one per device; results come back in order.
+        let share = refs.len().div_ceil(devices.len()).max(1);
+        let parts: Vec<&[&jit::ValidatedKernel]> = refs.chunks(share).collect();
+        for (device, part) in devices.iter().zip(&parts) {
+            device.prepare_pipelines(part, threads)?;
+        }
         self.time.compile += start.elapsed();
         let start = Instant::now();
         let data: Vec<&Scene> = self.scenes.iter().collect();
-        let out = self.gpu.evaluate_fitness(&refs, &mut self.device_scenes, &data, self.radius)?;
-        // Each generation's kernels are new: the memo keeps their fitness, not their pipelines.
-        self.gpu.prune_pipelines(|_| false);
+        let radius = self.radius;
+        let results: Vec<Result<Vec<Vec<crate::gpu::FitnessError>>, crate::gpu::GpuError>> = std::thread::scope(|s| {
+            let handles: Vec<_> = devices
+                .iter()
+                .zip(self.device_scenes.iter_mut())
+                .zip(&parts)
+                .map(|((device, scenes), part)| {
+                    let data = &data;
+                    s.spawn(move || {
+                        let out = device.evaluate_fitness(part, scenes, data, radius);
+                        // Each generation's kernels are new: the memo keeps their fitness, not their pipelines.
+                        device.prune_pipelines(|_| false);
+                        out
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().expect("evaluation thread panicked")).collect()
+        });
+        let mut out = Vec::with_capacity(exprs.len());
+        for r in results {
+            out.extend(r?);
+        }
         self.time.evaluate += start.elapsed();
         Ok(out)
     }

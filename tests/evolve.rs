@@ -63,6 +63,16 @@ fn run(
     resume: bool,
     stop_after: Option<u32>,
 ) -> Option<evolve::Summary> {
+    try_run(dir, settings, config, resume, stop_after).unwrap()
+}
+
+fn try_run(
+    dir: &Path,
+    settings: Settings,
+    config: RunConfig,
+    resume: bool,
+    stop_after: Option<u32>,
+) -> anyhow::Result<Option<evolve::Summary>> {
     evolve::run(
         gpu(),
         RunOptions {
@@ -77,7 +87,6 @@ fn run(
             baselines: Vec::new(),
         },
     )
-    .unwrap()
 }
 
 fn read(path: PathBuf) -> String {
@@ -117,38 +126,9 @@ fn runs_are_deterministic_and_resume_exactly() {
     assert_eq!(read(c.join(evolve::LOG_FILE)).lines().count(), 5);
 
     // Starting over an existing run, or resuming with other settings, is refused.
-    let err = evolve::run(
-        gpu(),
-        RunOptions {
-            settings: small(),
-            config: config(training, test),
-            output: a.clone(),
-            resume: false,
-            threads: 1,
-            stop_after: None,
-            on_report: &mut |_| {},
-            on_render: &mut |_, _| {},
-            baselines: Vec::new(),
-        },
-    )
-    .unwrap_err();
+    let err = try_run(&a, small(), config(training, test), false, None).unwrap_err();
     assert!(err.to_string().contains("--resume"), "{err}");
-    let other = Settings { seed: 8, ..small() };
-    let err = evolve::run(
-        gpu(),
-        RunOptions {
-            settings: other,
-            config: config(training, test),
-            output: a.clone(),
-            resume: true,
-            threads: 1,
-            stop_after: None,
-            on_report: &mut |_| {},
-            on_render: &mut |_, _| {},
-            baselines: Vec::new(),
-        },
-    )
-    .unwrap_err();
+    let err = try_run(&a, Settings { seed: 8, ..small() }, config(training, test), true, None).unwrap_err();
     assert!(err.to_string().contains("other settings"), "{err}");
 }
 

@@ -65,7 +65,10 @@ pub struct PipelineTiming {
 impl Gpu {
     /// Open the adapter [`adapter::choose`] picks.
     pub fn open() -> Result<Gpu, GpuError> {
-        let adapter = adapter::choose()?;
+        Self::from_adapter(adapter::choose()?)
+    }
+
+    fn from_adapter(adapter: wgpu::Adapter) -> Result<Gpu, GpuError> {
         let info = adapter.get_info();
         let limits = adapter.limits();
         let descriptor = wgpu::DeviceDescriptor {
@@ -77,6 +80,19 @@ impl Gpu {
         let (device, queue) = pollster::block_on(adapter.request_device(&descriptor))
             .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
         Ok(Gpu { device, queue, info, limits, pipelines: Mutex::new(HashMap::new()), tracer: OnceLock::new() })
+    }
+
+    /// Another device on the same adapter as `other` (its own queue and pipelines).
+    pub fn open_like(other: &Gpu) -> Result<Gpu, GpuError> {
+        let wanted = other.info.clone();
+        let adapter = adapter::available(wgpu::Backends::from(wanted.backend), true)
+            .into_iter()
+            .find(|a| {
+                let info = a.get_info();
+                info.name == wanted.name && info.device == wanted.device && info.backend == wanted.backend
+            })
+            .ok_or(GpuError::NoMatchingAdapter { wanted: wanted.name.clone(), found: Vec::new() })?;
+        Self::from_adapter(adapter)
     }
 
     /// One line naming the adapter and backend.
@@ -124,29 +140,38 @@ impl Gpu {
             });
         }
         let start = Instant::now();
-        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("filterjit kernel"),
-            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(kernel.module().clone())),
-        });
-        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("filterjit kernel"),
-            layout: None,
-            module: &module,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Pipeline {
+        let pipeline = self.create_pipeline(kernel.module().clone(), "filterjit kernel").map_err(|message| {
+            GpuError::Pipeline {
                 expression: kernel.source().canonical.clone(),
-                message: error.to_string(),
+                message,
                 wgsl: kernel.wgsl().to_string(),
-            });
-        }
+            }
+        })?;
         let pipeline = Arc::new(pipeline);
         let create = start.elapsed();
         self.pipelines.lock().expect("pipeline cache lock").insert(kernel.key(), pipeline.clone());
         Ok((pipeline, PipelineTiming { create, cache_hit: false }))
+    }
+
+    /// A compute pipeline (entry point `main`) from a validated naga module,
+    /// inside a validation error scope; the error's text on failure.
+    pub(crate) fn create_pipeline(&self, module: naga::Module, label: &str) -> Result<wgpu::ComputePipeline, String> {
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let shader = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),
+        });
+        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(label),
+            layout: None,
+            module: &shader,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        match pollster::block_on(scope.pop()) {
+            Some(error) => Err(error.to_string()),
+            None => Ok(pipeline),
+        }
     }
 }

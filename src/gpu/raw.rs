@@ -27,22 +27,7 @@ impl Gpu {
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
             .validate(&module)
             .map_err(|e| invalid(e.emit_to_string(wgsl)))?;
-        let scope = self.device().push_error_scope(wgpu::ErrorFilter::Validation);
-        let shader = self.device().create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("raw"),
-            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),
-        });
-        let pipeline = self.device().create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("raw"),
-            layout: None,
-            module: &shader,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(invalid(e.to_string()));
-        }
+        let pipeline = self.create_pipeline(module, "raw").map_err(invalid)?;
         Ok(RawKernel { pipeline })
     }
 

@@ -42,27 +42,9 @@ impl Gpu {
         if let Some(p) = self.tracer.get() {
             return Ok(p);
         }
-        let module = module()?;
-        let scope = self.device().push_error_scope(wgpu::ErrorFilter::Validation);
-        let shader = self.device().create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("filterjit path tracer"),
-            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module.clone())),
-        });
-        let pipeline = self.device().create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some("filterjit path tracer"),
-            layout: None,
-            module: &shader,
-            entry_point: Some("main"),
-            compilation_options: Default::default(),
-            cache: None,
-        });
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Pipeline {
-                expression: "<path tracer>".into(),
-                message: error.to_string(),
-                wgsl: String::new(),
-            });
-        }
+        let pipeline = self.create_pipeline(module()?.clone(), "filterjit path tracer").map_err(|message| {
+            GpuError::Pipeline { expression: "<path tracer>".into(), message, wgsl: String::new() }
+        })?;
         Ok(self.tracer.get_or_init(|| pipeline))
     }
 

@@ -12,13 +12,24 @@ use filterjit::Scene;
 /// the GPU tests fail, saying what to install.
 pub fn gpu() -> &'static Gpu {
     static GPU: OnceLock<Gpu> = OnceLock::new();
-    GPU.get_or_init(|| match Gpu::open() {
+    GPU.get_or_init(|| {
+        // As the binary does: Mesa's Vulkan device-select layer probes for a display
+        // and prints warnings without one. std's environment lock guards this write.
+        if std::env::var_os("NODEVICE_SELECT").is_none() {
+            std::env::set_var("NODEVICE_SELECT", "1");
+        }
+        open()
+    })
+}
+
+fn open() -> Gpu {
+    match Gpu::open() {
         Ok(gpu) => {
             eprintln!("GPU tests run on {}", gpu.describe());
             gpu
         }
         Err(e) => panic!("GPU tests need an adapter: {e}"),
-    })
+    }
 }
 
 /// The Mitsuba sample beside the repository (tests may read ../shared; the program never does).
