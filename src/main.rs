@@ -151,15 +151,19 @@ struct EvolveArgs {
     /// The expression the population is seeded from.
     #[arg(long, default_value = "@bilateral")]
     seed_expr: String,
+    /// Number of islands [quick, thesis: 4].
     #[arg(long)]
     islands: Option<usize>,
+    /// Individuals per island [quick: 25, thesis: 100].
     #[arg(long)]
     island_size: Option<usize>,
+    /// Generations to run: the stopping rule [quick: 15, thesis: 200].
     #[arg(long)]
     generations: Option<u32>,
-    /// Longest expression, in nodes.
+    /// Longest expression, in nodes [75].
     #[arg(long)]
     max_length: Option<usize>,
+    /// Tournament size [8].
     #[arg(long)]
     tournament: Option<usize>,
     /// Share of each generation copied unchanged.
