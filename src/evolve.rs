@@ -64,8 +64,13 @@ impl<'g> GpuEvaluator<'g> {
         &self.scenes
     }
 
-    /// relMSE of every expression on every scene (`[expr][scene]`), with domain-error bits.
-    pub fn errors(&mut self, exprs: &[Expr]) -> Result<Vec<Vec<crate::gpu::FitnessError>>> {
+    /// relMSE of every expression on every scene (`[expr][scene]`), with
+    /// domain-error bits; `Err(reason)` for an expression this device cannot
+    /// run (more inputs than it allows storage buffers).
+    pub fn errors(
+        &mut self,
+        exprs: &[Expr],
+    ) -> Result<Vec<std::result::Result<Vec<crate::gpu::FitnessError>, String>>> {
         let start = Instant::now();
         let threads = self.threads.max(1);
         let chunk = exprs.len().div_ceil(threads).max(1);
@@ -79,7 +84,10 @@ impl<'g> GpuEvaluator<'g> {
             handles.into_iter().flat_map(|h| h.join().expect("compile thread panicked")).collect()
         });
         let kernels: Vec<jit::ValidatedKernel> = compiled.into_iter().collect::<Result<_, _>>()?;
-        let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
+        let unsupported: Vec<Option<String>> =
+            kernels.iter().map(|k| self.gpu.check_bindings(k).err().map(|e| e.to_string())).collect();
+        let refs: Vec<&jit::ValidatedKernel> =
+            kernels.iter().zip(&unsupported).filter(|(_, u)| u.is_none()).map(|(k, _)| k).collect();
         let devices: Vec<&Gpu> = std::iter::once(self.gpu).chain(self.more.iter()).collect();
         // Contiguous shares, one per device; results come back in order.
         let share = refs.len().div_ceil(devices.len()).max(1);
@@ -108,10 +116,18 @@ impl<'g> GpuEvaluator<'g> {
                 .collect();
             handles.into_iter().map(|h| h.join().expect("evaluation thread panicked")).collect()
         });
-        let mut out = Vec::with_capacity(exprs.len());
+        let mut evaluated = Vec::with_capacity(refs.len());
         for r in results {
-            out.extend(r?);
+            evaluated.extend(r?);
         }
+        let mut evaluated = evaluated.into_iter();
+        let out = unsupported
+            .into_iter()
+            .map(|u| match u {
+                Some(reason) => Err(reason),
+                None => Ok(evaluated.next().expect("one result per supported kernel")),
+            })
+            .collect();
         self.time.evaluate += start.elapsed();
         Ok(out)
     }
@@ -126,7 +142,11 @@ impl Evaluator for GpuEvaluator<'_> {
         let errors = self.errors(exprs)?;
         Ok(errors
             .iter()
-            .map(|per_scene| {
+            .map(|result| {
+                let per_scene = match result {
+                    Ok(per_scene) => per_scene,
+                    Err(reason) => return Fitness::invalid(reason.clone()),
+                };
                 let flags = per_scene.iter().fold(0, |a, e| a | e.flags);
                 if flags != 0 {
                     return Fitness::invalid(format!("domain error: {}", semantics::flag::describe(flags).join("; ")));
@@ -324,7 +344,18 @@ pub fn test(evaluator: &mut GpuEvaluator<'_>, exprs: &[Expr]) -> Result<Vec<Test
     Ok(exprs
         .iter()
         .zip(errors)
-        .map(|(e, per_scene)| {
+        .map(|(e, result)| {
+            let per_scene = match result {
+                Ok(per_scene) => per_scene,
+                Err(reason) => {
+                    return TestResult {
+                        expr: e.to_string(),
+                        relmse: vec![f64::NAN; noisy.len()],
+                        normalised: f64::NAN,
+                        invalid: Some(reason),
+                    }
+                }
+            };
             let flags = per_scene.iter().fold(0, |a, s| a | s.flags);
             let relmse: Vec<f64> = per_scene.iter().map(|s| s.relmse).collect();
             let normalised = relmse.iter().zip(&noisy).map(|(r, n)| r / n).sum::<f64>() / relmse.len().max(1) as f64;

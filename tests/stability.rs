@@ -187,8 +187,16 @@ fn random_expressions_far_past_the_length_limit_compile_and_run() {
         let expr = alphabet.of_length(&mut rng, length);
         assert!(expr.len() >= length);
         let kernel = jit::compile(&expr).unwrap_or_else(|e| panic!("length {length}: {e}"));
-        let out = gpu().filter(&kernel, &mut buffers, &scene, 1).unwrap();
-        assert!(out.rgb().iter().flatten().all(|v| v.is_finite()), "length {}", expr.len());
+        match gpu().filter(&kernel, &mut buffers, &scene, 1) {
+            Ok(out) => assert!(out.rgb().iter().flatten().all(|v| v.is_finite()), "length {}", expr.len()),
+            // Some devices (llvmpipe through GL: 16) allow fewer storage buffers than a
+            // kernel reading 19 inputs needs: a clear error, not a crash.
+            Err(e @ filterjit::gpu::GpuError::TooManyBindings { .. }) => {
+                assert!(e.to_string().contains("storage buffers"), "{e}");
+                eprintln!("length {}: {e}", expr.len());
+            }
+            Err(e) => panic!("length {}: {e}", expr.len()),
+        }
     }
 }
 

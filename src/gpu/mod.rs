@@ -124,21 +124,31 @@ impl Gpu {
         self.pipelines.lock().expect("pipeline cache lock").len()
     }
 
-    /// Get the pipeline of a kernel: from the cache, or created and cached.
-    pub fn pipeline(&self, kernel: &ValidatedKernel) -> Result<(Arc<wgpu::ComputePipeline>, PipelineTiming), GpuError> {
-        if let Some(p) = self.pipelines.lock().expect("pipeline cache lock").get(&kernel.key()) {
-            return Ok((p.clone(), PipelineTiming { create: Duration::ZERO, cache_hit: true }));
-        }
-        let needed = FIRST_INPUT_BINDING - 1 + kernel.source().layout.inputs.len() as u32;
+    /// Whether the device allows as many storage buffers as the kernel binds.
+    pub fn check_bindings(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
+        let source = kernel.source();
+        // Colour, output (or partial sums), flags, the inputs, and a fitness kernel's reference.
+        let needed = FIRST_INPUT_BINDING - 1
+            + source.layout.inputs.len() as u32
+            + u32::from(source.kind == crate::jit::KernelKind::Fitness);
         let limit = self.limits.max_storage_buffers_per_shader_stage;
         if needed > limit {
             return Err(GpuError::TooManyBindings {
-                expression: kernel.source().canonical.clone(),
+                expression: source.canonical.clone(),
                 needed,
                 limit,
                 adapter: self.info.name.clone(),
             });
         }
+        Ok(())
+    }
+
+    /// Get the pipeline of a kernel: from the cache, or created and cached.
+    pub fn pipeline(&self, kernel: &ValidatedKernel) -> Result<(Arc<wgpu::ComputePipeline>, PipelineTiming), GpuError> {
+        if let Some(p) = self.pipelines.lock().expect("pipeline cache lock").get(&kernel.key()) {
+            return Ok((p.clone(), PipelineTiming { create: Duration::ZERO, cache_hit: true }));
+        }
+        self.check_bindings(kernel)?;
         let start = Instant::now();
         let pipeline = self.create_pipeline(kernel.module().clone(), "filterjit kernel").map_err(|message| {
             GpuError::Pipeline {
