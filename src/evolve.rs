@@ -73,17 +73,7 @@ impl<'g> GpuEvaluator<'g> {
     ) -> Result<Vec<std::result::Result<Vec<crate::gpu::FitnessError>, String>>> {
         let start = Instant::now();
         let threads = self.threads.max(1);
-        let chunk = exprs.len().div_ceil(threads).max(1);
-        let compiled: Vec<Result<jit::ValidatedKernel, jit::CompileError>> = std::thread::scope(|s| {
-            let handles: Vec<_> = exprs
-                .chunks(chunk)
-                .map(|part| {
-                    s.spawn(move || part.iter().map(|e| jit::compile_kind(e, KernelKind::Fitness)).collect::<Vec<_>>())
-                })
-                .collect();
-            handles.into_iter().flat_map(|h| h.join().expect("compile thread panicked")).collect()
-        });
-        let kernels: Vec<jit::ValidatedKernel> = compiled.into_iter().collect::<Result<_, _>>()?;
+        let kernels = jit::compile_all(exprs, KernelKind::Fitness, threads)?;
         let unsupported: Vec<Option<String>> =
             kernels.iter().map(|k| self.gpu.check_bindings(k).err().map(|e| e.to_string())).collect();
         let refs: Vec<&jit::ValidatedKernel> =
@@ -431,16 +421,22 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     };
     let mut engine = gp::Engine::new(settings.clone(), terminals, seed_expr.clone(), &mut evaluator);
 
+    // A generation is done once it is logged and checkpointed, in that order: a
+    // resumed run drops log lines past its checkpoint.
+    let mut record = |state: &State, report: &gp::Report| -> Result<()> {
+        append_log(&output, report)?;
+        write_checkpoint(
+            &output,
+            &Checkpoint { version: 1, settings: settings.clone(), run: config.clone(), state: state.clone() },
+        )?;
+        on_report(report);
+        Ok(())
+    };
     let mut state = match resumed {
         Some(state) => state,
         None => {
             let (state, report) = engine.initial()?;
-            append_log(&output, &report)?;
-            write_checkpoint(
-                &output,
-                &Checkpoint { version: 1, settings: settings.clone(), run: config.clone(), state: state.clone() },
-            )?;
-            on_report(&report);
+            record(&state, &report)?;
             state
         }
     };
@@ -450,12 +446,7 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
             return Ok(None);
         }
         let (next, report) = engine.step(&state)?;
-        append_log(&output, &report)?;
-        write_checkpoint(
-            &output,
-            &Checkpoint { version: 1, settings: settings.clone(), run: config.clone(), state: next.clone() },
-        )?;
-        on_report(&report);
+        record(&next, &report)?;
         state = next;
         done_here += 1;
     }

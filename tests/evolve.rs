@@ -12,9 +12,7 @@ use filterjit::{corpus, scene};
 use crate::common::{gpu, mitsuba_sample};
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("filterjit-evolve-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+    crate::common::temp_dir("evolve", name)
 }
 
 /// Two tiny rendered datasets shared by the tests: (training, test).

@@ -12,9 +12,7 @@ fn tiny() -> RenderSettings {
 }
 
 fn temp_dir(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("filterjit-render-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+    crate::common::temp_dir("render", name)
 }
 
 /// Our Cornell box against Mitsuba 3's reference of the same scene (box filter, 64x64).

@@ -18,10 +18,7 @@ fn request(features: &[Feature], variances: &[ScalarVar]) -> Request {
 }
 
 fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("filterjit-test-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    crate::common::temp_dir("test", name)
 }
 
 #[test]

@@ -317,21 +317,7 @@ pub fn run(
     }
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
     let t = Instant::now();
-    let chunk = distinct.len().div_ceil(threads).max(1);
-    let kernels: Vec<jit::ValidatedKernel> = std::thread::scope(|s| {
-        let handles: Vec<_> = distinct
-            .chunks(chunk)
-            .map(|part| {
-                s.spawn(move || {
-                    part.iter().map(|e| jit::compile_kind(e, KernelKind::Fitness)).collect::<Result<Vec<_>, _>>()
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join().expect("compile thread")).collect::<Result<Vec<Vec<_>>, _>>()
-    })?
-    .into_iter()
-    .flatten()
-    .collect();
+    let kernels = jit::compile_all(&distinct, KernelKind::Fitness, threads)?;
     let lower_validate = t.elapsed();
     let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
     let t = Instant::now();

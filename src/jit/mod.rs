@@ -20,6 +20,26 @@ pub fn compile_kind(expr: &crate::lang::Expr, kind: KernelKind) -> Result<Valida
     Ok(validate(lower_kind(expr, kind)?)?)
 }
 
+/// Lower and validate many expressions on up to `threads` threads; results in order.
+pub fn compile_all(
+    exprs: &[crate::lang::Expr],
+    kind: KernelKind,
+    threads: usize,
+) -> Result<Vec<ValidatedKernel>, CompileError> {
+    let chunk = exprs.len().div_ceil(threads.max(1)).max(1);
+    std::thread::scope(|s| {
+        let handles: Vec<_> = exprs
+            .chunks(chunk)
+            .map(|part| s.spawn(move || part.iter().map(|e| compile_kind(e, kind)).collect::<Result<Vec<_>, _>>()))
+            .collect();
+        let mut out = Vec::with_capacity(exprs.len());
+        for h in handles {
+            out.extend(h.join().expect("compile thread panicked")?);
+        }
+        Ok(out)
+    })
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum CompileError {
     #[error(transparent)]

@@ -39,6 +39,15 @@ pub fn mitsuba_sample() -> PathBuf {
     dir
 }
 
+/// An empty directory for one test: `area` and `name` keep tests apart, the
+/// process id keeps concurrent runs apart.
+pub fn temp_dir(area: &str, name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("filterjit-{area}-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temporary directory");
+    dir
+}
+
 /// Limits read from the environment so CI can shrink or grow a run.
 pub fn env_usize(name: &str, default: usize) -> usize {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
