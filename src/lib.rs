@@ -8,6 +8,7 @@ pub mod bench;
 pub mod corpus;
 pub mod cpu;
 pub mod evolve;
+pub mod export;
 pub mod gp;
 pub mod gpu;
 pub mod io;

@@ -35,6 +35,22 @@ enum Command {
     },
     /// Parse and type-check an expression; print its canonical form, length and inputs.
     Check { expr: String },
+    /// Export an expression as a standalone shader for another program (an
+    /// engine): inputs from textures, output to a storage texture; writes a
+    /// manifest of the binding interface beside it (FILE.json).
+    Export {
+        /// The expression, @name for a shipped one, or @FILE[:NAME] (a hall of fame).
+        expr: String,
+        /// Shading language: WGSL from filterjit's templates, the others through naga's back ends.
+        #[arg(long, value_enum, default_value_t = filterjit::export::Target::Wgsl)]
+        target: filterjit::export::Target,
+        /// Texel format of the output storage texture.
+        #[arg(long, value_enum, default_value_t = jit::OutputFormat::Rgba16float)]
+        format: jit::OutputFormat,
+        /// The shader file; its manifest goes to FILE.json.
+        #[arg(short, long)]
+        output: PathBuf,
+    },
     /// Filter a scene with an expression on the GPU; write the result as EXR and a PNG preview.
     Filter {
         /// The expression, or @name for a shipped one.
@@ -236,6 +252,23 @@ fn run(cli: Cli) -> Result<()> {
                     .map_err(anyhow::Error::msg)
                     .with_context(|| format!("writing {}", path.display()))?,
                 None => print!("{}", kernel.wgsl()),
+            }
+            Ok(())
+        }
+        Command::Export { expr, target, format, output } => {
+            let expr = resolve_expr(&expr)?;
+            let exported = filterjit::export::export(&expr, target, format)?;
+            let manifest_path = manifest_path(&output);
+            let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
+            for (path, bytes) in [(&output, exported.code.to_bytes()), (&manifest_path, manifest.into_bytes())] {
+                filterjit::io::write_bytes_atomically(path, &bytes)
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
+            println!("wrote {} ({}) and its manifest {}", output.display(), exported.manifest.language, manifest_path.display());
+            println!("entry point `{}`, workgroup 8x8x1; bindings:", exported.manifest.entry_point);
+            for b in &exported.manifest.bindings {
+                println!("  {:<26} {:<16} {}", b.target_slot, b.kind, b.role);
             }
             Ok(())
         }
@@ -676,4 +709,11 @@ fn print_errors(label: &str, e: &Errors) {
 
 fn ms(d: std::time::Duration) -> f64 {
     d.as_secs_f64() * 1e3
+}
+
+/// Where `export` writes the manifest of the shader at `shader`: `shader` + `.json`.
+fn manifest_path(shader: &Path) -> PathBuf {
+    let mut name = shader.as_os_str().to_owned();
+    name.push(".json");
+    PathBuf::from(name)
 }

@@ -4,6 +4,7 @@ mod common;
 
 mod cli;
 mod evolve;
+mod export;
 mod gpu_vs_cpu;
 mod lang;
 mod render;

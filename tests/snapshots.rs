@@ -27,3 +27,20 @@ fn generated_wgsl_matches_snapshots() {
         }
     });
 }
+
+/// The exported shader of the thesis's first expression in every text target,
+/// and its manifest: what an engine developer copies out.
+#[test]
+fn exported_shaders_match_snapshots() {
+    use filterjit::export::{export, Code, Target};
+    let expr = parse_expr(corpus::lookup("thesis1").unwrap()).unwrap();
+    settings().bind(|| {
+        for target in [Target::Wgsl, Target::Glsl, Target::Hlsl, Target::Msl] {
+            let exported = export(&expr, target, jit::OutputFormat::Rgba16float).unwrap();
+            let Code::Text(text) = exported.code else { panic!("{target:?} is text") };
+            insta::assert_snapshot!(format!("export__thesis1.{}", target.extension()), text);
+        }
+        let manifest = export(&expr, Target::Wgsl, jit::OutputFormat::Rgba16float).unwrap().manifest;
+        insta::assert_snapshot!("export__thesis1.wgsl.json", serde_json::to_string_pretty(&manifest).unwrap());
+    });
+}

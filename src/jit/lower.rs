@@ -45,6 +45,10 @@ impl Input {
         }
     }
 
+    fn texture_ident(self) -> String {
+        self.ident().replacen("buf_", "tex_", 1)
+    }
+
     pub fn describe(self) -> String {
         match self {
             Input::Feature(f) => f.name().to_string(),
@@ -94,6 +98,32 @@ pub enum KernelKind {
     /// The filter's relMSE terms and domain errors, reduced per workgroup
     /// (binding 2 partial sums, 3 partial flags; the reference after the inputs).
     Fitness,
+    /// The filter as a standalone shader for other programs: inputs are
+    /// sampled textures normalised in the shader by scales from the uniform,
+    /// the result goes to a storage texture of the given format
+    /// (`templates/export.wgsl.tera`, examples/README.md).
+    Export(OutputFormat),
+}
+
+/// Texel format of an exported shader's output storage texture.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum OutputFormat {
+    /// Half floats: what engines keep HDR colour in; about 3 decimal digits.
+    #[default]
+    Rgba16float,
+    /// Full floats: matches `filterjit filter` to f32 rounding.
+    Rgba32float,
+}
+
+impl OutputFormat {
+    /// The WGSL texel format name.
+    pub fn wgsl(self) -> &'static str {
+        match self {
+            OutputFormat::Rgba16float => "rgba16float",
+            OutputFormat::Rgba32float => "rgba32float",
+        }
+    }
 }
 
 impl KernelKind {
@@ -102,7 +132,22 @@ impl KernelKind {
             KernelKind::Filter => FILTER_TEMPLATE,
             KernelKind::Probe => PROBE_TEMPLATE,
             KernelKind::Fitness => FITNESS_TEMPLATE,
+            KernelKind::Export(_) => EXPORT_TEMPLATE,
         }
+    }
+
+    /// Binding of the first per-expression input. Exported shaders have no
+    /// flags buffer, so their inputs follow the output directly.
+    pub fn first_input_binding(self) -> u32 {
+        match self {
+            KernelKind::Export(_) => FIRST_INPUT_BINDING - 1,
+            _ => FIRST_INPUT_BINDING,
+        }
+    }
+
+    /// Whether the kernel reads its inputs from textures (else from storage buffers).
+    fn reads_textures(self) -> bool {
+        matches!(self, KernelKind::Export(_))
     }
 }
 
@@ -184,8 +229,9 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     let mut body = Body { options, ..Body::default() };
     let result = body.emit(expr);
 
-    let centre_lines: Vec<String> = centre_loads(expr).into_iter().chain(body.centre).collect();
-    let neighbour_lines: Vec<String> = neighbour_loads(expr).into_iter().chain(body.lines).collect();
+    let loads = Loads::of(kind, &layout);
+    let centre_lines: Vec<String> = centre_loads(expr, &loads).into_iter().chain(body.centre).collect();
+    let neighbour_lines: Vec<String> = neighbour_loads(expr, &loads).into_iter().chain(body.lines).collect();
 
     #[derive(Serialize)]
     struct BindingView {
@@ -193,16 +239,19 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
         ident: String,
         element: &'static str,
         describes: String,
+        /// Index into the exported shader's `params.scale`.
+        scale_index: usize,
     }
     let bindings: Vec<BindingView> = layout
         .inputs
         .iter()
         .enumerate()
         .map(|(k, input)| BindingView {
-            index: FIRST_INPUT_BINDING + k as u32,
-            ident: input.ident(),
+            index: kind.first_input_binding() + k as u32,
+            ident: if kind.reads_textures() { input.texture_ident() } else { input.ident() },
             element: if input.components() == 1 { "f32" } else { "vec4<f32>" },
             describes: input.describe(),
+            scale_index: k,
         })
         .collect();
 
@@ -220,6 +269,9 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     context.insert("neighbour_lines", &neighbour_lines);
     context.insert("result", &result);
     context.insert("reference_binding", &(FIRST_INPUT_BINDING + layout.inputs.len() as u32));
+    if let KernelKind::Export(format) = kind {
+        context.insert("output_format", format.wgsl());
+    }
     let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
     Ok(KernelSource { kind, options, expr: expr.clone(), canonical, layout, wgsl })
 }
@@ -305,6 +357,7 @@ pub fn helpers_for(code: &str) -> String {
 const FILTER_TEMPLATE: &str = "filter.wgsl";
 const PROBE_TEMPLATE: &str = "probe.wgsl";
 const FITNESS_TEMPLATE: &str = "fitness.wgsl";
+const EXPORT_TEMPLATE: &str = "export.wgsl";
 
 fn templates() -> &'static tera::Tera {
     static TERA: OnceLock<tera::Tera> = OnceLock::new();
@@ -316,6 +369,8 @@ fn templates() -> &'static tera::Tera {
             .expect("built-in probe template parses");
         tera.add_raw_template(FITNESS_TEMPLATE, include_str!("../../templates/fitness.wgsl.tera"))
             .expect("built-in fitness template parses");
+        tera.add_raw_template(EXPORT_TEMPLATE, include_str!("../../templates/export.wgsl.tera"))
+            .expect("built-in export template parses");
         tera
     })
 }
@@ -333,14 +388,63 @@ fn var_ident(v: ScalarVar) -> String {
     format!("var_{}", v.name().to_ascii_lowercase())
 }
 
-/// Load of feature `f` at pixel index `index`, as a zero-padded vec3.
-fn load(f: Feature, index: &str, coords: (&str, &str)) -> String {
-    match f {
-        Feature::Pixel => format!("vec3<f32>(f32({}), f32({}), 0.0)", coords.0, coords.1),
-        Feature::Color => format!("buf_color[{index}].xyz"),
-        _ if f.dimension() == 1 => format!("vec3<f32>({}[{index}], 0.0, 0.0)", Input::Feature(f).ident()),
-        _ => format!("{}[{index}].xyz", Input::Feature(f).ident()),
+/// How loads are spelled in a kernel of one kind.
+enum Loads<'a> {
+    /// Storage buffers indexed by pixel, already normalised (filterjit's own kernels).
+    Buffers,
+    /// Sampled textures read with `textureLoad`, normalised in the shader by
+    /// `params.scale[k]`, k the input's index in the layout (exported shaders).
+    Textures(&'a KernelLayout),
+}
+
+impl<'a> Loads<'a> {
+    fn of(kind: KernelKind, layout: &'a KernelLayout) -> Self {
+        if kind.reads_textures() {
+            Loads::Textures(layout)
+        } else {
+            Loads::Buffers
+        }
     }
+
+    /// Load of feature `f` at pixel index `index` / coordinates `coords`, as a zero-padded vec3.
+    fn feature(&self, f: Feature, index: &str, coords: (&str, &str)) -> String {
+        match (self, f) {
+            (_, Feature::Pixel) => format!("vec3<f32>(f32({}), f32({}), 0.0)", coords.0, coords.1),
+            (Loads::Buffers, Feature::Color) => format!("buf_color[{index}].xyz"),
+            (Loads::Buffers, _) if f.dimension() == 1 => {
+                format!("vec3<f32>({}[{index}], 0.0, 0.0)", Input::Feature(f).ident())
+            }
+            (Loads::Buffers, _) => format!("{}[{index}].xyz", Input::Feature(f).ident()),
+            (Loads::Textures(_), Feature::Color) => format!("{}.xyz", texel("tex_color", coords)),
+            (Loads::Textures(layout), _) => {
+                let input = Input::Feature(f);
+                let texel = texel(&input.texture_ident(), coords);
+                let raw = if f.dimension() == 1 { format!("vec3<f32>({texel}.x, 0.0, 0.0)") } else { format!("{texel}.xyz") };
+                format!("fj_normalised({raw}, {})", scale_of(layout, input))
+            }
+        }
+    }
+
+    /// Load of variance `v` at the centre pixel.
+    fn variance(&self, v: ScalarVar) -> String {
+        match self {
+            Loads::Buffers => format!("{}[i]", Input::Variance(v).ident()),
+            Loads::Textures(layout) => {
+                let input = Input::Variance(v);
+                let texel = texel(&input.texture_ident(), ("x", "y"));
+                format!("fj_normalised(vec3<f32>({texel}.x, 0.0, 0.0), {}).x", scale_of(layout, input))
+            }
+        }
+    }
+}
+
+fn texel(texture: &str, coords: (&str, &str)) -> String {
+    format!("textureLoad({texture}, vec2<i32>(i32({}), i32({})), 0)", coords.0, coords.1)
+}
+
+fn scale_of(layout: &KernelLayout, input: Input) -> String {
+    let k = layout.inputs.iter().position(|i| *i == input).expect("every input of the expression is in its layout");
+    format!("params.scale[{k}].x")
 }
 
 fn pair_sides(expr: &Expr) -> (BTreeSet<Feature>, BTreeSet<Feature>) {
@@ -354,20 +458,19 @@ fn pair_sides(expr: &Expr) -> (BTreeSet<Feature>, BTreeSet<Feature>) {
     (centre, neighbour)
 }
 
-fn centre_loads(expr: &Expr) -> Vec<String> {
+fn centre_loads(expr: &Expr, loads: &Loads<'_>) -> Vec<String> {
     let (centre, _) = pair_sides(expr);
-    let features = centre.into_iter().map(|f| format!("let {} = {};", feature_ident('i', f), load(f, "i", ("x", "y"))));
-    let vars =
-        expr.variables().into_iter().map(|v| format!("let {} = {}[i];", var_ident(v), Input::Variance(v).ident()));
+    let features = centre.into_iter().map(|f| format!("let {} = {};", feature_ident('i', f), loads.feature(f, "i", ("x", "y"))));
+    let vars = expr.variables().into_iter().map(|v| format!("let {} = {};", var_ident(v), loads.variance(v)));
     features.chain(vars).collect()
 }
 
-fn neighbour_loads(expr: &Expr) -> Vec<String> {
+fn neighbour_loads(expr: &Expr, loads: &Loads<'_>) -> Vec<String> {
     let (_, neighbour) = pair_sides(expr);
     neighbour
         .into_iter()
         .map(|f| {
-            let value = if f == Feature::Color { "color_j".to_string() } else { load(f, "j", ("xj", "yj")) };
+            let value = if f == Feature::Color { "color_j".to_string() } else { loads.feature(f, "j", ("xj", "yj")) };
             format!("let {} = {};", feature_ident('j', f), value)
         })
         .collect()

@@ -1,0 +1,400 @@
+//! `filterjit export`: an expression as a standalone shader for another
+//! program, with a manifest of its binding interface.
+//!
+//! WGSL comes from `templates/export.wgsl.tera` through the same lowering as
+//! every filterjit kernel ([`KernelKind::Export`]); GLSL, HLSL, MSL and SPIR-V
+//! are naga's back ends run on the validated module, so every target computes
+//! what the WGSL computes. examples/README.md describes the interface.
+
+use serde::Serialize;
+
+use crate::jit::{self, Input, KernelKind, OutputFormat, ValidatedKernel, WORKGROUP};
+use crate::lang::{Expr, Feature, ScalarVar};
+
+/// Shading languages an expression can be exported to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Target {
+    Wgsl,
+    /// GLSL 4.50 core (desktop OpenGL 4.5, Vulkan GLSL).
+    Glsl,
+    /// HLSL shader model 5.1 (D3D12; FXC or DXC).
+    Hlsl,
+    /// Metal Shading Language 2.0.
+    Msl,
+    /// SPIR-V 1.0 binary (Vulkan).
+    Spirv,
+}
+
+impl Target {
+    /// The usual file extension.
+    pub fn extension(self) -> &'static str {
+        match self {
+            Target::Wgsl => "wgsl",
+            Target::Glsl => "comp",
+            Target::Hlsl => "hlsl",
+            Target::Msl => "metal",
+            Target::Spirv => "spv",
+        }
+    }
+
+    fn language(self) -> &'static str {
+        match self {
+            Target::Wgsl => "WGSL",
+            Target::Glsl => "GLSL 4.50 core, compute stage",
+            Target::Hlsl => "HLSL shader model 5.1, compute shader (cs_5_1)",
+            Target::Msl => "Metal Shading Language 2.0, kernel function",
+            Target::Spirv => "SPIR-V 1.0, GLCompute execution model",
+        }
+    }
+}
+
+/// The shader's code: text, or SPIR-V words.
+#[derive(Clone, Debug)]
+pub enum Code {
+    Text(String),
+    SpirV(Vec<u32>),
+}
+
+impl Code {
+    /// What goes into the file (SPIR-V in little-endian words).
+    pub fn to_bytes(&self) -> Vec<u8> {
+        match self {
+            Code::Text(text) => text.clone().into_bytes(),
+            Code::SpirV(words) => words.iter().flat_map(|w| w.to_le_bytes()).collect(),
+        }
+    }
+}
+
+/// An exported shader and its interface.
+#[derive(Clone, Debug)]
+pub struct Exported {
+    pub code: Code,
+    pub manifest: Manifest,
+}
+
+/// The binding interface of an exported shader, written beside it as JSON.
+#[derive(Clone, Debug, Serialize)]
+pub struct Manifest {
+    pub generator: String,
+    pub expression: String,
+    pub target: Target,
+    pub language: &'static str,
+    /// Name of the compute entry point in this target's code.
+    pub entry_point: String,
+    pub workgroup_size: [u32; 3],
+    pub dispatch: String,
+    pub output_format: OutputFormat,
+    pub uniform: Uniform,
+    /// Every resource, group 0, by binding.
+    pub bindings: Vec<Binding>,
+    pub normalisation: &'static str,
+    pub semantics: &'static str,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Uniform {
+    pub binding: u32,
+    pub size_bytes: u32,
+    pub fields: Vec<Field>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Field {
+    pub name: String,
+    #[serde(rename = "type")]
+    pub ty: &'static str,
+    pub offset: u32,
+    pub meaning: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Binding {
+    pub group: u32,
+    pub binding: u32,
+    /// `uniform`, `sampled_texture` or `storage_texture`.
+    pub kind: &'static str,
+    /// The WGSL declaration's name.
+    pub name: String,
+    /// The input's name in filterjit's expression language (`color`, `normal`, `wpVariance`…), or `output`/`params`.
+    pub role: String,
+    /// Texel components read or written.
+    pub components: &'static str,
+    /// What the texture must hold.
+    pub content: String,
+    /// Index into `params.scale` (features and variances only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale_index: Option<usize>,
+    /// Where this binding is in the target's own terms (GLSL binding, HLSL register, Metal slot).
+    pub target_slot: String,
+}
+
+const NORMALISATION: &str = "Each feature or variance texel v is used as v * scale (scale = params.scale[scale_index].x), \
+     shortened to length 1 when it is longer. filterjit uses scale = 1 / (99.9th percentile of |v| over the frame); \
+     gradients are the per-channel Sobel magnitude of the normalised feature, normalised the same way. A fixed scale \
+     (1 / scene extent for world positions, 1 for normals and albedo) is a good engine approximation; pass 1 when the \
+     texture already holds normalised values.";
+
+const SEMANTICS: &str = "f_i = sum_j w_ij c_j / sum_j w_ij over the (2r+1)^2 window around i clipped to the image; \
+     negative weights count as zero; a zero weight sum keeps the noisy colour; every operator is total (filterjit's \
+     docs/SEMANTICS.md). Colour is linear RGB, not normalised; alpha is passed through.";
+
+#[derive(Debug, thiserror::Error)]
+pub enum ExportError {
+    #[error(transparent)]
+    Compile(#[from] jit::CompileError),
+    #[error("naga's {target:?} back end failed: {message}")]
+    Backend { target: Target, message: String },
+}
+
+/// What the texture of an input must hold.
+fn content(input: Input) -> String {
+    match input {
+        Input::Feature(f) => match f {
+            Feature::WorldPosition => "world-space position of the first hit".into(),
+            Feature::Normal => "shading normal at the first hit".into(),
+            Feature::Texture => "albedo (surface colour) at the first hit".into(),
+            Feature::SecondaryTexture => "albedo at the second hit".into(),
+            Feature::Depth => "distance from the camera to the first hit".into(),
+            Feature::DirectIllumination => "visibility of the lights from the first hit (0..1)".into(),
+            gradient => format!("per-channel Sobel gradient magnitude of the normalised {}", gradient.base()),
+        },
+        Input::Variance(v) => {
+            let of = match v {
+                ScalarVar::WpVariance => "world position",
+                ScalarVar::NVariance => "normal",
+                ScalarVar::TexVariance => "albedo",
+                ScalarVar::SecTexVariance => "secondary albedo",
+                ScalarVar::DovVariance => "depth",
+                ScalarVar::DiVariance => "direct-light visibility",
+                ScalarVar::ColorVariance => "colour",
+            };
+            format!("per-pixel sample variance of the {of}, mean over channels")
+        }
+    }
+}
+
+/// The target's own name for a binding.
+fn target_slot(target: Target, binding: u32, kind: &str) -> String {
+    match target {
+        Target::Wgsl | Target::Spirv => format!("set 0, binding {binding}"),
+        Target::Glsl => format!("layout(binding = {binding})"),
+        Target::Hlsl => {
+            let register = match kind {
+                "uniform" => 'b',
+                "storage_texture" => 'u',
+                _ => 't',
+            };
+            format!("register({register}{binding}, space0)")
+        }
+        Target::Msl => match kind {
+            "uniform" => "[[buffer(0)]]".into(),
+            _ => format!("[[texture({})]]", binding - 1),
+        },
+    }
+}
+
+/// Lower, validate and translate `expr` into a standalone shader for `target`.
+pub fn export(expr: &Expr, target: Target, format: OutputFormat) -> Result<Exported, ExportError> {
+    let kernel = jit::compile_kind(expr, KernelKind::Export(format))?;
+    let (code, entry_point) = translate(&kernel, target)?;
+    let manifest = manifest(&kernel, target, format, entry_point);
+    let code = match code {
+        Code::Text(text) if target != Target::Wgsl => Code::Text(header(&manifest, &text)),
+        other => other,
+    };
+    Ok(Exported { code, manifest })
+}
+
+fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entry_point: String) -> Manifest {
+    let inputs = &kernel.source().layout.inputs;
+    let mut fields = vec![
+        Field { name: "width".into(), ty: "u32", offset: 0, meaning: "image width in pixels".into() },
+        Field { name: "height".into(), ty: "u32", offset: 4, meaning: "image height in pixels".into() },
+        Field { name: "radius".into(), ty: "u32", offset: 8, meaning: "window radius r: (2r+1)^2 pixels".into() },
+        Field { name: "_pad".into(), ty: "u32", offset: 12, meaning: "unused".into() },
+    ];
+    for (k, input) in inputs.iter().enumerate() {
+        fields.push(Field {
+            name: format!("scale[{k}]"),
+            ty: "vec4<f32>",
+            offset: 16 + 16 * k as u32,
+            meaning: format!("x: normalisation scale of {}; y, z, w unused", input.describe()),
+        });
+    }
+    let slot = |binding, kind| target_slot(target, binding, kind);
+    let mut bindings = vec![
+        Binding {
+            group: 0,
+            binding: 0,
+            kind: "uniform",
+            name: "params".into(),
+            role: "params".into(),
+            components: "",
+            content: "the Params struct of the uniform section".into(),
+            scale_index: None,
+            target_slot: slot(0, "uniform"),
+        },
+        Binding {
+            group: 0,
+            binding: 1,
+            kind: "sampled_texture",
+            name: "tex_color".into(),
+            role: "color".into(),
+            components: "xyzw",
+            content: "noisy colour, linear RGB; alpha is copied to the output".into(),
+            scale_index: None,
+            target_slot: slot(1, "sampled_texture"),
+        },
+        Binding {
+            group: 0,
+            binding: 2,
+            kind: "storage_texture",
+            name: "tex_out".into(),
+            role: "output".into(),
+            components: "xyzw",
+            content: format!("filtered colour, written with textureStore; format {}", format.wgsl()),
+            scale_index: None,
+            target_slot: slot(2, "storage_texture"),
+        },
+    ];
+    for (k, input) in inputs.iter().enumerate() {
+        let binding = kernel.source().kind.first_input_binding() + k as u32;
+        bindings.push(Binding {
+            group: 0,
+            binding,
+            kind: "sampled_texture",
+            name: format!("tex_{}", input.describe().to_ascii_lowercase()),
+            role: input.describe(),
+            components: if input.components() == 1 { "x" } else { "xyz" },
+            content: content(*input),
+            scale_index: Some(k),
+            target_slot: slot(binding, "sampled_texture"),
+        });
+    }
+    Manifest {
+        generator: format!("filterjit {}", env!("CARGO_PKG_VERSION")),
+        expression: kernel.source().canonical.clone(),
+        target,
+        language: target.language(),
+        entry_point,
+        workgroup_size: [WORKGROUP[0], WORKGROUP[1], 1],
+        dispatch: format!("ceil(width / {}) x ceil(height / {}) x 1 workgroups", WORKGROUP[0], WORKGROUP[1]),
+        output_format: format,
+        uniform: Uniform { binding: 0, size_bytes: 16 + 16 * inputs.len() as u32, fields },
+        bindings,
+        normalisation: NORMALISATION,
+        semantics: SEMANTICS,
+    }
+}
+
+/// A comment block naming the interface, for targets whose back end drops comments.
+fn header(manifest: &Manifest, code: &str) -> String {
+    let mut out = format!(
+        "// Generated by {} from the filter-weight expression\n//   {}\n// {}. Entry point `{}`, workgroup {}x{}x1; dispatch {}.\n// Bindings (group/set 0):\n",
+        manifest.generator,
+        manifest.expression,
+        manifest.language,
+        manifest.entry_point,
+        manifest.workgroup_size[0],
+        manifest.workgroup_size[1],
+        manifest.dispatch
+    );
+    for b in &manifest.bindings {
+        out.push_str(&format!("//   {:<26} {:<16} {:<14} {}\n", b.target_slot, b.kind, b.role, b.content));
+    }
+    out.push_str(&format!(
+        "// Uniform: {} bytes: width, height, radius, pad (u32), then one vec4 per input, .x its scale.\n// The manifest beside this file has the details.\n\n",
+        manifest.uniform.size_bytes
+    ));
+    out.push_str(code);
+    out
+}
+
+fn backend_error(target: Target) -> impl Fn(String) -> ExportError {
+    move |message| ExportError::Backend { target, message }
+}
+
+fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String), ExportError> {
+    use naga::back;
+    let err = backend_error(target);
+    let module = kernel.module();
+    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
+        .validate(module)
+        .map_err(|e| err(format!("{e:?}")))?;
+    let bindings = || {
+        let count = kernel.source().kind.first_input_binding() + kernel.source().layout.inputs.len() as u32;
+        (0..count).map(|binding| naga::ResourceBinding { group: 0, binding })
+    };
+    match target {
+        Target::Wgsl => Ok((Code::Text(kernel.wgsl().to_string()), "main".into())),
+        Target::Glsl => {
+            let options = back::glsl::Options {
+                version: back::glsl::Version::Desktop(450),
+                writer_flags: back::glsl::WriterFlags::empty(),
+                binding_map: bindings().map(|b| (b, b.binding as u8)).collect(),
+                zero_initialize_workgroup_memory: true,
+            };
+            let pipeline =
+                back::glsl::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".into(), multiview: None };
+            let mut text = String::new();
+            let mut writer = back::glsl::Writer::new(
+                &mut text,
+                module,
+                &info,
+                &options,
+                &pipeline,
+                naga::proc::BoundsCheckPolicies::default(),
+            )
+            .map_err(|e| err(e.to_string()))?;
+            writer.write().map_err(|e| err(e.to_string()))?;
+            Ok((Code::Text(text), "main".into()))
+        }
+        Target::Hlsl => {
+            let options = back::hlsl::Options { shader_model: back::hlsl::ShaderModel::V5_1, ..Default::default() };
+            let pipeline = back::hlsl::PipelineOptions::default();
+            let mut text = String::new();
+            let mut writer = back::hlsl::Writer::new(&mut text, &options, &pipeline);
+            let reflection = writer.write(module, &info, None).map_err(|e| err(e.to_string()))?;
+            let entry = reflection.entry_point_names.into_iter().next().and_then(Result::ok).unwrap_or_else(|| "main".into());
+            Ok((Code::Text(text), entry))
+        }
+        Target::Msl => {
+            let resources = bindings()
+                .map(|b| {
+                    let target = match b.binding {
+                        0 => back::msl::BindTarget { buffer: Some(0), ..Default::default() },
+                        n => back::msl::BindTarget { texture: Some((n - 1) as u8), mutable: n == 2, ..Default::default() },
+                    };
+                    (b, target)
+                })
+                .collect();
+            let mut options = back::msl::Options { lang_version: (2, 0), fake_missing_bindings: false, ..Default::default() };
+            options.per_entry_point_map.insert(
+                "main".into(),
+                back::msl::EntryPointResources { resources, immediates_buffer: None, sizes_buffer: None },
+            );
+            let pipeline = back::msl::PipelineOptions::default();
+            let (text, translation) =
+                back::msl::write_string(module, &info, &options, &pipeline).map_err(|e| err(e.to_string()))?;
+            let entry = translation
+                .entry_point_names
+                .into_iter()
+                .next()
+                .and_then(Result::ok)
+                .unwrap_or_else(|| "main_".into());
+            Ok((Code::Text(text), entry))
+        }
+        Target::Spirv => {
+            let options = back::spv::Options {
+                lang_version: (1, 0),
+                flags: back::spv::WriterFlags::empty(),
+                ..Default::default()
+            };
+            let pipeline =
+                back::spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".into() };
+            let words = back::spv::write_vec(module, &info, &options, Some(&pipeline)).map_err(|e| err(e.to_string()))?;
+            Ok((Code::SpirV(words), "main".into()))
+        }
+    }
+}
