@@ -129,7 +129,8 @@ pub struct Binding {
     pub target_slot: String,
 }
 
-const NORMALISATION: &str = "Each feature or variance texel v is used as v * scale (scale = params.scale[scale_index].x), \
+const NORMALISATION: &str =
+    "Each feature or variance texel v is used as v * scale (scale = params.scale[scale_index].x), \
      shortened to length 1 when it is longer. filterjit uses scale = 1 / (99.9th percentile of |v| over the frame); \
      gradients are the per-channel Sobel magnitude of the normalised feature, normalised the same way. A fixed scale \
      (1 / scene extent for world positions, 1 for normals and albedo) is a good engine approximation; pass 1 when the \
@@ -335,8 +336,11 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
                 binding_map: bindings().map(|b| (b, b.binding as u8)).collect(),
                 zero_initialize_workgroup_memory: true,
             };
-            let pipeline =
-                back::glsl::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".into(), multiview: None };
+            let pipeline = back::glsl::PipelineOptions {
+                shader_stage: naga::ShaderStage::Compute,
+                entry_point: "main".into(),
+                multiview: None,
+            };
             let mut text = String::new();
             let mut writer = back::glsl::Writer::new(
                 &mut text,
@@ -356,7 +360,8 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
             let mut text = String::new();
             let mut writer = back::hlsl::Writer::new(&mut text, &options, &pipeline);
             let reflection = writer.write(module, &info, None).map_err(|e| err(e.to_string()))?;
-            let entry = reflection.entry_point_names.into_iter().next().and_then(Result::ok).unwrap_or_else(|| "main".into());
+            let entry =
+                reflection.entry_point_names.into_iter().next().and_then(Result::ok).unwrap_or_else(|| "main".into());
             Ok((Code::Text(text), entry))
         }
         Target::Msl => {
@@ -364,12 +369,17 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
                 .map(|b| {
                     let target = match b.binding {
                         0 => back::msl::BindTarget { buffer: Some(0), ..Default::default() },
-                        n => back::msl::BindTarget { texture: Some((n - 1) as u8), mutable: n == 2, ..Default::default() },
+                        n => back::msl::BindTarget {
+                            texture: Some((n - 1) as u8),
+                            mutable: n == 2,
+                            ..Default::default()
+                        },
                     };
                     (b, target)
                 })
                 .collect();
-            let mut options = back::msl::Options { lang_version: (2, 0), fake_missing_bindings: false, ..Default::default() };
+            let mut options =
+                back::msl::Options { lang_version: (2, 0), fake_missing_bindings: false, ..Default::default() };
             options.per_entry_point_map.insert(
                 "main".into(),
                 back::msl::EntryPointResources { resources, immediates_buffer: None, sizes_buffer: None },
@@ -377,12 +387,8 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
             let pipeline = back::msl::PipelineOptions::default();
             let (text, translation) =
                 back::msl::write_string(module, &info, &options, &pipeline).map_err(|e| err(e.to_string()))?;
-            let entry = translation
-                .entry_point_names
-                .into_iter()
-                .next()
-                .and_then(Result::ok)
-                .unwrap_or_else(|| "main_".into());
+            let entry =
+                translation.entry_point_names.into_iter().next().and_then(Result::ok).unwrap_or_else(|| "main_".into());
             Ok((Code::Text(text), entry))
         }
         Target::Spirv => {
@@ -393,7 +399,8 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
             };
             let pipeline =
                 back::spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".into() };
-            let words = back::spv::write_vec(module, &info, &options, Some(&pipeline)).map_err(|e| err(e.to_string()))?;
+            let words =
+                back::spv::write_vec(module, &info, &options, Some(&pipeline)).map_err(|e| err(e.to_string()))?;
             Ok((Code::SpirV(words), "main".into()))
         }
     }

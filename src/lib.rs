@@ -17,9 +17,11 @@ pub mod lang;
 pub mod metrics;
 pub mod preview;
 pub mod render;
+pub mod report;
 pub mod rng;
 pub mod scene;
 pub mod semantics;
+pub mod tune;
 
 pub use jit::{compile, ValidatedKernel};
 pub use lang::{parse_expr, Expr, ExprError};

@@ -124,6 +124,13 @@ enum Command {
         #[arg(short, long, default_value = "bench.json")]
         output: PathBuf,
     },
+    /// Compare filters on scenes with references: error (relMSE both ways, MSE)
+    /// against device time per megapixel, in tables, scatter plots with the
+    /// Pareto front, image crops and an index.html, all in one folder.
+    Report(Box<ReportArgs>),
+    /// Tune the constant sigmas of the cross-bilateral filter on training scenes
+    /// (the report's baseline); prints the tuned expression.
+    Tune(Box<TuneArgs>),
     /// List the built-in scenes.
     Scenes,
     /// List the shipped expressions.
@@ -138,6 +145,74 @@ enum Preset {
     Quick,
     /// The thesis's settings: 4 islands of 100, 200 generations, 64x64 scenes, radius 10.
     Thesis,
+}
+
+/// How scenes are made and filtered, for `report` and `tune`; unset values
+/// come from `--run`'s checkpoint, else the defaults shown.
+#[derive(clap::Args, Clone)]
+struct SceneArgs {
+    /// Size scenes are rendered at, WIDTHxHEIGHT [64x64].
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Samples per pixel of rendered noisy images [4].
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Samples per pixel of rendered references [1024].
+    #[arg(long)]
+    reference_spp: Option<u32>,
+    /// Filter window radius [5].
+    #[arg(long)]
+    radius: Option<u32>,
+    /// Training scenes, for tuning the baseline [the run's, else the built-in training scenes].
+    #[arg(long, value_delimiter = ',')]
+    training_scenes: Vec<String>,
+    /// An evolve run directory: its test and training scenes, render settings and radius are the defaults.
+    #[arg(long)]
+    run: Option<PathBuf>,
+    /// Passes of coordinate descent over the sigmas.
+    #[arg(long, default_value_t = 3)]
+    sweeps: usize,
+}
+
+#[derive(clap::Args)]
+struct ReportArgs {
+    /// Expressions to report on: text, @name, or @FILE[:NAME]; with --run, the best of its hall of fame are added.
+    exprs: Vec<String>,
+    /// Scenes to report on: built-in names, .toml files or datasets [the run's test scenes, else the built-in test scenes].
+    #[arg(long, value_delimiter = ',')]
+    scenes: Vec<String>,
+    /// How many of the hall of fame's best to include (with --run or --hall-of-fame).
+    #[arg(long, default_value_t = 3)]
+    top: usize,
+    /// A hall-of-fame file (default with --run: its hall_of_fame.txt); also drawn as a feature-usage chart.
+    #[arg(long)]
+    hall_of_fame: Option<PathBuf>,
+    /// Use this expression as the cross-bilateral baseline instead of tuning one.
+    #[arg(long)]
+    baseline: Option<String>,
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Timed dispatches per filter and scene, after a warm-up.
+    #[arg(long, default_value_t = 5)]
+    repeats: usize,
+    /// Side of the square image crops, pixels.
+    #[arg(long, default_value_t = 48)]
+    crop: usize,
+    /// Filters are timed on each scene tiled to at least this many pixels per side.
+    #[arg(long, default_value_t = 256)]
+    timing_size: usize,
+    /// The report folder.
+    #[arg(short, long, default_value = "runs/report")]
+    output: PathBuf,
+}
+
+#[derive(clap::Args)]
+struct TuneArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Also write the result as a `name = expression` file (readable with @FILE).
+    #[arg(short, long)]
+    output: Option<PathBuf>,
 }
 
 /// Raw `evolve` flags; unset ones take the preset's values.
@@ -265,7 +340,12 @@ fn run(cli: Cli) -> Result<()> {
                     .map_err(anyhow::Error::msg)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
-            println!("wrote {} ({}) and its manifest {}", output.display(), exported.manifest.language, manifest_path.display());
+            println!(
+                "wrote {} ({}) and its manifest {}",
+                output.display(),
+                exported.manifest.language,
+                manifest_path.display()
+            );
             println!("entry point `{}`, workgroup 8x8x1; bindings:", exported.manifest.entry_point);
             for b in &exported.manifest.bindings {
                 println!("  {:<26} {:<16} {}", b.target_slot, b.kind, b.role);
@@ -291,6 +371,27 @@ fn run(cli: Cli) -> Result<()> {
             render(&scene, spp, reference_spp, size, seed, output.as_deref())
         }
         Command::Evolve(args) => evolve(*args),
+        Command::Report(args) => report(*args),
+        Command::Tune(args) => {
+            let gpu = gpu::Gpu::open()?;
+            let context = scene_context(&args.scene)?;
+            let tuned = tune_baseline(&gpu, &args.scene, &context)?;
+            println!("crossBilateralTuned = {}", tuned.expr);
+            if let Some(path) = &args.output {
+                let text = format!(
+                    "# tuned on {} at {}x{}, radius {}: training relMSE/noisy {:.5} (hand-set {:.5})\ncrossBilateralTuned = {}\n",
+                    tuned.scenes.join(", "),
+                    context.render.width,
+                    context.render.height,
+                    context.radius,
+                    tuned.fitness,
+                    tuned.hand_set_fitness,
+                    tuned.expr
+                );
+                filterjit::io::write_bytes_atomically(path, text.as_bytes()).map_err(anyhow::Error::msg)?;
+            }
+            Ok(())
+        }
         Command::Bench { size, radius, repeats, population, lengths, generation_sizes, generation_radius, output } => {
             let settings = filterjit::bench::BenchSettings {
                 radius,
@@ -341,45 +442,7 @@ fn run(cli: Cli) -> Result<()> {
 
 /// An expression from the command line: text, or @name of a shipped one.
 fn resolve_expr(arg: &str) -> Result<lang::Expr> {
-    let text = match arg.strip_prefix('@') {
-        Some(reference) if corpus::lookup(reference).is_none() && file_reference(reference).is_some() => {
-            let (path, name) = file_reference(reference).expect("checked");
-            let content = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-            let entries = corpus::parse_named(&content);
-            let found = match &name {
-                Some(n) => entries.iter().find(|(k, _)| k == n),
-                None => entries.first(),
-            };
-            match found {
-                Some((_, text)) => text.to_string(),
-                None => bail!(
-                    "{} has no expression{}",
-                    path.display(),
-                    name.map(|n| format!(" named `{n}`")).unwrap_or_default()
-                ),
-            }
-        }
-        Some(name) => match corpus::lookup(name) {
-            Some(text) => text.to_string(),
-            None => {
-                let names: Vec<String> = corpus::named().iter().map(|(n, _)| format!("@{n}")).collect();
-                bail!("no shipped expression `@{name}`; there are: {}", names.join(", "))
-            }
-        },
-        None => arg.to_string(),
-    };
-    lang::parse_expr(&text).map_err(|e| anyhow::anyhow!("invalid expression:\n{e}"))
-}
-
-/// `PATH` or `PATH:NAME` of an existing file of named expressions.
-fn file_reference(reference: &str) -> Option<(PathBuf, Option<String>)> {
-    let whole = PathBuf::from(reference);
-    if whole.is_file() {
-        return Some((whole, None));
-    }
-    let (path, name) = reference.rsplit_once(':')?;
-    let path = PathBuf::from(path);
-    path.is_file().then(|| (path, Some(name.to_string())))
+    Ok(corpus::resolve(arg)?.1)
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -716,4 +779,159 @@ fn manifest_path(shader: &Path) -> PathBuf {
     let mut name = shader.as_os_str().to_owned();
     name.push(".json");
     PathBuf::from(name)
+}
+
+/// Scene settings of `report`/`tune`: flags, else the run's checkpoint, else defaults.
+struct SceneContext {
+    render: render::RenderSettings,
+    radius: u32,
+    training: Vec<String>,
+    test: Vec<String>,
+}
+
+fn scene_context(args: &SceneArgs) -> Result<SceneContext> {
+    let run = match &args.run {
+        Some(dir) => Some(
+            filterjit::evolve::read_checkpoint(dir)
+                .with_context(|| format!("reading the run in {}", dir.display()))?
+                .run,
+        ),
+        None => None,
+    };
+    let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
+    let base = run.as_ref().map(|r| r.render).unwrap_or(render::RenderSettings {
+        width: 64,
+        height: 64,
+        spp: 4,
+        reference_spp: 1024,
+        seed: 0,
+    });
+    let size = args.size.unwrap_or((base.width, base.height));
+    Ok(SceneContext {
+        render: render::RenderSettings {
+            width: size.0,
+            height: size.1,
+            spp: args.spp.unwrap_or(base.spp),
+            reference_spp: args.reference_spp.unwrap_or(base.reference_spp),
+            seed: base.seed,
+        },
+        radius: args.radius.or(run.as_ref().map(|r| r.radius)).unwrap_or(5),
+        training: if !args.training_scenes.is_empty() {
+            args.training_scenes.clone()
+        } else {
+            run.as_ref().map(|r| r.training.clone()).unwrap_or_else(|| builtin(render::Split::Train))
+        },
+        test: run.as_ref().map(|r| r.test.clone()).unwrap_or_else(|| builtin(render::Split::Test)),
+    })
+}
+
+fn render_progress() -> impl FnMut(u64, u64) {
+    let bar = sample_bar("rendering");
+    move |done: u64, total: u64| {
+        bar.set_length(total);
+        bar.set_position(done);
+        if done == total {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+fn tune_baseline(gpu: &gpu::Gpu, args: &SceneArgs, context: &SceneContext) -> Result<filterjit::tune::Tuned> {
+    use filterjit::evolve as ev;
+    let datasets = ev::resolve_scenes(gpu, &context.training, &context.render, &mut render_progress())?;
+    let (features, variances) = ev::common_terminals(&datasets)?;
+    let scenes = ev::load_all(&datasets, &features, &variances)?;
+    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let mut evaluator = ev::GpuEvaluator::new(gpu, scenes, context.radius, threads)?;
+    eprintln!(
+        "tune      cross-bilateral sigmas on {} ({}x{}, radius {})",
+        context.training.join(", "),
+        context.render.width,
+        context.render.height,
+        context.radius
+    );
+    let tuned = filterjit::tune::tune(&mut evaluator, args.sweeps, &mut |sigmas, fitness| {
+        eprintln!(
+            "          {fitness:.5}  {}",
+            sigmas.0.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
+        );
+    })?;
+    eprintln!(
+        "tuned     training relMSE/noisy {:.5} (hand-set sigmas {:.5}), {} candidates",
+        tuned.fitness, tuned.hand_set_fitness, tuned.evaluated
+    );
+    Ok(tuned)
+}
+
+fn report(args: ReportArgs) -> Result<()> {
+    use filterjit::report::{self, Method, Origin};
+    let context = scene_context(&args.scene)?;
+    let gpu = gpu::Gpu::open()?;
+    let mut methods = Vec::new();
+    let (baseline_name, baseline_expr, tuned) = match &args.baseline {
+        Some(b) => {
+            let (name, expr) = corpus::resolve(b)?;
+            (name.unwrap_or_else(|| "baseline".into()), expr, None)
+        }
+        None => {
+            let tuned = tune_baseline(&gpu, &args.scene, &context)?;
+            let expr = lang::parse_expr(&tuned.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
+            ("crossBilateral (tuned)".to_string(), expr, Some(tuned))
+        }
+    };
+    methods.push(Method { name: baseline_name, origin: Origin::Baseline, expr: baseline_expr });
+    for name in ["thesis1", "thesis2", "thesis3"] {
+        methods.push(Method { name: name.into(), origin: Origin::Thesis, expr: resolve_expr(&format!("@{name}"))? });
+    }
+    for (k, arg) in args.exprs.iter().enumerate() {
+        let (name, expr) = corpus::resolve(arg)?;
+        methods.push(Method { name: name.unwrap_or_else(|| format!("expr{}", k + 1)), origin: Origin::Given, expr });
+    }
+    let hall_path = args
+        .hall_of_fame
+        .clone()
+        .or_else(|| args.scene.run.as_ref().map(|d| d.join(filterjit::evolve::HALL_OF_FAME_FILE)));
+    let mut hall = Vec::new();
+    if let Some(path) = &hall_path {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut taken = 0;
+        for (name, text) in corpus::parse_named(&text) {
+            let expr =
+                lang::parse_expr(text).map_err(|e| anyhow::anyhow!("{}: entry `{name}`:\n{e}", path.display()))?;
+            if taken < args.top && !methods.iter().any(|m| m.expr == expr) {
+                taken += 1;
+                methods.push(Method { name: name.to_string(), origin: Origin::Given, expr: expr.clone() });
+            }
+            hall.push(expr);
+        }
+    }
+    let scene_names = if args.scenes.is_empty() { context.test.clone() } else { args.scenes.clone() };
+    let datasets = filterjit::evolve::resolve_scenes(&gpu, &scene_names, &context.render, &mut render_progress())?;
+    let settings = report::Settings {
+        radius: context.radius,
+        repeats: args.repeats,
+        crop: args.crop,
+        timing_size: args.timing_size,
+    };
+    let inputs = report::Inputs {
+        scenes: &datasets,
+        methods: &methods,
+        settings,
+        baseline: tuned,
+        hall_of_fame: hall_path.as_ref().map(|_| hall.as_slice()),
+    };
+    let results = report::run(&gpu, inputs, &args.output, &mut |what| eprintln!("measure   {what}"))?;
+    println!("{:<26} {:>14} {:>10} {:>10}", "method", "relMSE/noisy", "relMSE", "ms/Mpx");
+    for m in &results.methods {
+        let f = |v: Option<f64>, d: usize| v.map(|v| format!("{v:.d$}")).unwrap_or_else(|| "-".into());
+        println!(
+            "{:<26} {:>14} {:>10} {:>10}",
+            m.name,
+            f(m.mean_normalised, 4),
+            f(m.mean_relmse, 4),
+            f(m.mean_ms_per_mpx, 1)
+        );
+    }
+    println!("wrote     {}", args.output.join("index.html").display());
+    Ok(())
 }

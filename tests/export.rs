@@ -35,7 +35,9 @@ fn frame_of(scene: &Scene, manifest: &serde_json::Value) -> host::Frame {
         }
         let role = b["role"].as_str().unwrap();
         let texels: Vec<[f32; 4]> = match (Feature::from_name(role), ScalarVar::from_name(role)) {
-            (Some(f), _) => scene.feature(f).unwrap().iter().map(|v| [2.0 * v[0], 2.0 * v[1], 2.0 * v[2], 0.0]).collect(),
+            (Some(f), _) => {
+                scene.feature(f).unwrap().iter().map(|v| [2.0 * v[0], 2.0 * v[1], 2.0 * v[2], 0.0]).collect()
+            }
             (_, Some(v)) => scene.variance(v).unwrap().iter().map(|x| [2.0 * x, 0.0, 0.0, 0.0]).collect(),
             _ => panic!("the manifest names an unknown input `{role}`"),
         };
@@ -87,7 +89,8 @@ fn unit_length(mut scene: Scene) -> Scene {
 #[test]
 fn exported_wgsl_in_plain_wgpu_matches_filter() {
     let synthetic = unit_length(synthetic_scene(37, 29, 3));
-    let variances = parse_expr("exp(-(distance2(wpGradient) + wpVariance + colorVariance * distance1(texGradient)))").unwrap();
+    let variances =
+        parse_expr("exp(-(distance2(wpGradient) + wpVariance + colorVariance * distance1(texGradient)))").unwrap();
     let mut worst: f64 = 0.0;
     for (expr, radius) in [(named("thesis1"), 3), (named("thesis2"), 2), (named("thesis3"), 4), (variances, 3)] {
         let error = compare(&expr, &synthetic, radius, OutputFormat::Rgba32float);

@@ -8,6 +8,7 @@ mod export;
 mod gpu_vs_cpu;
 mod lang;
 mod render;
+mod report;
 mod scenes;
 mod snapshots;
 mod stability;

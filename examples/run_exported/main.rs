@@ -23,10 +23,9 @@ fn main() -> Result<(), String> {
     };
     let wgsl = std::fs::read_to_string(shader).map_err(|e| format!("{shader}: {e}"))?;
     let manifest_path = format!("{shader}.json");
-    let manifest: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(&manifest_path).map_err(|e| format!("{manifest_path}: {e}"))?,
-    )
-    .map_err(|e| format!("{manifest_path}: {e}"))?;
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&manifest_path).map_err(|e| format!("{manifest_path}: {e}"))?)
+            .map_err(|e| format!("{manifest_path}: {e}"))?;
 
     // The engine's G-buffer stand-in: every input the manifest names.
     let roles: Vec<String> = manifest["bindings"]

@@ -419,7 +419,8 @@ impl<'a> Loads<'a> {
             (Loads::Textures(layout), _) => {
                 let input = Input::Feature(f);
                 let texel = texel(&input.texture_ident(), coords);
-                let raw = if f.dimension() == 1 { format!("vec3<f32>({texel}.x, 0.0, 0.0)") } else { format!("{texel}.xyz") };
+                let raw =
+                    if f.dimension() == 1 { format!("vec3<f32>({texel}.x, 0.0, 0.0)") } else { format!("{texel}.xyz") };
                 format!("fj_normalised({raw}, {})", scale_of(layout, input))
             }
         }
@@ -460,7 +461,8 @@ fn pair_sides(expr: &Expr) -> (BTreeSet<Feature>, BTreeSet<Feature>) {
 
 fn centre_loads(expr: &Expr, loads: &Loads<'_>) -> Vec<String> {
     let (centre, _) = pair_sides(expr);
-    let features = centre.into_iter().map(|f| format!("let {} = {};", feature_ident('i', f), loads.feature(f, "i", ("x", "y"))));
+    let features =
+        centre.into_iter().map(|f| format!("let {} = {};", feature_ident('i', f), loads.feature(f, "i", ("x", "y"))));
     let vars = expr.variables().into_iter().map(|v| format!("let {} = {};", var_ident(v), loads.variance(v)));
     features.chain(vars).collect()
 }

@@ -5,8 +5,8 @@ pub mod lower;
 pub mod validate;
 
 pub use lower::{
-    lower, lower_kind, lower_with, Input, KernelKind, KernelLayout, KernelSource, LowerError, LowerOptions, OutputFormat,
-    FIRST_INPUT_BINDING, TEMPLATE_VERSION, WORKGROUP,
+    lower, lower_kind, lower_with, Input, KernelKind, KernelLayout, KernelSource, LowerError, LowerOptions,
+    OutputFormat, FIRST_INPUT_BINDING, TEMPLATE_VERSION, WORKGROUP,
 };
 pub use validate::{validate, KernelKey, ValidateError, ValidatedKernel};
 

@@ -1,0 +1,730 @@
+//! `filterjit report`: error and speed of filters side by side, on scenes
+//! with references, written into one folder with an index.
+//!
+//! For every scene and method: relMSE (both variants), MSE, pixels with
+//! domain errors, and the filter's device time per megapixel (median of
+//! repeated dispatches after a warm-up that compiles the pipeline). Then
+//! tables (Markdown, CSV, JSON), time-against-error scatter plots with the
+//! Pareto front (SVG), tone-mapped crops (PNG), a chart of feature usage, and
+//! `index.html` tying them together.
+
+pub mod plot;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+
+use crate::gpu::{Gpu, SceneBuffers};
+use crate::lang::{Expr, Feature};
+use crate::scene::{self, Request, Scene};
+use crate::tune::Tuned;
+use crate::{io, jit, metrics, preview};
+
+/// Where a method comes from, for the reader of the report.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Origin {
+    /// The unfiltered input.
+    Noisy,
+    /// The cross-bilateral filter with tuned constant sigmas.
+    Baseline,
+    /// Published in the thesis.
+    Thesis,
+    /// Given on the command line or taken from a hall of fame.
+    Given,
+}
+
+/// A filter to compare.
+#[derive(Clone, Debug)]
+pub struct Method {
+    pub name: String,
+    pub origin: Origin,
+    pub expr: Expr,
+}
+
+#[derive(Clone, Debug)]
+pub struct Settings {
+    pub radius: u32,
+    /// Timed dispatches per filter and scene (after one warm-up).
+    pub repeats: usize,
+    /// Side of the square crops, in pixels.
+    pub crop: usize,
+    /// Times are taken on the scene tiled to at least this many pixels per
+    /// side: on a small image a dispatch's fixed cost would hide the filter's.
+    pub timing_size: usize,
+}
+
+/// One method on one scene.
+#[derive(Clone, Debug, Serialize)]
+pub struct Cell {
+    pub scene: String,
+    pub method: String,
+    pub relmse: Option<f64>,
+    /// relMSE × m/2 (thesis equation 3.5 as printed), where m is known.
+    pub relmse_half_spp: Option<f64>,
+    pub mse: Option<f64>,
+    /// relMSE / the noisy input's relMSE.
+    pub normalised: Option<f64>,
+    /// Median device time per megapixel, milliseconds; none for the noisy input.
+    pub ms_per_mpx: Option<f64>,
+    /// Fastest and slowest of the timed repeats.
+    pub ms_per_mpx_range: Option<(f64, f64)>,
+    pub flagged_pixels: usize,
+    /// Why the method did not run on this scene (a feature the scene lacks).
+    pub unavailable: Option<String>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct MethodInfo {
+    pub name: String,
+    pub origin: Origin,
+    pub expr: Option<String>,
+    pub length: Option<usize>,
+    /// Means over the scenes it ran on.
+    pub mean_relmse: Option<f64>,
+    pub mean_normalised: Option<f64>,
+    pub mean_ms_per_mpx: Option<f64>,
+    pub scenes_run: usize,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct SceneInfo {
+    pub name: String,
+    pub path: String,
+    pub width: usize,
+    pub height: usize,
+    pub spp: Option<u32>,
+    /// Crop origin and size, pixels.
+    pub crop: [usize; 3],
+}
+
+/// Everything measured; `results.json`.
+#[derive(Clone, Debug, Serialize)]
+pub struct Results {
+    pub generator: String,
+    pub device: String,
+    pub radius: u32,
+    pub repeats: usize,
+    pub scenes: Vec<SceneInfo>,
+    pub methods: Vec<MethodInfo>,
+    pub cells: Vec<Cell>,
+    pub baseline: Option<Tuned>,
+    /// Feature counts over the hall of fame's expressions, when one was given.
+    pub feature_usage: Option<BTreeMap<String, usize>>,
+}
+
+pub const NOISY: &str = "noisy";
+
+/// What a report is made of.
+pub struct Inputs<'a> {
+    /// Datasets with references.
+    pub scenes: &'a [PathBuf],
+    pub methods: &'a [Method],
+    pub settings: Settings,
+    /// How the baseline among `methods` was tuned, when it was.
+    pub baseline: Option<Tuned>,
+    /// Expressions of a hall of fame, for the feature-usage chart.
+    pub hall_of_fame: Option<&'a [Expr]>,
+}
+
+/// Measure the methods on the scenes and write the report into `output`.
+pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMut(&str)) -> Result<Results> {
+    let Inputs { scenes, methods, settings, baseline, hall_of_fame } = inputs;
+    let settings = &settings;
+    std::fs::create_dir_all(output).with_context(|| format!("creating {}", output.display()))?;
+    io::remove_stale_temporaries(output);
+    let mut results = Results {
+        generator: format!("filterjit {}", env!("CARGO_PKG_VERSION")),
+        device: gpu.describe(),
+        radius: settings.radius,
+        repeats: settings.repeats,
+        scenes: Vec::new(),
+        methods: Vec::new(),
+        cells: Vec::new(),
+        baseline,
+        feature_usage: hall_of_fame.map(feature_usage),
+    };
+    let kernels: Vec<jit::ValidatedKernel> =
+        methods.iter().map(|m| jit::compile(&m.expr).with_context(|| m.name.clone())).collect::<Result<_>>()?;
+    for path in scenes {
+        let (provided, provided_variances) =
+            scene::provides(path).with_context(|| format!("reading {}", path.display()))?;
+        let runnable = |e: &Expr| {
+            let missing: Vec<String> = e
+                .features()
+                .into_iter()
+                .filter(|f| !provided.contains(f))
+                .map(|f| f.to_string())
+                .chain(e.variables().into_iter().filter(|v| !provided_variances.contains(v)).map(|v| v.to_string()))
+                .collect();
+            if missing.is_empty() {
+                None
+            } else {
+                Some(format!("the scene has no {}", missing.join(", ")))
+            }
+        };
+        let mut request = Request { reference: true, ..Default::default() };
+        for m in methods.iter().filter(|m| runnable(&m.expr).is_none()) {
+            request.features.extend(m.expr.features());
+            request.variances.extend(m.expr.variables());
+        }
+        let scene = scene::load(path, &request).with_context(|| format!("loading {}", path.display()))?;
+        let reference = scene
+            .reference
+            .clone()
+            .with_context(|| format!("{} has no reference image to compare with", path.display()))?;
+        progress(&format!("scene {} ({}x{})", scene.name, scene.width, scene.height));
+        let crop = crop_window(&scene.color, &reference, scene.width, scene.height, settings.crop);
+        let crops_dir = output.join("crops").join(file_name(&scene.name));
+        std::fs::create_dir_all(&crops_dir)?;
+        let mut strip = vec![write_crop(&crops_dir.join("noisy.png"), &scene.color, &scene, crop)?];
+
+        let noisy = metrics::errors(&scene.color, &reference, scene.spp);
+        results.cells.push(Cell {
+            scene: scene.name.clone(),
+            method: NOISY.into(),
+            relmse: Some(noisy.relmse),
+            relmse_half_spp: noisy.relmse_half_spp,
+            mse: Some(noisy.mse),
+            normalised: Some(1.0),
+            ms_per_mpx: None,
+            ms_per_mpx_range: None,
+            flagged_pixels: 0,
+            unavailable: None,
+        });
+        let mut buffers = SceneBuffers::new(gpu, &scene);
+        let timing_scene = tile(&scene, settings.timing_size);
+        let mut timing_buffers = SceneBuffers::new(gpu, &timing_scene);
+        let mut timing = Timing { scene: &timing_scene, buffers: &mut timing_buffers };
+        for (method, kernel) in methods.iter().zip(&kernels) {
+            if let Some(reason) = runnable(&method.expr) {
+                results.cells.push(Cell {
+                    scene: scene.name.clone(),
+                    method: method.name.clone(),
+                    relmse: None,
+                    relmse_half_spp: None,
+                    mse: None,
+                    normalised: None,
+                    ms_per_mpx: None,
+                    ms_per_mpx_range: None,
+                    flagged_pixels: 0,
+                    unavailable: Some(reason),
+                });
+                continue;
+            }
+            progress(&format!("scene {}: {}", scene.name, method.name));
+            let cell = measure(gpu, kernel, &mut buffers, &scene, &mut timing, &reference, settings, noisy.relmse)
+                .with_context(|| format!("filtering {} with {}", scene.name, method.name))?;
+            strip.push(write_crop(&crops_dir.join(format!("{}.png", file_name(&method.name))), &cell.1, &scene, crop)?);
+            results.cells.push(Cell { method: method.name.clone(), ..cell.0 });
+        }
+        strip.push(write_crop(&crops_dir.join("reference.png"), &reference, &scene, crop)?);
+        write_strip(&output.join("crops").join(format!("{}.png", file_name(&scene.name))), &strip)?;
+        results.scenes.push(SceneInfo {
+            name: scene.name.clone(),
+            path: path.display().to_string(),
+            width: scene.width,
+            height: scene.height,
+            spp: scene.spp,
+            crop: [crop.0, crop.1, crop.2],
+        });
+    }
+    results.methods = std::iter::once((NOISY.to_string(), Origin::Noisy, None))
+        .chain(methods.iter().map(|m| (m.name.clone(), m.origin, Some(&m.expr))))
+        .map(|(name, origin, expr)| summarise(&results.cells, name, origin, expr))
+        .collect();
+    write(&results, output)?;
+    Ok(results)
+}
+
+fn summarise(cells: &[Cell], name: String, origin: Origin, expr: Option<&Expr>) -> MethodInfo {
+    let ran: Vec<&Cell> = cells.iter().filter(|c| c.method == name && c.relmse.is_some()).collect();
+    let mean = |f: &dyn Fn(&Cell) -> Option<f64>| -> Option<f64> {
+        let values: Vec<f64> = ran.iter().filter_map(|c| f(c)).collect();
+        (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
+    };
+    MethodInfo {
+        mean_relmse: mean(&|c| c.relmse),
+        mean_normalised: mean(&|c| c.normalised),
+        mean_ms_per_mpx: mean(&|c| c.ms_per_mpx),
+        scenes_run: ran.len(),
+        name,
+        origin,
+        expr: expr.map(|e| e.to_string()),
+        length: expr.map(Expr::len),
+    }
+}
+
+/// The scene a filter is timed on, and its buffers.
+struct Timing<'a> {
+    scene: &'a Scene,
+    buffers: &'a mut SceneBuffers,
+}
+
+/// `scene` repeated to at least `side` pixels each way (colour, features and
+/// variances; no reference): the same content statistics, a larger dispatch.
+pub fn tile(scene: &Scene, side: usize) -> Scene {
+    let (w, h) = (scene.width, scene.height);
+    let (tw, th) = (w.max(side), h.max(side));
+    let map = |x: usize, y: usize| (y % h) * w + x % w;
+    let tiled = |data: &[[f32; 3]]| -> Vec<[f32; 3]> {
+        (0..th).flat_map(|y| (0..tw).map(move |x| (x, y))).map(|(x, y)| data[map(x, y)]).collect()
+    };
+    let mut out = Scene::from_color(format!("{} (tiled)", scene.name), tw, th, tiled(&scene.color));
+    out.spp = scene.spp;
+    out.features = scene.features.iter().map(|(f, v)| (*f, tiled(v))).collect();
+    out.variances = scene
+        .variances
+        .iter()
+        .map(|(k, v)| (*k, (0..th).flat_map(|y| (0..tw).map(move |x| (x, y))).map(|(x, y)| v[map(x, y)]).collect()))
+        .collect();
+    out
+}
+
+/// Filter the scene for the errors; time the filter on the timing scene: one
+/// warm-up dispatch (it compiles the pipeline), then `repeats` timed ones.
+#[allow(clippy::too_many_arguments)]
+fn measure(
+    gpu: &Gpu,
+    kernel: &jit::ValidatedKernel,
+    buffers: &mut SceneBuffers,
+    scene: &Scene,
+    timing: &mut Timing<'_>,
+    reference: &[[f32; 3]],
+    settings: &Settings,
+    noisy_relmse: f64,
+) -> Result<(Cell, Vec<[f32; 3]>)> {
+    let first = gpu.filter(kernel, buffers, scene, settings.radius)?;
+    gpu.filter(kernel, timing.buffers, timing.scene, settings.radius)?;
+    let mut times = Vec::new();
+    for _ in 0..settings.repeats.max(1) {
+        times.push(gpu.filter(kernel, timing.buffers, timing.scene, settings.radius)?.dispatch.as_secs_f64());
+    }
+    times.sort_by(f64::total_cmp);
+    let mpx = timing.scene.pixels() as f64 / 1e6;
+    let per_mpx = |t: f64| t * 1e3 / mpx;
+    let rgb = first.rgb();
+    let e = metrics::errors(&rgb, reference, scene.spp);
+    let cell = Cell {
+        scene: scene.name.clone(),
+        method: String::new(),
+        relmse: Some(e.relmse),
+        relmse_half_spp: e.relmse_half_spp,
+        mse: Some(e.mse),
+        normalised: Some(e.relmse / noisy_relmse.max(1e-12)),
+        ms_per_mpx: Some(per_mpx(times[times.len() / 2])),
+        ms_per_mpx_range: Some((per_mpx(times[0]), per_mpx(times[times.len() - 1]))),
+        flagged_pixels: first.flagged_pixels(),
+        unavailable: None,
+    };
+    Ok((cell, rgb))
+}
+
+/// How often each feature occurs in a set of expressions (feature pairs count once per occurrence).
+pub fn feature_usage(exprs: &[Expr]) -> BTreeMap<String, usize> {
+    let mut counts: BTreeMap<String, usize> = BTreeMap::new();
+    for e in exprs {
+        e.visit(&mut |node| {
+            if let Expr::Pair(_, i, j) = node {
+                let features: BTreeSet<Feature> = [*i, *j].into_iter().collect();
+                for f in features {
+                    *counts.entry(f.to_string()).or_default() += 1;
+                }
+            }
+        });
+        for v in e.variables() {
+            *counts.entry(v.to_string()).or_default() += 1;
+        }
+    }
+    counts
+}
+
+/// The `side`² window where the noisy input is furthest from the reference
+/// (summed relative squared error): where filtering has most to do.
+fn crop_window(
+    noisy: &[[f32; 3]],
+    reference: &[[f32; 3]],
+    width: usize,
+    height: usize,
+    side: usize,
+) -> (usize, usize, usize) {
+    let side = side.min(width).min(height).max(1);
+    let error: Vec<f64> = noisy
+        .iter()
+        .zip(reference)
+        .map(|(c, g)| (0..3).map(|q| (c[q] as f64 - g[q] as f64).powi(2) / ((g[q] as f64).powi(2) + 0.01)).sum::<f64>())
+        .collect();
+    // Summed-area table for O(1) window sums.
+    let mut table = vec![0.0; (width + 1) * (height + 1)];
+    for y in 0..height {
+        for x in 0..width {
+            table[(y + 1) * (width + 1) + x + 1] =
+                error[y * width + x] + table[y * (width + 1) + x + 1] + table[(y + 1) * (width + 1) + x]
+                    - table[y * (width + 1) + x];
+        }
+    }
+    let sum = |x: usize, y: usize| {
+        table[(y + side) * (width + 1) + x + side]
+            - table[y * (width + 1) + x + side]
+            - table[(y + side) * (width + 1) + x]
+            + table[y * (width + 1) + x]
+    };
+    let mut best = (0, 0, f64::NEG_INFINITY);
+    for y in 0..=height - side {
+        for x in 0..=width - side {
+            let s = sum(x, y);
+            if s > best.2 {
+                best = (x, y, s);
+            }
+        }
+    }
+    (best.0, best.1, side)
+}
+
+/// One enlarged crop: its side and linear pixels.
+type Crop = (usize, Vec<[f32; 3]>);
+
+/// The crops side by side, 4 white pixels apart, in one PNG.
+fn write_strip(path: &Path, crops: &[Crop]) -> Result<()> {
+    let gap = 4;
+    let side = crops.iter().map(|c| c.0).max().unwrap_or(1);
+    let width = crops.len() * (side + gap) - gap;
+    let mut pixels = vec![[1.0f32; 3]; width * side];
+    for (k, (s, crop)) in crops.iter().enumerate() {
+        for y in 0..*s {
+            for x in 0..*s {
+                pixels[y * width + k * (side + gap) + x] = crop[y * s + x];
+            }
+        }
+    }
+    preview::write_png(path, width, side, &pixels).map_err(anyhow::Error::msg)
+}
+
+/// The crop, tone-mapped like every preview and enlarged to about 192 pixels (nearest neighbour).
+fn write_crop(path: &Path, image: &[[f32; 3]], scene: &Scene, (x0, y0, side): (usize, usize, usize)) -> Result<Crop> {
+    let zoom = (192 / side).max(1);
+    let out_side = side * zoom;
+    let mut pixels = Vec::with_capacity(out_side * out_side);
+    for y in 0..out_side {
+        for x in 0..out_side {
+            pixels.push(image[(y0 + y / zoom) * scene.width + x0 + x / zoom]);
+        }
+    }
+    preview::write_png(path, out_side, out_side, &pixels).map_err(anyhow::Error::msg)?;
+    Ok((out_side, pixels))
+}
+
+/// A name safe as a file name.
+fn file_name(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' }).collect()
+}
+
+fn fmt(value: Option<f64>, digits: usize) -> String {
+    match value {
+        Some(v) if v.abs() >= 1e4 || (v != 0.0 && v.abs() < 1e-3) => format!("{v:.digits$e}", digits = digits.min(3)),
+        Some(v) => format!("{v:.digits$}"),
+        None => "—".into(),
+    }
+}
+
+fn write(results: &Results, output: &Path) -> Result<()> {
+    let put = |name: &str, bytes: &[u8]| -> Result<()> {
+        let path = output.join(name);
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir)?;
+        }
+        io::write_bytes_atomically(&path, bytes)
+            .map_err(anyhow::Error::msg)
+            .with_context(|| format!("writing {}", path.display()))
+    };
+    put("results.json", (serde_json::to_string_pretty(results)? + "\n").as_bytes())?;
+    put("results.csv", csv(results).as_bytes())?;
+    put("results.md", markdown(results).as_bytes())?;
+    for (file, svg) in plots(results) {
+        put(&file, svg.as_bytes())?;
+    }
+    if let Some(usage) = &results.feature_usage {
+        let items: Vec<(String, usize)> = usage.iter().map(|(k, v)| (k.clone(), *v)).collect();
+        put("features.svg", plot::bars("Feature usage in the hall of fame", &items).as_bytes())?;
+    }
+    put("index.html", html(results).as_bytes())?;
+    Ok(())
+}
+
+fn csv(results: &Results) -> String {
+    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,normalised,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable\n");
+    let opt = |v: Option<f64>| v.map(|v| format!("{v:e}")).unwrap_or_default();
+    for c in &results.cells {
+        let _ = writeln!(
+            out,
+            "{},{},{},{},{},{},{},{},{},{},{}",
+            c.scene,
+            c.method,
+            opt(c.relmse),
+            opt(c.relmse_half_spp),
+            opt(c.mse),
+            opt(c.normalised),
+            opt(c.ms_per_mpx),
+            opt(c.ms_per_mpx_range.map(|r| r.0)),
+            opt(c.ms_per_mpx_range.map(|r| r.1)),
+            c.flagged_pixels,
+            c.unavailable.as_deref().unwrap_or("").replace(',', ";")
+        );
+    }
+    out
+}
+
+/// The averaged table, then one per scene.
+fn markdown(results: &Results) -> String {
+    let mut out = format!(
+        "# filterjit report\n\n{} on {}; window radius {}; time = median of {} dispatches (device wall time), per megapixel.\n\n",
+        results.generator, results.device, results.radius, results.repeats
+    );
+    if let Some(b) = &results.baseline {
+        let _ = writeln!(
+            out,
+            "Cross-bilateral baseline tuned on the training scenes {} ({} candidates): sigmas {}; training fitness {:.4} (hand-set sigmas {:.4}).\n",
+            b.scenes.join(", "),
+            b.evaluated,
+            b.sigmas.0.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", "),
+            b.fitness,
+            b.hand_set_fitness
+        );
+    }
+    out.push_str("## Mean over scenes\n\n| method | relMSE / noisy | relMSE | ms/Mpx | scenes | length |\n|---|---:|---:|---:|---:|---:|\n");
+    for m in &results.methods {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {} | {} | {} |",
+            m.name,
+            fmt(m.mean_normalised, 4),
+            fmt(m.mean_relmse, 4),
+            fmt(m.mean_ms_per_mpx, 1),
+            m.scenes_run,
+            m.length.map(|l| l.to_string()).unwrap_or_else(|| "—".into())
+        );
+    }
+    for s in &results.scenes {
+        let _ = write!(
+            out,
+            "\n## {} ({}x{}, {} spp)\n\n| method | relMSE | relMSE·m/2 | MSE | relMSE / noisy | ms/Mpx (min–max) | flagged px |\n|---|---:|---:|---:|---:|---:|---:|\n",
+            s.name,
+            s.width,
+            s.height,
+            s.spp.map(|m| m.to_string()).unwrap_or_else(|| "?".into())
+        );
+        for c in results.cells.iter().filter(|c| c.scene == s.name) {
+            if let Some(reason) = &c.unavailable {
+                let _ = writeln!(out, "| {} | n/a: {reason} | | | | | |", c.method);
+                continue;
+            }
+            let range = c.ms_per_mpx_range.map(|(a, b)| format!(" ({a:.1}–{b:.1})")).unwrap_or_default();
+            let _ = writeln!(
+                out,
+                "| {} | {} | {} | {} | {} | {}{} | {} |",
+                c.method,
+                fmt(c.relmse, 5),
+                fmt(c.relmse_half_spp, 5),
+                fmt(c.mse, 5),
+                fmt(c.normalised, 4),
+                fmt(c.ms_per_mpx, 1),
+                range,
+                c.flagged_pixels
+            );
+        }
+    }
+    out.push_str("\n## Expressions\n\n");
+    for m in results.methods.iter().filter(|m| m.expr.is_some()) {
+        let _ = writeln!(out, "* **{}** ({:?}): `{}`", m.name, m.origin, m.expr.as_deref().unwrap_or(""));
+    }
+    out
+}
+
+/// `(file, svg)`: the averaged scatter and one per scene.
+fn plots(results: &Results) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mean_points: Vec<plot::Point> = results
+        .methods
+        .iter()
+        .filter_map(|m| {
+            Some(plot::Point { label: m.name.clone(), time: m.mean_ms_per_mpx?, error: m.mean_normalised? })
+        })
+        .collect();
+    out.push((
+        "plots/mean.svg".to_string(),
+        plot::scatter(
+            &format!("Mean over {} scenes: time against error", results.scenes.len()),
+            "relMSE / noisy relMSE",
+            &mean_points,
+            Some(("noisy input", 1.0)),
+        ),
+    ));
+    for s in &results.scenes {
+        let cells: Vec<&Cell> = results.cells.iter().filter(|c| c.scene == s.name).collect();
+        let points: Vec<plot::Point> = cells
+            .iter()
+            .filter_map(|c| Some(plot::Point { label: c.method.clone(), time: c.ms_per_mpx?, error: c.relmse? }))
+            .collect();
+        let noisy = cells.iter().find(|c| c.method == NOISY).and_then(|c| c.relmse);
+        out.push((
+            format!("plots/{}.svg", file_name(&s.name)),
+            plot::scatter(
+                &format!("{}: time against error", s.name),
+                "relMSE",
+                &points,
+                noisy.map(|n| ("noisy input", n)),
+            ),
+        ));
+    }
+    out
+}
+
+fn html_escape(text: &str) -> String {
+    text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+fn html(results: &Results) -> String {
+    let mut out = String::from(
+        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>filterjit report</title>\n<style>body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}td:first-child,th:first-child{text-align:left}.crops td{text-align:center;border:none;font-size:12px}code{font-size:12px;word-break:break-all}img{image-rendering:pixelated}</style></head><body>\n",
+    );
+    let _ = writeln!(
+        out,
+        "<h1>filterjit report</h1><p>{} on {}; window radius {}; time = median of {} dispatches per megapixel. Data: <a href=\"results.md\">results.md</a>, <a href=\"results.csv\">results.csv</a>, <a href=\"results.json\">results.json</a>.</p>",
+        html_escape(&results.generator),
+        html_escape(&results.device),
+        results.radius,
+        results.repeats
+    );
+    if let Some(b) = &results.baseline {
+        let _ = writeln!(
+            out,
+            "<p>The cross-bilateral baseline's constant sigmas were tuned on the training scenes only ({}; {} candidates): {}. Training relMSE/noisy {:.4}, against {:.4} with the hand-set sigmas.</p>",
+            html_escape(&b.scenes.join(", ")),
+            b.evaluated,
+            html_escape(&b.sigmas.0.iter().map(|(k, v)| format!("σ<sub>{k}</sub> = {v}")).collect::<Vec<_>>().join(", "))
+                .replace("&lt;sub&gt;", "<sub>")
+                .replace("&lt;/sub&gt;", "</sub>"),
+            b.fitness,
+            b.hand_set_fitness
+        );
+    }
+    out.push_str("<h2>Mean over scenes</h2>\n<img src=\"plots/mean.svg\" alt=\"mean scatter\">\n<table><tr><th>method</th><th>relMSE / noisy</th><th>relMSE</th><th>ms/Mpx</th><th>scenes</th><th>length</th></tr>\n");
+    for m in &results.methods {
+        let _ = writeln!(
+            out,
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            html_escape(&m.name),
+            fmt(m.mean_normalised, 4),
+            fmt(m.mean_relmse, 4),
+            fmt(m.mean_ms_per_mpx, 1),
+            m.scenes_run,
+            m.length.map(|l| l.to_string()).unwrap_or_else(|| "—".into())
+        );
+    }
+    out.push_str("</table>\n");
+    for s in &results.scenes {
+        let _ = writeln!(
+            out,
+            "<h2>{}</h2><p>{}x{}, {} spp, from <code>{}</code>. Crops: {}² pixels at ({}, {}), where the noisy input is worst.</p>",
+            html_escape(&s.name),
+            s.width,
+            s.height,
+            s.spp.map(|m| m.to_string()).unwrap_or_else(|| "?".into()),
+            html_escape(&s.path),
+            s.crop[2],
+            s.crop[0],
+            s.crop[1]
+        );
+        let _ = writeln!(out, "<img src=\"plots/{}.svg\" alt=\"scatter\">", file_name(&s.name));
+        out.push_str("<table><tr><th>method</th><th>relMSE</th><th>relMSE·m/2</th><th>MSE</th><th>relMSE / noisy</th><th>ms/Mpx</th><th>flagged px</th></tr>\n");
+        let cells: Vec<&Cell> = results.cells.iter().filter(|c| c.scene == s.name).collect();
+        for c in &cells {
+            match &c.unavailable {
+                Some(reason) => {
+                    let _ = writeln!(
+                        out,
+                        "<tr><td>{}</td><td colspan=6>n/a: {}</td></tr>",
+                        html_escape(&c.method),
+                        html_escape(reason)
+                    );
+                }
+                None => {
+                    let _ = writeln!(
+                        out,
+                        "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                        html_escape(&c.method),
+                        fmt(c.relmse, 5),
+                        fmt(c.relmse_half_spp, 5),
+                        fmt(c.mse, 5),
+                        fmt(c.normalised, 4),
+                        fmt(c.ms_per_mpx, 1),
+                        c.flagged_pixels
+                    );
+                }
+            }
+        }
+        out.push_str("</table>\n<table class=\"crops\"><tr>");
+        let shown: Vec<&str> =
+            cells.iter().filter(|c| c.unavailable.is_none()).map(|c| c.method.as_str()).chain(["reference"]).collect();
+        for name in &shown {
+            let _ = write!(
+                out,
+                "<td><img src=\"crops/{}/{}.png\" alt=\"{}\"><br>{}</td>",
+                file_name(&s.name),
+                file_name(name),
+                html_escape(name),
+                html_escape(name)
+            );
+        }
+        let _ = writeln!(
+            out,
+            "</tr></table><p>All in one picture: <a href=\"crops/{0}.png\">crops/{0}.png</a> (same order).</p>",
+            file_name(&s.name)
+        );
+    }
+    if results.feature_usage.is_some() {
+        out.push_str("<h2>Feature usage in the hall of fame</h2>\n<img src=\"features.svg\" alt=\"feature usage\">\n");
+    }
+    out.push_str("<h2>Expressions</h2>\n<ul>\n");
+    for m in results.methods.iter().filter(|m| m.expr.is_some()) {
+        let _ = writeln!(
+            out,
+            "<li><b>{}</b> ({:?}, {} nodes): <code>{}</code></li>",
+            html_escape(&m.name),
+            m.origin,
+            m.length.unwrap_or(0),
+            html_escape(m.expr.as_deref().unwrap_or(""))
+        );
+    }
+    out.push_str("</ul>\n</body></html>\n");
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_crop_finds_the_noisiest_window() {
+        let (w, h) = (20, 10);
+        let reference = vec![[0.5f32; 3]; w * h];
+        let mut noisy = reference.clone();
+        noisy[7 * w + 15] = [9.0, 9.0, 9.0];
+        let (x, y, side) = crop_window(&noisy, &reference, w, h, 4);
+        assert_eq!(side, 4);
+        assert!((x..x + 4).contains(&15) && (y..y + 4).contains(&7), "({x}, {y})");
+        assert_eq!(crop_window(&noisy, &reference, w, h, 64).2, 10, "a crop never exceeds the image");
+    }
+
+    #[test]
+    fn feature_usage_counts_each_occurrence() {
+        let e = crate::parse_expr("distance2(normal) + dot(normal, texture) + wpVariance").unwrap();
+        let usage = feature_usage(&[e]);
+        assert_eq!(usage["normal"], 2);
+        assert_eq!(usage["texture"], 1);
+        assert_eq!(usage["wpVariance"], 1);
+    }
+}
