@@ -15,6 +15,11 @@ use std::path::PathBuf;
 use filterjit::lang::{Feature, ScalarVar};
 
 fn main() -> Result<(), String> {
+    // Mesa's Vulkan device-select layer looks for a display and complains
+    // without one; this program picks its adapter through wgpu anyway.
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (shader, scene, radius, out) = match args.as_slice() {
         [shader, scene, out] => (shader, scene, 5, out),
