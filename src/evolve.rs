@@ -31,6 +31,9 @@ pub struct GpuEvaluator<'g> {
     noisy: Vec<f64>,
     radius: u32,
     threads: usize,
+    /// How fitness kernels are lowered: every optimisation, and workgroup
+    /// tiles for the run's radius on hardware adapters ([`Tiles::Auto`]).
+    options: jit::LowerOptions,
     time: EvalTime,
 }
 
@@ -57,7 +60,24 @@ impl<'g> GpuEvaluator<'g> {
                 s.reference.as_ref().with_context(|| format!("scene `{}` has no reference image", s.name))?;
             noisy.push(metrics::errors(&s.color, reference, s.spp).relmse.max(1e-12));
         }
-        Ok(GpuEvaluator { gpu, more, scenes, device_scenes, noisy, radius, threads, time: EvalTime::default() })
+        let options =
+            if gpu.is_software() { jit::LowerOptions::ALL } else { jit::LowerOptions::ALL.with_tiles(radius) };
+        Ok(GpuEvaluator {
+            gpu,
+            more,
+            scenes,
+            device_scenes,
+            noisy,
+            radius,
+            threads,
+            options,
+            time: EvalTime::default(),
+        })
+    }
+
+    /// Lower fitness kernels with workgroup tiles or without.
+    pub fn set_tiles(&mut self, on: bool) {
+        self.options.tile_radius = on.then_some(self.radius);
     }
 
     pub fn scenes(&self) -> &[Scene] {
@@ -73,7 +93,7 @@ impl<'g> GpuEvaluator<'g> {
     ) -> Result<Vec<std::result::Result<Vec<crate::gpu::FitnessError>, String>>> {
         let start = Instant::now();
         let threads = self.threads.max(1);
-        let kernels = jit::compile_all(exprs, KernelKind::Fitness, threads)?;
+        let kernels = jit::compile_all_with(exprs, KernelKind::Fitness, self.options, threads)?;
         let unsupported: Vec<Option<String>> =
             kernels.iter().map(|k| self.gpu.check_bindings(k).err().map(|e| e.to_string())).collect();
         let refs: Vec<&jit::ValidatedKernel> =
@@ -372,12 +392,37 @@ pub struct RunOptions<'a> {
     pub on_render: render::Progress<'a>,
     /// Expressions to compare with on the test scenes (they do not affect the search).
     pub baselines: Vec<Expr>,
+    /// Whether fitness kernels stage their windows in workgroup memory
+    /// (results are identical either way; only the time differs).
+    pub tiles: Tiles,
+}
+
+/// When fitness kernels get workgroup tiles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Tiles {
+    /// On hardware adapters; off on software ones, whose compilers make
+    /// barriers expensive (`filterjit bench` shows it: docs/BENCHMARKS.md).
+    #[default]
+    Auto,
+    On,
+    Off,
+}
+
+impl Tiles {
+    pub fn enabled(self, gpu: &Gpu) -> bool {
+        match self {
+            Tiles::Auto => !gpu.is_software(),
+            Tiles::On => true,
+            Tiles::Off => false,
+        }
+    }
 }
 
 /// Run (or resume) a search; returns the summary when the last generation is done.
 pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     let start = Instant::now();
-    let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render, baselines } = options;
+    let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render, baselines, tiles } =
+        options;
     settings.check().map_err(anyhow::Error::msg)?;
     std::fs::create_dir_all(&output).with_context(|| format!("creating {}", output.display()))?;
     crate::io::remove_stale_temporaries(&output);
@@ -414,6 +459,7 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     }
     let scenes = load_all(&training, &features, &variances)?;
     let mut evaluator = GpuEvaluator::new(gpu, scenes, config.radius, threads)?;
+    evaluator.set_tiles(tiles.enabled(gpu));
     let terminals = gp::operators::Terminals {
         features: features.iter().copied().collect(),
         variables: variances.iter().copied().collect(),

@@ -116,8 +116,8 @@ enum Command {
         /// Expression lengths of the corpus (two random expressions each).
         #[arg(long, value_delimiter = ',', default_value = "5,10,20,40,75,100,150")]
         lengths: Vec<usize>,
-        /// Square sizes of the one-generation measurement; empty to skip it.
-        #[arg(long, value_delimiter = ',', default_value = "64,128,256")]
+        /// Square sizes of the one-generation measurement; the flag without values skips it.
+        #[arg(long, value_delimiter = ',', num_args = 0.., default_value = "64,128,256")]
         generation_sizes: Vec<u32>,
         #[arg(long, default_value_t = 10)]
         generation_radius: u32,
@@ -293,6 +293,9 @@ struct EvolveArgs {
     /// Filters to compare with on the test scenes at the end (repeatable).
     #[arg(long, default_value = "@crossBilateral")]
     baseline: Vec<String>,
+    /// Stage fitness kernels' windows in workgroup memory: auto = on hardware GPUs, off on software adapters (same results either way).
+    #[arg(long, value_enum, default_value_t = filterjit::evolve::Tiles::Auto)]
+    tiles: filterjit::evolve::Tiles,
 }
 
 fn main() -> ExitCode {
@@ -683,6 +686,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
             on_report: &mut on_report,
             on_render: &mut on_render,
             baselines: args.baseline.iter().map(|b| resolve_expr(b)).collect::<Result<_>>()?,
+            tiles: args.tiles,
         },
     )?
     .expect("runs to the end");

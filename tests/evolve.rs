@@ -61,7 +61,7 @@ fn run(
     resume: bool,
     stop_after: Option<u32>,
 ) -> Option<evolve::Summary> {
-    try_run(dir, settings, config, resume, stop_after).unwrap()
+    try_run(dir, settings, config, resume, stop_after, evolve::Tiles::On).unwrap()
 }
 
 fn try_run(
@@ -70,6 +70,7 @@ fn try_run(
     config: RunConfig,
     resume: bool,
     stop_after: Option<u32>,
+    tiles: evolve::Tiles,
 ) -> anyhow::Result<Option<evolve::Summary>> {
     evolve::run(
         gpu(),
@@ -83,6 +84,7 @@ fn try_run(
             on_report: &mut |_| {},
             on_render: &mut |_, _| {},
             baselines: Vec::new(),
+            tiles,
         },
     )
 }
@@ -104,9 +106,9 @@ fn runs_are_deterministic_and_resume_exactly() {
         summary.best
     );
 
-    // The same seed and inputs: the same run, bit for bit.
+    // The same seed and inputs: the same run, bit for bit, also without workgroup tiles.
     let b = temp_dir("b");
-    run(&b, small(), config(training, test), false, None).expect("finished");
+    try_run(&b, small(), config(training, test), false, None, evolve::Tiles::Off).unwrap().expect("finished");
     let state = |dir: &Path| {
         serde_json::from_str::<serde_json::Value>(&read(dir.join(evolve::CHECKPOINT_FILE))).unwrap()["state"].clone()
     };
@@ -124,9 +126,10 @@ fn runs_are_deterministic_and_resume_exactly() {
     assert_eq!(read(c.join(evolve::LOG_FILE)).lines().count(), 5);
 
     // Starting over an existing run, or resuming with other settings, is refused.
-    let err = try_run(&a, small(), config(training, test), false, None).unwrap_err();
+    let err = try_run(&a, small(), config(training, test), false, None, evolve::Tiles::On).unwrap_err();
     assert!(err.to_string().contains("--resume"), "{err}");
-    let err = try_run(&a, Settings { seed: 8, ..small() }, config(training, test), true, None).unwrap_err();
+    let err = try_run(&a, Settings { seed: 8, ..small() }, config(training, test), true, None, evolve::Tiles::On)
+        .unwrap_err();
     assert!(err.to_string().contains("other settings"), "{err}");
 }
 

@@ -322,7 +322,10 @@ fn each_optimisation_gives_the_plain_kernels_results() {
         ("cse", LowerOptions { common_subexpressions: true, ..LowerOptions::NONE }),
         ("hoist", LowerOptions { hoist_centre_terms: true, ..LowerOptions::NONE }),
         ("strength", LowerOptions { strength_reduction: true, ..LowerOptions::NONE }),
+        ("skip-checks", LowerOptions { skip_redundant_checks: true, ..LowerOptions::NONE }),
+        ("tiles", LowerOptions::NONE.with_tiles(2)),
         ("all", LowerOptions::ALL),
+        ("all+tiles", LowerOptions::ALL.with_tiles(2)),
     ];
     let run = |e: &Expr, options: LowerOptions, buffers: &mut SceneBuffers| {
         let kernel = jit::validate(jit::lower_with(e, KernelKind::Filter, options).unwrap()).unwrap();
@@ -342,4 +345,37 @@ fn each_optimisation_gives_the_plain_kernels_results() {
             assert_eq!(optimised.flags, plain.flags, "{name} changes the domain flags of `{e}`");
         }
     }
+}
+
+#[test]
+fn tiled_kernels_agree_across_bands_and_edges() {
+    use filterjit::jit::LowerOptions;
+    let check = |scene: &Scene, name: &str, radius: u32| {
+        let mut buffers = SceneBuffers::new(gpu(), scene);
+        let e = parse_expr(corpus::lookup(name).unwrap()).unwrap();
+        let lower = |options| jit::validate(jit::lower_with(&e, KernelKind::Filter, options).unwrap()).unwrap();
+        let (plain, tiled) = (lower(LowerOptions::ALL), lower(LowerOptions::ALL.with_tiles(radius)));
+        assert_eq!(tiled.source().tile_radius, Some(radius), "{name} fits in workgroup memory at radius {radius}");
+        assert!(tiled.wgsl().contains("var<workgroup> tile_color"));
+        let a = gpu().filter(&plain, &mut buffers, scene, radius).unwrap();
+        let b = gpu().filter(&tiled, &mut buffers, scene, radius).unwrap();
+        assert_eq!(a.color, b.color, "{name}: tiles read the same data, so the same bits");
+        assert_eq!(a.flags, b.flags);
+        // A tiled kernel refuses any other radius instead of reading outside its tile.
+        let err = gpu().filter(&tiled, &mut buffers, scene, radius + 1).unwrap_err().to_string();
+        assert!(err.contains(&format!("radius {radius}")), "{err}");
+        b.dispatches
+    };
+    // 37x29 is not a multiple of the workgroup: tiles hang over every edge.
+    let scene = synthetic_scene(37, 29, 12);
+    for (name, radius) in [("thesis1", 4), ("thesis3", 3), ("crossBilateral", 3)] {
+        check(&scene, name, radius);
+    }
+    // Radius 10 over 512 columns splits the image into bands of rows: tiles start mid-image.
+    let wide = synthetic_scene(512, 40, 13);
+    assert!(check(&wide, "bilateral", 10) > 1, "the image is split into bands");
+    // Too large to fit: the kernel is made without tiles and says so.
+    let e = parse_expr(corpus::lookup("thesis1").unwrap()).unwrap();
+    let source = jit::lower_with(&e, KernelKind::Filter, LowerOptions::ALL.with_tiles(30)).unwrap();
+    assert_eq!(source.tile_radius, None);
 }

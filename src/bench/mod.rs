@@ -59,6 +59,8 @@ pub struct ExpressionResult {
     pub jit_ms: Stat,
     /// Warm dispatches, generated kernel without optimisations.
     pub jit_plain_ms: Stat,
+    /// Median warm time of each variant of [`VARIANTS`] (none where tiles do not fit).
+    pub variant_ms: Vec<Option<f64>>,
     pub interpreter_ms: Option<Stat>,
     /// interpreter / JIT, median times.
     pub interpreter_ratio: Option<f64>,
@@ -82,6 +84,9 @@ pub struct HandWrittenResult {
     pub handwritten_ms: Stat,
     pub generated_ms: Stat,
     pub generated_plain_ms: Stat,
+    /// The generated kernel with workgroup tiles.
+    pub generated_tiled_ms: Stat,
+    pub tiled_ratio: f64,
     /// generated / hand-written.
     pub ratio: f64,
     pub plain_ratio: f64,
@@ -108,11 +113,30 @@ pub struct Report {
     pub expressions: Vec<ExpressionResult>,
     pub interpreter_ratio_median: f64,
     pub optimisation_ratio_median: f64,
+    /// Per variant of [`VARIANTS`]: median over the corpus of its time / the default kernel's time.
+    pub variant_ratio_median: Vec<(String, f64)>,
     pub weights_per_second_median: f64,
     pub gp_ops_per_second_median: f64,
     pub population: PopulationResult,
     pub handwritten: HandWrittenResult,
     pub generations: Vec<GenerationResult>,
+}
+
+/// What each optimisation is worth: the default kernel with one switch
+/// turned off, and with workgroup tiles turned on (for the bench radius).
+pub const VARIANTS: [&str; 6] = ["-fold", "-cse", "-hoist", "-strength", "-skip-checks", "+tiles"];
+
+fn variant(name: &str, radius: u32) -> LowerOptions {
+    let all = LowerOptions::ALL;
+    match name {
+        "-fold" => LowerOptions { fold_constants: false, ..all },
+        "-cse" => LowerOptions { common_subexpressions: false, ..all },
+        "-hoist" => LowerOptions { hoist_centre_terms: false, ..all },
+        "-strength" => LowerOptions { strength_reduction: false, ..all },
+        "-skip-checks" => LowerOptions { skip_redundant_checks: false, ..all },
+        "+tiles" => all.with_tiles(radius),
+        other => unreachable!("unknown variant {other}"),
+    }
 }
 
 /// The hand-written cross-bilateral kernel a person would write for `@bilateral`.
@@ -127,19 +151,23 @@ fn weights(width: usize, height: usize, radius: u32) -> f64 {
     xs * ys
 }
 
-fn warm(
+/// Warm times of several kernels measured in rounds (one dispatch of each per
+/// round), so that a shared machine's drifting load falls on all of them alike.
+fn interleaved(
     gpu: &Gpu,
-    kernel: &jit::ValidatedKernel,
+    kernels: &[&jit::ValidatedKernel],
     buffers: &mut SceneBuffers,
     scene: &Scene,
     radius: u32,
     repeats: usize,
-) -> anyhow::Result<Stat> {
-    let mut times = Vec::new();
-    for _ in 0..repeats {
-        times.push(ms(gpu.filter(kernel, buffers, scene, radius)?.dispatch));
+) -> anyhow::Result<Vec<Stat>> {
+    let mut times = vec![Vec::new(); kernels.len()];
+    for _ in 0..repeats.max(1) {
+        for (k, kernel) in kernels.iter().enumerate() {
+            times[k].push(ms(gpu.filter(kernel, buffers, scene, radius)?.dispatch));
+        }
     }
-    Ok(stat(times))
+    Ok(times.into_iter().map(stat).collect())
 }
 
 /// The interpreter's inputs for a scene: features and variances packed by slot.
@@ -268,10 +296,26 @@ pub fn run(
         let kernel = jit::validate(source)?;
         let validate = t.elapsed();
         let first = gpu.filter(&kernel, &mut buffers, scene, settings.radius)?;
-        let jit_ms = warm(gpu, &kernel, &mut buffers, scene, settings.radius, settings.repeats)?;
+        // The default kernel, the unoptimised one and each variant, timed in rounds.
         let plain = jit::validate(jit::lower_with(expr, KernelKind::Filter, LowerOptions::NONE)?)?;
-        gpu.filter(&plain, &mut buffers, scene, settings.radius)?;
-        let jit_plain_ms = warm(gpu, &plain, &mut buffers, scene, settings.radius, settings.repeats)?;
+        let mut others = vec![plain];
+        let mut present = Vec::new();
+        for name in VARIANTS {
+            let source = jit::lower_with(expr, KernelKind::Filter, variant(name, settings.radius))?;
+            present.push(!(name == "+tiles" && source.tile_radius.is_none()));
+            if *present.last().expect("pushed") {
+                others.push(jit::validate(source)?);
+            }
+        }
+        for k in &others {
+            gpu.filter(k, &mut buffers, scene, settings.radius)?;
+        }
+        let all: Vec<&jit::ValidatedKernel> = std::iter::once(&kernel).chain(others.iter()).collect();
+        let mut stats = interleaved(gpu, &all, &mut buffers, scene, settings.radius, settings.repeats)?.into_iter();
+        let jit_ms = stats.next().expect("default kernel");
+        let jit_plain_ms = stats.next().expect("plain kernel");
+        let variant_ms: Vec<Option<f64>> =
+            present.iter().map(|p| if *p { stats.next().map(|s| s.median) } else { None }).collect();
         let interpreter_ms =
             interpret(gpu, &interpreter_kernel, &packed, expr, scene, settings.radius, settings.repeats)?;
         let seconds = jit_ms.median / 1e3;
@@ -284,6 +328,7 @@ pub fn run(
             first_dispatch_ms: ms(first.dispatch),
             interpreter_ratio: interpreter_ms.as_ref().map(|i| i.median / jit_ms.median),
             jit_plain_ms,
+            variant_ms,
             interpreter_ms,
             weights_per_second: per_pass / seconds,
             gp_ops_per_second: per_pass * expr.len() as f64 / seconds,
@@ -295,6 +340,14 @@ pub fn run(
     let interpreter_ratio_median = median(expressions.iter().filter_map(|e| e.interpreter_ratio).collect());
     let optimisation_ratio_median =
         median(expressions.iter().map(|e| e.jit_plain_ms.median / e.jit_ms.median).collect());
+    let variant_ratio_median = VARIANTS
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let ratios = expressions.iter().filter_map(|e| e.variant_ms[k].map(|v| v / e.jit_ms.median)).collect();
+            (name.to_string(), median(ratios))
+        })
+        .collect();
     let weights_per_second_median = median(expressions.iter().map(|e| e.weights_per_second).collect());
     let gp_ops_per_second_median = median(expressions.iter().map(|e| e.gp_ops_per_second).collect());
 
@@ -345,18 +398,25 @@ pub fn run(
         options: LowerOptions::NONE,
         canonical: "<hand-written bilateral>".into(),
         layout: KernelLayout::of(&bilateral),
+        tile_radius: None,
         expr: bilateral.clone(),
         wgsl: HANDWRITTEN_BILATERAL.to_string(),
     })?;
     let generated = jit::compile(&bilateral)?;
     let generated_plain = jit::validate(jit::lower_with(&bilateral, KernelKind::Filter, LowerOptions::NONE)?)?;
-    for k in [&handwritten, &generated, &generated_plain] {
+    let generated_tiled =
+        jit::validate(jit::lower_with(&bilateral, KernelKind::Filter, LowerOptions::ALL.with_tiles(settings.radius))?)?;
+    let kernels = [&handwritten, &generated, &generated_plain, &generated_tiled];
+    for k in kernels {
         gpu.filter(k, &mut buffers, scene, settings.radius)?;
     }
-    let handwritten_ms = warm(gpu, &handwritten, &mut buffers, scene, settings.radius, settings.repeats * 2)?;
-    let generated_ms = warm(gpu, &generated, &mut buffers, scene, settings.radius, settings.repeats * 2)?;
-    let generated_plain_ms = warm(gpu, &generated_plain, &mut buffers, scene, settings.radius, settings.repeats * 2)?;
+    let [handwritten_ms, generated_ms, generated_plain_ms, generated_tiled_ms]: [Stat; 4] =
+        interleaved(gpu, &kernels, &mut buffers, scene, settings.radius, settings.repeats * 4)?
+            .try_into()
+            .expect("four kernels");
     let handwritten_result = HandWrittenResult {
+        tiled_ratio: generated_tiled_ms.median / handwritten_ms.median,
+        generated_tiled_ms,
         ratio: generated_ms.median / handwritten_ms.median,
         plain_ratio: generated_plain_ms.median / handwritten_ms.median,
         handwritten_ms,
@@ -411,6 +471,7 @@ pub fn run(
         expressions,
         interpreter_ratio_median,
         optimisation_ratio_median,
+        variant_ratio_median,
         weights_per_second_median,
         gp_ops_per_second_median,
         population: population_result,
@@ -457,6 +518,11 @@ pub fn table(r: &Report) -> String {
         r.weights_per_second_median / 1e9,
         r.gp_ops_per_second_median / 1e9
     );
+    t += "what each optimisation is worth (median over the corpus of the variant's time / the default kernel's):\n";
+    for (name, ratio) in &r.variant_ratio_median {
+        let meaning = if name.starts_with('-') { "without" } else { "with" };
+        t += &format!("  {name:<13} {ratio:.3}x  ({meaning} {})\n", name.trim_start_matches(['-', '+']));
+    }
     let p = &r.population;
     t += &format!(
         "\npopulation of {} ({} distinct) compiled together: lower+validate {:.0} ms, pipelines {:.0} ms, first evaluation {:.0} ms => {:.2} ms per individual\n",
@@ -464,8 +530,14 @@ pub fn table(r: &Report) -> String {
     );
     let h = &r.handwritten;
     t += &format!(
-        "\nbilateral: hand-written {:.3} ms, generated {:.3} ms ({:.2}x), generated unoptimised {:.3} ms ({:.2}x)\n",
-        h.handwritten_ms.median, h.generated_ms.median, h.ratio, h.generated_plain_ms.median, h.plain_ratio
+        "\nbilateral: hand-written {:.3} ms, generated {:.3} ms ({:.2}x), generated with tiles {:.3} ms ({:.2}x), generated unoptimised {:.3} ms ({:.2}x)\n",
+        h.handwritten_ms.median,
+        h.generated_ms.median,
+        h.ratio,
+        h.generated_tiled_ms.median,
+        h.tiled_ratio,
+        h.generated_plain_ms.median,
+        h.plain_ratio
     );
     if !r.generations.is_empty() {
         t += "\none GP generation (this device) next to the thesis's Table 4.1 (GTX 980 Ti, population 200: another machine)\n";

@@ -120,6 +120,7 @@ impl Gpu {
         scene: &Scene,
         radius: u32,
     ) -> Result<Filtered, GpuError> {
+        super::check_radius(kernel, radius)?;
         let (pipeline, timing) = self.pipeline(kernel)?;
         for input in &kernel.source().layout.inputs {
             buffers.ensure(self, scene, *input)?;

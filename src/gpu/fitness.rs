@@ -86,6 +86,7 @@ impl Gpu {
         assert_eq!(scenes.len(), data.len(), "one FitnessScene per Scene");
         for k in kernels {
             assert_eq!(k.source().kind, KernelKind::Fitness, "evaluate_fitness runs fitness kernels");
+            super::check_radius(k, radius)?;
         }
         let device = self.device();
         let mut pipelines = Vec::with_capacity(kernels.len());

@@ -42,6 +42,18 @@ pub enum GpuError {
     Pipeline { expression: String, message: String, wgsl: String },
     #[error("the GPU failed while {during}: {message}")]
     Runtime { during: &'static str, message: String },
+    #[error("the kernel for `{expression}` stages tiles for radius {tiled}; it cannot filter with radius {radius}")]
+    TileRadius { expression: String, tiled: u32, radius: u32 },
+}
+
+/// A tiled kernel runs only with the radius its tiles were made for.
+pub(crate) fn check_radius(kernel: &ValidatedKernel, radius: u32) -> Result<(), GpuError> {
+    match kernel.source().tile_radius {
+        Some(tiled) if tiled != radius => {
+            Err(GpuError::TileRadius { expression: kernel.source().canonical.clone(), tiled, radius })
+        }
+        _ => Ok(()),
+    }
 }
 
 /// An open device with its pipeline cache.

@@ -9,12 +9,12 @@ use std::sync::OnceLock;
 
 use serde::Serialize;
 
-use crate::lang::{Expr, Feature, FeatureSource, ScalarVar};
+use crate::lang::{Expr, Feature, FeatureSource, ScalarVar, UnaryOp};
 use crate::semantics;
 
 /// Bumped whenever the template or the lowering changes what a kernel computes
 /// or how it binds its inputs; part of every pipeline-cache key.
-pub const TEMPLATE_VERSION: u32 = 1;
+pub const TEMPLATE_VERSION: u32 = 2;
 
 /// Workgroup shape of every filter kernel.
 pub const WORKGROUP: [u32; 2] = [8, 8];
@@ -165,8 +165,20 @@ pub struct LowerOptions {
     /// outside the neighbour loop.
     pub hoist_centre_terms: bool,
     /// Square by multiplying: pow(x, 2) becomes x·x, and pow(distance2(f), 2)
-    /// the squared distance without its square root.
+    /// the squared distance without its square root; division by a literal
+    /// becomes multiplication by its reciprocal (no zero guard needed).
     pub strength_reduction: bool,
+    /// Leave out saturation an operand has already had: every operator's
+    /// result and every literal is already in range (saturated and flushed,
+    /// docs/SEMANTICS.md), so negating it, taking its absolute value or
+    /// clamping the final weight at zero needs no second pass through
+    /// `fj_fin`. (Variances are read raw, so they keep the full helpers.)
+    pub skip_redundant_checks: bool,
+    /// Stage the colour and neighbour features of each workgroup's window in
+    /// workgroup memory, for this window radius (the kernel then runs only
+    /// with it). Applied to filter and fitness kernels when the tile fits in
+    /// [`WORKGROUP_STORAGE_BUDGET`]; see [`KernelSource::tile_radius`].
+    pub tile_radius: Option<u32>,
 }
 
 impl LowerOptions {
@@ -176,6 +188,8 @@ impl LowerOptions {
         common_subexpressions: true,
         hoist_centre_terms: true,
         strength_reduction: true,
+        skip_redundant_checks: true,
+        tile_radius: None,
     };
     /// A literal translation: one SSA value per node, all inside the loop.
     pub const NONE: LowerOptions = LowerOptions {
@@ -183,8 +197,19 @@ impl LowerOptions {
         common_subexpressions: false,
         hoist_centre_terms: false,
         strength_reduction: false,
+        skip_redundant_checks: false,
+        tile_radius: None,
     };
+
+    /// These options with workgroup tiles for `radius`.
+    pub const fn with_tiles(self, radius: u32) -> Self {
+        LowerOptions { tile_radius: Some(radius), ..self }
+    }
 }
+
+/// Bytes of workgroup memory a tile may take: WebGPU's guaranteed 16 KiB
+/// (`maxComputeWorkgroupStorageSize`), less the fitness kernel's reduction arrays.
+pub const WORKGROUP_STORAGE_BUDGET: usize = 16384 - 1024;
 
 impl Default for LowerOptions {
     fn default() -> Self {
@@ -201,6 +226,9 @@ pub struct KernelSource {
     /// The expression's canonical text.
     pub canonical: String,
     pub layout: KernelLayout,
+    /// The radius the kernel's workgroup tiles were made for, if it has them:
+    /// it must be dispatched with exactly this radius.
+    pub tile_radius: Option<u32>,
     pub wgsl: String,
 }
 
@@ -228,10 +256,18 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     let layout = KernelLayout::of(expr);
     let mut body = Body { options, ..Body::default() };
     let result = body.emit(expr);
+    let root_in_range = in_range(&body.folded(expr));
 
     let loads = Loads::of(kind, &layout);
+    let tile = options.tile_radius.and_then(|radius| Tile::plan(expr, kind, radius));
+    let neighbour_side = if tile.is_some() { Loads::Tiled } else { Loads::of(kind, &layout) };
     let centre_lines: Vec<String> = centre_loads(expr, &loads).into_iter().chain(body.centre).collect();
-    let neighbour_lines: Vec<String> = neighbour_loads(expr, &loads).into_iter().chain(body.lines).collect();
+    let neighbour_lines: Vec<String> = neighbour_side
+        .neighbour_prelude()
+        .into_iter()
+        .chain(neighbour_loads(expr, &neighbour_side))
+        .chain(body.lines)
+        .collect();
 
     #[derive(Serialize)]
     struct BindingView {
@@ -261,7 +297,13 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     context.insert("template_version", &TEMPLATE_VERSION);
     context.insert("expression", &canonical);
     context.insert("length", &expr.len());
-    context.insert("ops", &helpers_for(&wgsl_body_text(&centre_lines, &neighbour_lines, &result)));
+    let weight = if options.skip_redundant_checks && root_in_range {
+        format!("max({result}, 0.0)")
+    } else {
+        format!("fj_weight({result})")
+    };
+    context.insert("ops", &helpers_for(&wgsl_body_text(&centre_lines, &neighbour_lines, &weight)));
+    context.insert("weight", &weight);
     context.insert("bindings", &bindings);
     context.insert("workgroup_x", &WORKGROUP[0]);
     context.insert("workgroup_y", &WORKGROUP[1]);
@@ -272,8 +314,58 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     if let KernelKind::Export(format) = kind {
         context.insert("output_format", format.wgsl());
     }
+    context.insert("tile", &tile);
     let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
-    Ok(KernelSource { kind, options, expr: expr.clone(), canonical, layout, wgsl })
+    let tile_radius = tile.map(|t| t.radius);
+    Ok(KernelSource { kind, options, expr: expr.clone(), canonical, layout, tile_radius, wgsl })
+}
+
+/// A workgroup tile: the (8 + 2r)² window of colour and neighbour features
+/// that a workgroup's invocations read, for `templates/tile_decl.wgsl.tera`.
+#[derive(Serialize)]
+struct Tile {
+    radius: u32,
+    width: u32,
+    count: u32,
+    arrays: Vec<TileArray>,
+}
+
+#[derive(Serialize)]
+struct TileArray {
+    ident: String,
+    source: String,
+    element: &'static str,
+}
+
+impl Tile {
+    /// The tile of `expr`'s neighbour-side features for `radius`, if the
+    /// kind reads storage buffers through a window and the tile fits.
+    fn plan(expr: &Expr, kind: KernelKind, radius: u32) -> Option<Tile> {
+        if !matches!(kind, KernelKind::Filter | KernelKind::Fitness) {
+            return None;
+        }
+        let (_, neighbour) = pair_sides(expr);
+        let arrays: Vec<TileArray> = neighbour
+            .into_iter()
+            .filter(|f| !matches!(f, Feature::Color | Feature::Pixel))
+            .map(|f| {
+                let input = Input::Feature(f);
+                TileArray {
+                    ident: tile_ident(f),
+                    source: input.ident(),
+                    element: if input.components() == 1 { "f32" } else { "vec4<f32>" },
+                }
+            })
+            .collect();
+        let width = WORKGROUP[0] + 2 * radius;
+        let count = width * (WORKGROUP[1] + 2 * radius);
+        let bytes_per_cell = 16 + arrays.iter().map(|a| if a.element == "f32" { 4 } else { 16 }).sum::<usize>();
+        (count as usize * bytes_per_cell <= WORKGROUP_STORAGE_BUDGET).then_some(Tile { radius, width, count, arrays })
+    }
+}
+
+fn tile_ident(f: Feature) -> String {
+    format!("tile_{}", f.name().to_ascii_lowercase())
 }
 
 /// The operator helpers, verbatim.
@@ -320,15 +412,34 @@ fn helper_items() -> &'static (String, Vec<(String, String)>) {
     })
 }
 
-fn wgsl_body_text(centre: &[String], neighbour: &[String], result: &str) -> String {
+fn wgsl_body_text(centre: &[String], neighbour: &[String], weight: &str) -> String {
     let mut text = centre.join("\n");
     text.push('\n');
     text.push_str(&neighbour.join("\n"));
     text.push('\n');
-    text.push_str(result);
-    // Every kernel computes its weight through fj_weight.
-    text.push_str("\nfj_weight(");
+    text.push_str(weight);
+    // The probe kernel saturates its raw value with fj_fin.
+    text.push_str("\nfj_fin(");
     text
+}
+
+/// Whether the value of `e` (constants already folded) is in range by
+/// construction: every operator's helper ends in `fj_fin` and literals are
+/// saturated and flushed when emitted; only variances are read raw.
+fn in_range(e: &Expr) -> bool {
+    !matches!(e, Expr::Var(_))
+}
+
+/// The f32 value of a literal or a negated literal, as the kernel holds it.
+fn literal_value(e: &Expr) -> Option<f64> {
+    match e {
+        Expr::Const(c) => Some(semantics::literal(*c) as f32 as f64),
+        Expr::Unary(UnaryOp::Neg, a) => match **a {
+            Expr::Const(c) => Some(-(semantics::literal(c) as f32 as f64)),
+            _ => None,
+        },
+        _ => None,
+    }
 }
 
 /// The prelude and exactly the helper functions `code` calls, directly or
@@ -363,6 +474,13 @@ fn templates() -> &'static tera::Tera {
     static TERA: OnceLock<tera::Tera> = OnceLock::new();
     TERA.get_or_init(|| {
         let mut tera = tera::Tera::default();
+        // Partials first: the kernel templates include them.
+        tera.add_raw_templates([
+            ("window.wgsl", include_str!("../../templates/window.wgsl.tera")),
+            ("tile_decl.wgsl", include_str!("../../templates/tile_decl.wgsl.tera")),
+            ("tile_load.wgsl", include_str!("../../templates/tile_load.wgsl.tera")),
+        ])
+        .expect("built-in partial templates parse");
         tera.add_raw_template(FILTER_TEMPLATE, include_str!("../../templates/filter.wgsl.tera"))
             .expect("built-in kernel template parses");
         tera.add_raw_template(PROBE_TEMPLATE, include_str!("../../templates/probe.wgsl.tera"))
@@ -395,6 +513,8 @@ enum Loads<'a> {
     /// Sampled textures read with `textureLoad`, normalised in the shader by
     /// `params.scale[k]`, k the input's index in the layout (exported shaders).
     Textures(&'a KernelLayout),
+    /// The workgroup tile, at cell `t` (neighbour side of tiled kernels).
+    Tiled,
 }
 
 impl<'a> Loads<'a> {
@@ -415,6 +535,9 @@ impl<'a> Loads<'a> {
                 format!("vec3<f32>({}[{index}], 0.0, 0.0)", Input::Feature(f).ident())
             }
             (Loads::Buffers, _) => format!("{}[{index}].xyz", Input::Feature(f).ident()),
+            (Loads::Tiled, Feature::Color) => "tile_color[t].xyz".to_string(),
+            (Loads::Tiled, _) if f.dimension() == 1 => format!("vec3<f32>({}[t], 0.0, 0.0)", tile_ident(f)),
+            (Loads::Tiled, _) => format!("{}[t].xyz", tile_ident(f)),
             (Loads::Textures(_), Feature::Color) => format!("{}.xyz", texel("tex_color", coords)),
             (Loads::Textures(layout), _) => {
                 let input = Input::Feature(f);
@@ -426,10 +549,22 @@ impl<'a> Loads<'a> {
         }
     }
 
+    /// The first lines of the neighbour loop: where neighbour j is, and its colour `color_j`.
+    fn neighbour_prelude(&self) -> Vec<String> {
+        match self {
+            Loads::Buffers => vec!["let j = u32(yj * w + xj);".into(), "let color_j = buf_color[j].xyz;".into()],
+            Loads::Textures(_) => vec![format!("let color_j = {}.xyz;", texel("tex_color", ("xj", "yj")))],
+            Loads::Tiled => vec![
+                "let t = u32((yj - tile_y) * TILE_W + (xj - tile_x));".into(),
+                "let color_j = tile_color[t].xyz;".into(),
+            ],
+        }
+    }
+
     /// Load of variance `v` at the centre pixel.
     fn variance(&self, v: ScalarVar) -> String {
         match self {
-            Loads::Buffers => format!("{}[i]", Input::Variance(v).ident()),
+            Loads::Buffers | Loads::Tiled => format!("{}[i]", Input::Variance(v).ident()),
             Loads::Textures(layout) => {
                 let input = Input::Variance(v);
                 let texel = texel(&input.texture_ident(), ("x", "y"));
@@ -552,7 +687,16 @@ impl Body {
                     return wgsl_f32(semantics::fin(v));
                 }
                 let a = self.emit(&folded_child);
-                format!("{}({a})", op.wgsl_helper())
+                match op {
+                    // `0.0 - a` rather than `-a`: a zero stays +0, as fj_fin leaves it.
+                    UnaryOp::Neg if self.options.skip_redundant_checks && in_range(&folded_child) => {
+                        format!("(0.0 - {a})")
+                    }
+                    UnaryOp::Abs if self.options.skip_redundant_checks && in_range(&folded_child) => {
+                        format!("abs({a})")
+                    }
+                    _ => format!("{}({a})", op.wgsl_helper()),
+                }
             }
             Expr::Binary(op, a, b) => {
                 let (fa, fb) = (self.folded(a), self.folded(b));
@@ -578,9 +722,22 @@ impl Body {
                     }
                     return name;
                 }
-                let a = self.emit(&fa);
-                let b = self.emit(&fb);
-                format!("{}({a}, {b})", op.wgsl_helper())
+                if let (true, crate::lang::BinaryOp::Div, Some(divisor)) =
+                    (self.options.strength_reduction, op, literal_value(&fb))
+                {
+                    // The zero guard only changes divisors below FJ_DIV_EPS.
+                    if divisor.abs() >= semantics::DIV_EPS {
+                        let a = self.emit(&fa);
+                        format!("fj_fin({a} * {})", wgsl_f32(1.0 / divisor))
+                    } else {
+                        let (a, b) = (self.emit(&fa), self.emit(&fb));
+                        format!("{}({a}, {b})", op.wgsl_helper())
+                    }
+                } else {
+                    let a = self.emit(&fa);
+                    let b = self.emit(&fb);
+                    format!("{}({a}, {b})", op.wgsl_helper())
+                }
             }
             Expr::Pair(op, i, j) => {
                 format!("{}({}, {})", op.wgsl_helper(), feature_ident('i', *i), feature_ident('j', *j))

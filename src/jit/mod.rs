@@ -20,17 +20,38 @@ pub fn compile_kind(expr: &crate::lang::Expr, kind: KernelKind) -> Result<Valida
     Ok(validate(lower_kind(expr, kind)?)?)
 }
 
+/// Lower with explicit options and validate.
+pub fn compile_with(
+    expr: &crate::lang::Expr,
+    kind: KernelKind,
+    options: LowerOptions,
+) -> Result<ValidatedKernel, CompileError> {
+    Ok(validate(lower_with(expr, kind, options)?)?)
+}
+
 /// Lower and validate many expressions on up to `threads` threads; results in order.
 pub fn compile_all(
     exprs: &[crate::lang::Expr],
     kind: KernelKind,
     threads: usize,
 ) -> Result<Vec<ValidatedKernel>, CompileError> {
+    compile_all_with(exprs, kind, LowerOptions::default(), threads)
+}
+
+/// [`compile_all`] with explicit lowering options.
+pub fn compile_all_with(
+    exprs: &[crate::lang::Expr],
+    kind: KernelKind,
+    options: LowerOptions,
+    threads: usize,
+) -> Result<Vec<ValidatedKernel>, CompileError> {
     let chunk = exprs.len().div_ceil(threads.max(1)).max(1);
     std::thread::scope(|s| {
         let handles: Vec<_> = exprs
             .chunks(chunk)
-            .map(|part| s.spawn(move || part.iter().map(|e| compile_kind(e, kind)).collect::<Result<Vec<_>, _>>()))
+            .map(|part| {
+                s.spawn(move || part.iter().map(|e| compile_with(e, kind, options)).collect::<Result<Vec<_>, _>>())
+            })
             .collect();
         let mut out = Vec::with_capacity(exprs.len());
         for h in handles {
