@@ -122,6 +122,7 @@ impl Gpu {
     ) -> Result<Filtered, GpuError> {
         super::check_radius(kernel, radius)?;
         let (pipeline, timing) = self.pipeline(kernel)?;
+        let _turn = self.gl_turn();
         for input in &kernel.source().layout.inputs {
             buffers.ensure(self, scene, *input)?;
         }

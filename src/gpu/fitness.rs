@@ -92,6 +92,9 @@ impl Gpu {
         let mut pipelines = Vec::with_capacity(kernels.len());
         for k in kernels {
             pipelines.push(self.pipeline(k)?.0);
+        }
+        let _turn = self.gl_turn();
+        for k in kernels {
             for (fs, scene) in scenes.iter_mut().zip(data) {
                 for input in &k.source().layout.inputs {
                     fs.buffers.ensure(self, scene, *input)?;

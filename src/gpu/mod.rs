@@ -64,6 +64,11 @@ pub struct Gpu {
     limits: wgpu::Limits,
     pipelines: Mutex<HashMap<KernelKey, Arc<wgpu::ComputePipeline>>>,
     tracer: OnceLock<wgpu::ComputePipeline>,
+    /// wgpu's GL backend shares one context per device and panics when a
+    /// thread waits more than a second for it (as it does while another
+    /// thread waits for a long dispatch or links a large program). On GL,
+    /// filterjit's own threads therefore take turns here, without a timeout.
+    gl_turns: Option<Mutex<()>>,
 }
 
 /// Timings of getting a pipeline.
@@ -75,6 +80,13 @@ pub struct PipelineTiming {
 }
 
 impl Gpu {
+    /// This thread's turn on a GL device (see `gl_turns`); nothing elsewhere.
+    /// Held around whole submit–wait–read sequences and pipeline creation,
+    /// never nested.
+    pub(crate) fn gl_turn(&self) -> Option<std::sync::MutexGuard<'_, ()>> {
+        self.gl_turns.as_ref().map(|m| m.lock().unwrap_or_else(|poisoned| poisoned.into_inner()))
+    }
+
     /// Open the adapter [`adapter::choose`] picks.
     pub fn open() -> Result<Gpu, GpuError> {
         Self::from_adapter(adapter::choose()?)
@@ -91,7 +103,16 @@ impl Gpu {
         };
         let (device, queue) = pollster::block_on(adapter.request_device(&descriptor))
             .map_err(|e| GpuError::Device { adapter: info.name.clone(), message: e.to_string() })?;
-        Ok(Gpu { device, queue, info, limits, pipelines: Mutex::new(HashMap::new()), tracer: OnceLock::new() })
+        let gl_turns = (info.backend == wgpu::Backend::Gl).then(|| Mutex::new(()));
+        Ok(Gpu {
+            device,
+            queue,
+            info,
+            limits,
+            pipelines: Mutex::new(HashMap::new()),
+            tracer: OnceLock::new(),
+            gl_turns,
+        })
     }
 
     /// Another device on the same adapter as `other` (its own queue and pipelines).
@@ -178,6 +199,7 @@ impl Gpu {
     /// A compute pipeline (entry point `main`) from a validated naga module,
     /// inside a validation error scope; the error's text on failure.
     pub(crate) fn create_pipeline(&self, module: naga::Module, label: &str) -> Result<wgpu::ComputePipeline, String> {
+        let _turn = self.gl_turn();
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let shader = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),

@@ -40,6 +40,7 @@ impl Gpu {
         buffers: &[RawBuffer<'_>],
         groups: (u32, u32),
     ) -> Result<(Duration, Vec<Vec<u8>>), GpuError> {
+        let _turn = self.gl_turn();
         let device = self.device();
         let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: None,

@@ -70,6 +70,7 @@ impl Gpu {
     /// + rows`; returns `SUMS_PER_PIXEL` sums per pixel of those rows.
     pub fn trace(&self, scene: &TraceScene, params: &TraceParams, rows: u32) -> Result<Vec<f32>, GpuError> {
         let pipeline = self.trace_pipeline()?;
+        let _turn = self.gl_turn();
         let device = self.device();
         let pixels = (params.width * params.height) as u64;
         let size = pixels * SUMS_PER_PIXEL as u64 * 4;
