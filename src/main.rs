@@ -126,10 +126,13 @@ enum Command {
     },
     /// Compare filters on scenes with references: error (relMSE both ways, MSE)
     /// against device time per megapixel, in tables, scatter plots with the
-    /// Pareto front, image crops and an index.html, all in one folder.
+    /// Pareto front, image crops and an index.html, all in one folder. Scenes,
+    /// sizes and radius default to --run's, else 64x64, 4 spp, 1024-spp
+    /// references, radius 5.
     Report(Box<ReportArgs>),
     /// Tune the constant sigmas of the cross-bilateral filter on training scenes
-    /// (the report's baseline); prints the tuned expression.
+    /// (the report's baseline); prints the tuned expression. Sizes and radius
+    /// default to --run's, else 64x64, 4 spp, 1024-spp references, radius 5.
     Tune(Box<TuneArgs>),
     /// List the built-in scenes.
     Scenes,
@@ -147,22 +150,31 @@ enum Preset {
     Thesis,
 }
 
+/// Render settings and radius; unset ones come from `evolve`'s preset, or
+/// for `report`/`tune` from `--run`'s checkpoint, else 64x64, 4 spp, 1024 spp
+/// references, radius 5.
+#[derive(clap::Args, Clone)]
+struct RenderArgs {
+    /// Size scenes are rendered at, WIDTHxHEIGHT.
+    #[arg(long, value_parser = parse_size)]
+    size: Option<(u32, u32)>,
+    /// Samples per pixel of rendered noisy images.
+    #[arg(long)]
+    spp: Option<u32>,
+    /// Samples per pixel of rendered references.
+    #[arg(long)]
+    reference_spp: Option<u32>,
+    /// Filter window radius.
+    #[arg(long)]
+    radius: Option<u32>,
+}
+
 /// How scenes are made and filtered, for `report` and `tune`; unset values
 /// come from `--run`'s checkpoint, else the defaults shown.
 #[derive(clap::Args, Clone)]
 struct SceneArgs {
-    /// Size scenes are rendered at, WIDTHxHEIGHT [64x64].
-    #[arg(long, value_parser = parse_size)]
-    size: Option<(u32, u32)>,
-    /// Samples per pixel of rendered noisy images [4].
-    #[arg(long)]
-    spp: Option<u32>,
-    /// Samples per pixel of rendered references [1024].
-    #[arg(long)]
-    reference_spp: Option<u32>,
-    /// Filter window radius [5].
-    #[arg(long)]
-    radius: Option<u32>,
+    #[command(flatten)]
+    render: RenderArgs,
     /// Training scenes, for tuning the baseline [the run's, else the built-in training scenes].
     #[arg(long, value_delimiter = ',')]
     training_scenes: Vec<String>,
@@ -227,18 +239,8 @@ struct EvolveArgs {
     /// Test scenes, likewise [default: the built-in test scenes].
     #[arg(long, value_delimiter = ',')]
     test_scenes: Vec<String>,
-    /// Size scenes are rendered at, WIDTHxHEIGHT.
-    #[arg(long, value_parser = parse_size)]
-    size: Option<(u32, u32)>,
-    /// Samples per pixel of rendered noisy images.
-    #[arg(long)]
-    spp: Option<u32>,
-    /// Samples per pixel of rendered references.
-    #[arg(long)]
-    reference_spp: Option<u32>,
-    /// Filter window radius.
-    #[arg(long)]
-    radius: Option<u32>,
+    #[command(flatten)]
+    render: RenderArgs,
     /// The expression the population is seeded from.
     #[arg(long, default_value = "@bilateral")]
     seed_expr: String,
@@ -626,7 +628,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         hall_of_fame: args.hall_of_fame.unwrap_or(preset.hall_of_fame),
         seed: args.seed.unwrap_or(preset.seed),
     };
-    let size = args.size.unwrap_or(size);
+    let size = args.render.size.unwrap_or(size);
     let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
     let seed_text = resolve_expr(&args.seed_expr)?.to_string();
     let config = ev::RunConfig {
@@ -635,11 +637,11 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         render: render::RenderSettings {
             width: size.0,
             height: size.1,
-            spp: args.spp.unwrap_or(spp),
-            reference_spp: args.reference_spp.unwrap_or(reference_spp),
+            spp: args.render.spp.unwrap_or(spp),
+            reference_spp: args.render.reference_spp.unwrap_or(reference_spp),
             seed: settings.seed as u32,
         },
-        radius: args.radius.unwrap_or(radius),
+        radius: args.render.radius.unwrap_or(radius),
         seed_expr: seed_text,
     };
     let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()));
@@ -810,16 +812,16 @@ fn scene_context(args: &SceneArgs) -> Result<SceneContext> {
         reference_spp: 1024,
         seed: 0,
     });
-    let size = args.size.unwrap_or((base.width, base.height));
+    let size = args.render.size.unwrap_or((base.width, base.height));
     Ok(SceneContext {
         render: render::RenderSettings {
             width: size.0,
             height: size.1,
-            spp: args.spp.unwrap_or(base.spp),
-            reference_spp: args.reference_spp.unwrap_or(base.reference_spp),
+            spp: args.render.spp.unwrap_or(base.spp),
+            reference_spp: args.render.reference_spp.unwrap_or(base.reference_spp),
             seed: base.seed,
         },
-        radius: args.radius.or(run.as_ref().map(|r| r.radius)).unwrap_or(5),
+        radius: args.render.radius.or(run.as_ref().map(|r| r.radius)).unwrap_or(5),
         training: if !args.training_scenes.is_empty() {
             args.training_scenes.clone()
         } else {
