@@ -90,7 +90,13 @@ pub struct Manifest {
     pub bindings: Vec<Binding>,
     pub normalisation: &'static str,
     pub semantics: &'static str,
+    /// Sampled textures the shader binds; more than WebGPU's guaranteed 16
+    /// per stage ([`PORTABLE_SAMPLED_TEXTURES`]) needs a device that allows them.
+    pub sampled_textures: usize,
 }
+
+/// Sampled textures per shader stage every WebGPU device allows.
+pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Uniform {
@@ -286,6 +292,7 @@ fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entr
         bindings,
         normalisation: NORMALISATION,
         semantics: SEMANTICS,
+        sampled_textures: 1 + inputs.len(),
     }
 }
 

@@ -355,6 +355,13 @@ fn run(cli: Cli) -> Result<()> {
             for b in &exported.manifest.bindings {
                 println!("  {:<26} {:<16} {}", b.target_slot, b.kind, b.role);
             }
+            if exported.manifest.sampled_textures > filterjit::export::PORTABLE_SAMPLED_TEXTURES {
+                eprintln!(
+                    "warning: the shader binds {} sampled textures; WebGPU guarantees {} per stage, so it needs a device that allows more",
+                    exported.manifest.sampled_textures,
+                    filterjit::export::PORTABLE_SAMPLED_TEXTURES
+                );
+            }
             Ok(())
         }
         Command::Check { expr } => {
