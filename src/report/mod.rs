@@ -588,7 +588,7 @@ fn html_escape(text: &str) -> String {
 
 fn html(results: &Results) -> String {
     let mut out = String::from(
-        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>filterjit report</title>\n<style>body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}td:first-child,th:first-child{text-align:left}.crops td{text-align:center;border:none;font-size:12px}code{font-size:12px;word-break:break-all}img{image-rendering:pixelated}</style></head><body>\n",
+        "<!doctype html>\n<html><head><meta charset=\"utf-8\"><title>filterjit report</title>\n<style>body{font-family:sans-serif;max-width:1200px;margin:2em auto;padding:0 1em}table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}td:first-child,th:first-child{text-align:left}.crops{display:flex;flex-wrap:wrap;gap:8px;margin:1em 0}.crops figure{margin:0;text-align:center;font-size:12px}code{font-size:12px;word-break:break-all}img{image-rendering:pixelated}</style></head><body>\n",
     );
     let _ = writeln!(
         out,
@@ -666,13 +666,13 @@ fn html(results: &Results) -> String {
                 }
             }
         }
-        out.push_str("</table>\n<table class=\"crops\"><tr>");
+        out.push_str("</table>\n<div class=\"crops\">");
         let shown: Vec<&str> =
             cells.iter().filter(|c| c.unavailable.is_none()).map(|c| c.method.as_str()).chain(["reference"]).collect();
         for name in &shown {
             let _ = write!(
                 out,
-                "<td><img src=\"crops/{}/{}.png\" alt=\"{}\"><br>{}</td>",
+                "<figure><img src=\"crops/{}/{}.png\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
                 file_name(&s.name),
                 file_name(name),
                 html_escape(name),
@@ -681,7 +681,7 @@ fn html(results: &Results) -> String {
         }
         let _ = writeln!(
             out,
-            "</tr></table><p>All in one picture: <a href=\"crops/{0}.png\">crops/{0}.png</a> (same order).</p>",
+            "</div><p>All in one picture: <a href=\"crops/{0}.png\">crops/{0}.png</a> (same order).</p>",
             file_name(&s.name)
         );
     }
