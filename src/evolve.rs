@@ -60,9 +60,7 @@ impl<'g> GpuEvaluator<'g> {
                 s.reference.as_ref().with_context(|| format!("scene `{}` has no reference image", s.name))?;
             noisy.push(metrics::errors(&s.color, reference, s.spp).relmse.max(1e-12));
         }
-        let options =
-            if gpu.is_software() { jit::LowerOptions::ALL } else { jit::LowerOptions::ALL.with_tiles(radius) };
-        Ok(GpuEvaluator {
+        let mut evaluator = GpuEvaluator {
             gpu,
             more,
             scenes,
@@ -70,9 +68,11 @@ impl<'g> GpuEvaluator<'g> {
             noisy,
             radius,
             threads,
-            options,
+            options: jit::LowerOptions::ALL,
             time: EvalTime::default(),
-        })
+        };
+        evaluator.set_tiles(Tiles::Auto.enabled(gpu));
+        Ok(evaluator)
     }
 
     /// Lower fitness kernels with workgroup tiles or without.

@@ -114,12 +114,30 @@ pub struct Field {
     pub meaning: String,
 }
 
+/// What a binding is; written `uniform`, `sampled_texture`, `storage_texture`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BindingKind {
+    Uniform,
+    SampledTexture,
+    StorageTexture,
+}
+
+impl std::fmt::Display for BindingKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(match self {
+            BindingKind::Uniform => "uniform",
+            BindingKind::SampledTexture => "sampled_texture",
+            BindingKind::StorageTexture => "storage_texture",
+        })
+    }
+}
+
 #[derive(Clone, Debug, Serialize)]
 pub struct Binding {
     pub group: u32,
     pub binding: u32,
-    /// `uniform`, `sampled_texture` or `storage_texture`.
-    pub kind: &'static str,
+    pub kind: BindingKind,
     /// The WGSL declaration's name.
     pub name: String,
     /// The input's name in filterjit's expression language (`color`, `normal`, `wpVariance`…), or `output`/`params`.
@@ -131,7 +149,8 @@ pub struct Binding {
     /// Index into `params.scale` (features and variances only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scale_index: Option<usize>,
-    /// Where this binding is in the target's own terms (GLSL binding, HLSL register, Metal slot).
+    /// Where this binding is in the target's own terms (GLSL binding, HLSL register, Metal slot),
+    /// derived from `binding` and `kind`.
     pub target_slot: String,
 }
 
@@ -182,20 +201,20 @@ fn content(input: Input) -> String {
 }
 
 /// The target's own name for a binding.
-fn target_slot(target: Target, binding: u32, kind: &str) -> String {
+fn target_slot(target: Target, binding: u32, kind: BindingKind) -> String {
     match target {
         Target::Wgsl | Target::Spirv => format!("set 0, binding {binding}"),
         Target::Glsl => format!("layout(binding = {binding})"),
         Target::Hlsl => {
             let register = match kind {
-                "uniform" => 'b',
-                "storage_texture" => 'u',
-                _ => 't',
+                BindingKind::Uniform => 'b',
+                BindingKind::StorageTexture => 'u',
+                BindingKind::SampledTexture => 't',
             };
             format!("register({register}{binding}, space0)")
         }
         Target::Msl => match kind {
-            "uniform" => "[[buffer(0)]]".into(),
+            BindingKind::Uniform => "[[buffer(0)]]".into(),
             _ => format!("[[texture({})]]", binding - 1),
         },
     }
@@ -229,40 +248,39 @@ fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entr
             meaning: format!("x: normalisation scale of {}; y, z, w unused", input.describe()),
         });
     }
-    let slot = |binding, kind| target_slot(target, binding, kind);
     let mut bindings = vec![
         Binding {
             group: 0,
             binding: 0,
-            kind: "uniform",
+            kind: BindingKind::Uniform,
             name: "params".into(),
             role: "params".into(),
             components: "",
             content: "the Params struct of the uniform section".into(),
             scale_index: None,
-            target_slot: slot(0, "uniform"),
+            target_slot: String::new(),
         },
         Binding {
             group: 0,
             binding: 1,
-            kind: "sampled_texture",
+            kind: BindingKind::SampledTexture,
             name: "tex_color".into(),
             role: "color".into(),
             components: "xyzw",
             content: "noisy colour, linear RGB; alpha is copied to the output".into(),
             scale_index: None,
-            target_slot: slot(1, "sampled_texture"),
+            target_slot: String::new(),
         },
         Binding {
             group: 0,
             binding: 2,
-            kind: "storage_texture",
+            kind: BindingKind::StorageTexture,
             name: "tex_out".into(),
             role: "output".into(),
             components: "xyzw",
             content: format!("filtered colour, written with textureStore; format {}", format.wgsl()),
             scale_index: None,
-            target_slot: slot(2, "storage_texture"),
+            target_slot: String::new(),
         },
     ];
     for (k, input) in inputs.iter().enumerate() {
@@ -270,14 +288,17 @@ fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entr
         bindings.push(Binding {
             group: 0,
             binding,
-            kind: "sampled_texture",
+            kind: BindingKind::SampledTexture,
             name: format!("tex_{}", input.describe().to_ascii_lowercase()),
             role: input.describe(),
             components: if input.components() == 1 { "x" } else { "xyz" },
             content: content(*input),
             scale_index: Some(k),
-            target_slot: slot(binding, "sampled_texture"),
+            target_slot: String::new(),
         });
+    }
+    for b in &mut bindings {
+        b.target_slot = target_slot(target, b.binding, b.kind);
     }
     Manifest {
         generator: format!("filterjit {}", env!("CARGO_PKG_VERSION")),
@@ -326,10 +347,7 @@ fn backend_error(target: Target) -> impl Fn(String) -> ExportError {
 fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String), ExportError> {
     use naga::back;
     let err = backend_error(target);
-    let module = kernel.module();
-    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-        .validate(module)
-        .map_err(|e| err(format!("{e:?}")))?;
+    let (module, info) = (kernel.module(), kernel.info());
     let bindings = || {
         let count = kernel.source().kind.first_input_binding() + kernel.source().layout.inputs.len() as u32;
         (0..count).map(|binding| naga::ResourceBinding { group: 0, binding })
@@ -352,7 +370,7 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
             let mut writer = back::glsl::Writer::new(
                 &mut text,
                 module,
-                &info,
+                info,
                 &options,
                 &pipeline,
                 naga::proc::BoundsCheckPolicies::default(),
@@ -366,7 +384,7 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
             let pipeline = back::hlsl::PipelineOptions::default();
             let mut text = String::new();
             let mut writer = back::hlsl::Writer::new(&mut text, &options, &pipeline);
-            let reflection = writer.write(module, &info, None).map_err(|e| err(e.to_string()))?;
+            let reflection = writer.write(module, info, None).map_err(|e| err(e.to_string()))?;
             let entry =
                 reflection.entry_point_names.into_iter().next().and_then(Result::ok).unwrap_or_else(|| "main".into());
             Ok((Code::Text(text), entry))
@@ -393,7 +411,7 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
             );
             let pipeline = back::msl::PipelineOptions::default();
             let (text, translation) =
-                back::msl::write_string(module, &info, &options, &pipeline).map_err(|e| err(e.to_string()))?;
+                back::msl::write_string(module, info, &options, &pipeline).map_err(|e| err(e.to_string()))?;
             let entry =
                 translation.entry_point_names.into_iter().next().and_then(Result::ok).unwrap_or_else(|| "main_".into());
             Ok((Code::Text(text), entry))
@@ -407,7 +425,7 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
             let pipeline =
                 back::spv::PipelineOptions { shader_stage: naga::ShaderStage::Compute, entry_point: "main".into() };
             let words =
-                back::spv::write_vec(module, &info, &options, Some(&pipeline)).map_err(|e| err(e.to_string()))?;
+                back::spv::write_vec(module, info, &options, Some(&pipeline)).map_err(|e| err(e.to_string()))?;
             Ok((Code::SpirV(words), "main".into()))
         }
     }

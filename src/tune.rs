@@ -88,27 +88,24 @@ pub fn tune(evaluator: &mut GpuEvaluator<'_>, sweeps: usize, on_step: &mut dyn F
         .collect();
     let mut memo: BTreeMap<String, f64> = BTreeMap::new();
     let mut score = |evaluator: &mut GpuEvaluator<'_>, candidates: &[Sigmas]| -> Result<Vec<f64>> {
-        let fresh: Vec<Expr> = candidates
-            .iter()
-            .map(Sigmas::expr)
-            .map(|e| (e.to_string(), e))
-            .filter(|(text, _)| !memo.contains_key(text))
-            .collect::<BTreeMap<String, Expr>>()
-            .into_values()
-            .collect();
+        let exprs: Vec<Expr> = candidates.iter().map(Sigmas::expr).collect();
+        let texts: Vec<String> = exprs.iter().map(Expr::to_string).collect();
+        let fresh: BTreeMap<&String, &Expr> =
+            texts.iter().zip(&exprs).filter(|(t, _)| !memo.contains_key(*t)).collect();
         if !fresh.is_empty() {
             let noisy = evaluator.noisy_relmse().to_vec();
-            for (e, result) in fresh.iter().zip(evaluator.errors(&fresh)?) {
+            let batch: Vec<Expr> = fresh.values().map(|e| (*e).clone()).collect();
+            for (text, result) in fresh.keys().zip(evaluator.errors(&batch)?) {
                 let fitness = match result {
                     Ok(per_scene) if per_scene.iter().all(|s| s.flags == 0 && s.relmse.is_finite()) => {
                         per_scene.iter().zip(&noisy).map(|(s, n)| s.relmse / n).sum::<f64>() / noisy.len() as f64
                     }
                     _ => f64::INFINITY,
                 };
-                memo.insert(e.to_string(), fitness);
+                memo.insert((*text).clone(), fitness);
             }
         }
-        Ok(candidates.iter().map(|c| memo[&c.expr().to_string()]).collect())
+        Ok(texts.iter().map(|t| memo[t]).collect())
     };
     let start = Sigmas::hand_set(&available);
     let hand_set_fitness = score(evaluator, std::slice::from_ref(&start))?[0];

@@ -298,24 +298,22 @@ pub fn run(
         let first = gpu.filter(&kernel, &mut buffers, scene, settings.radius)?;
         // The default kernel, the unoptimised one and each variant, timed in rounds.
         let plain = jit::validate(jit::lower_with(expr, KernelKind::Filter, LowerOptions::NONE)?)?;
-        let mut others = vec![plain];
-        let mut present = Vec::new();
+        let mut variants = Vec::new();
         for name in VARIANTS {
             let source = jit::lower_with(expr, KernelKind::Filter, variant(name, settings.radius))?;
-            present.push(!(name == "+tiles" && source.tile_radius.is_none()));
-            if *present.last().expect("pushed") {
-                others.push(jit::validate(source)?);
-            }
+            // Tiles that do not fit leave the default kernel: nothing to time.
+            let fits = name != "+tiles" || source.tile_radius.is_some();
+            variants.push(if fits { Some(jit::validate(source)?) } else { None });
         }
-        for k in &others {
+        let all: Vec<&jit::ValidatedKernel> = [&kernel, &plain].into_iter().chain(variants.iter().flatten()).collect();
+        for k in &all[1..] {
             gpu.filter(k, &mut buffers, scene, settings.radius)?;
         }
-        let all: Vec<&jit::ValidatedKernel> = std::iter::once(&kernel).chain(others.iter()).collect();
         let mut stats = interleaved(gpu, &all, &mut buffers, scene, settings.radius, settings.repeats)?.into_iter();
         let jit_ms = stats.next().expect("default kernel");
         let jit_plain_ms = stats.next().expect("plain kernel");
         let variant_ms: Vec<Option<f64>> =
-            present.iter().map(|p| if *p { stats.next().map(|s| s.median) } else { None }).collect();
+            variants.iter().map(|v| v.as_ref().and_then(|_| stats.next().map(|s| s.median))).collect();
         let interpreter_ms =
             interpret(gpu, &interpreter_kernel, &packed, expr, scene, settings.radius, settings.repeats)?;
         let seconds = jit_ms.median / 1e3;

@@ -196,11 +196,7 @@ impl Gpu {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, pixels * 16);
         encoder.copy_buffer_to_buffer(&flags, 0, &staging, pixels * 16, pixels * 4);
-        self.queue().submit([encoder.finish()]);
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Runtime { during: "filtering", message: error.to_string() });
-        }
-        let bytes = self.read(&staging)?;
+        let bytes = self.finish_and_read(encoder, scope, "filtering", &staging)?;
         let color: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes[..(pixels * 16) as usize]);
         let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(pixels * 16) as usize..]);
         Ok(Filtered { color, flags, pipeline: timing, dispatch, dispatches })
@@ -224,6 +220,22 @@ impl Gpu {
             .poll(wgpu::PollType::wait_indefinitely())
             .map(|_| ())
             .map_err(|e| GpuError::Runtime { during, message: e.to_string() })
+    }
+
+    /// Submit a job's last commands, turn a validation error caught by its
+    /// error scope into a [`GpuError`], and read `staging` back.
+    pub(super) fn finish_and_read(
+        &self,
+        encoder: wgpu::CommandEncoder,
+        scope: wgpu::ErrorScopeGuard,
+        during: &'static str,
+        staging: &wgpu::Buffer,
+    ) -> Result<Vec<u8>, GpuError> {
+        self.queue().submit([encoder.finish()]);
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during, message: error.to_string() });
+        }
+        self.read(staging)
     }
 
     /// Map a MAP_READ buffer and copy its contents out.

@@ -213,11 +213,7 @@ impl Gpu {
         }
         encoder.copy_buffer_to_buffer(&partials, 0, &staging, 0, total * 4);
         encoder.copy_buffer_to_buffer(&partial_flags, 0, &staging, total * 4, total * 4);
-        self.queue().submit([encoder.finish()]);
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Runtime { during: "evaluating fitness", message: error.to_string() });
-        }
-        let bytes = self.read(&staging)?;
+        let bytes = self.finish_and_read(encoder, scope, "evaluating fitness", &staging)?;
         let sums: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[..(total * 4) as usize]);
         let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(total * 4) as usize..]);
         let mut out = Vec::with_capacity(kernels.len());

@@ -114,11 +114,7 @@ impl Gpu {
             pass.dispatch_workgroups(params.width.div_ceil(8), rows.div_ceil(8), 1);
         }
         encoder.copy_buffer_to_buffer(&sums, first, &staging, 0, band);
-        self.queue().submit([encoder.finish()]);
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Runtime { during: "path tracing", message: error.to_string() });
-        }
-        let bytes = self.read(&staging)?;
+        let bytes = self.finish_and_read(encoder, scope, "path tracing", &staging)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
 }

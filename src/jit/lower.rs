@@ -256,11 +256,12 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     let layout = KernelLayout::of(expr);
     let mut body = Body { options, ..Body::default() };
     let result = body.emit(expr);
-    let root_in_range = in_range(&body.folded(expr));
+    // Folding never turns a non-variance into a variance or back, so the unfolded root tells.
+    let root_in_range = in_range(expr);
 
     let loads = Loads::of(kind, &layout);
     let tile = options.tile_radius.and_then(|radius| Tile::plan(expr, kind, radius));
-    let neighbour_side = if tile.is_some() { Loads::Tiled } else { Loads::of(kind, &layout) };
+    let neighbour_side = if tile.is_some() { Loads::Tiled } else { loads };
     let centre_lines: Vec<String> = centre_loads(expr, &loads).into_iter().chain(body.centre).collect();
     let neighbour_lines: Vec<String> = neighbour_side
         .neighbour_prelude()
@@ -507,6 +508,7 @@ fn var_ident(v: ScalarVar) -> String {
 }
 
 /// How loads are spelled in a kernel of one kind.
+#[derive(Clone, Copy)]
 enum Loads<'a> {
     /// Storage buffers indexed by pixel, already normalised (filterjit's own kernels).
     Buffers,

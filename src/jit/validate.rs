@@ -10,6 +10,8 @@ use super::lower::{KernelSource, TEMPLATE_VERSION, WORKGROUP};
 pub struct ValidatedKernel {
     source: KernelSource,
     module: naga::Module,
+    /// What validation learned; naga's back ends need it (`export`).
+    info: naga::valid::ModuleInfo,
     key: KernelKey,
 }
 
@@ -64,13 +66,13 @@ pub fn validate(source: KernelSource) -> Result<ValidatedKernel, ValidateError> 
     })?;
     let mut validator =
         naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty());
-    validator.validate(&module).map_err(|e| ValidateError::Invalid {
+    let info = validator.validate(&module).map_err(|e| ValidateError::Invalid {
         expression: source.canonical.clone(),
         message: e.emit_to_string(&source.wgsl),
         wgsl: source.wgsl.clone(),
     })?;
     let key = KernelKey::of(&source);
-    Ok(ValidatedKernel { source, module, key })
+    Ok(ValidatedKernel { source, module, info, key })
 }
 
 impl ValidatedKernel {
@@ -82,6 +84,9 @@ impl ValidatedKernel {
     }
     pub fn module(&self) -> &naga::Module {
         &self.module
+    }
+    pub fn info(&self) -> &naga::valid::ModuleInfo {
+        &self.info
     }
     pub fn key(&self) -> KernelKey {
         self.key

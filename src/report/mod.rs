@@ -58,7 +58,7 @@ pub struct Settings {
 }
 
 /// One method on one scene.
-#[derive(Clone, Debug, Serialize)]
+#[derive(Clone, Debug, Default, Serialize)]
 pub struct Cell {
     pub scene: String,
     pub method: String,
@@ -190,10 +190,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             relmse_half_spp: noisy.relmse_half_spp,
             mse: Some(noisy.mse),
             normalised: Some(1.0),
-            ms_per_mpx: None,
-            ms_per_mpx_range: None,
-            flagged_pixels: 0,
-            unavailable: None,
+            ..Cell::default()
         });
         let mut buffers = SceneBuffers::new(gpu, &scene);
         let timing_scene = tile(&scene, settings.timing_size);
@@ -204,22 +201,22 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                 results.cells.push(Cell {
                     scene: scene.name.clone(),
                     method: method.name.clone(),
-                    relmse: None,
-                    relmse_half_spp: None,
-                    mse: None,
-                    normalised: None,
-                    ms_per_mpx: None,
-                    ms_per_mpx_range: None,
-                    flagged_pixels: 0,
                     unavailable: Some(reason),
+                    ..Cell::default()
                 });
                 continue;
             }
             progress(&format!("scene {}: {}", scene.name, method.name));
-            let cell = measure(gpu, kernel, &mut buffers, &scene, &mut timing, &reference, settings, noisy.relmse)
-                .with_context(|| format!("filtering {} with {}", scene.name, method.name))?;
-            strip.push(write_crop(&crops_dir.join(format!("{}.png", file_name(&method.name))), &cell.1, &scene, crop)?);
-            results.cells.push(Cell { method: method.name.clone(), ..cell.0 });
+            let (cell, filtered) =
+                measure(gpu, kernel, &mut buffers, &scene, &mut timing, &reference, settings, noisy.relmse)
+                    .with_context(|| format!("filtering {} with {}", scene.name, method.name))?;
+            strip.push(write_crop(
+                &crops_dir.join(format!("{}.png", file_name(&method.name))),
+                &filtered,
+                &scene,
+                crop,
+            )?);
+            results.cells.push(Cell { method: method.name.clone(), ..cell });
         }
         strip.push(write_crop(&crops_dir.join("reference.png"), &reference, &scene, crop)?);
         write_strip(&output.join("crops").join(format!("{}.png", file_name(&scene.name))), &strip)?;
@@ -269,18 +266,13 @@ struct Timing<'a> {
 pub fn tile(scene: &Scene, side: usize) -> Scene {
     let (w, h) = (scene.width, scene.height);
     let (tw, th) = (w.max(side), h.max(side));
-    let map = |x: usize, y: usize| (y % h) * w + x % w;
-    let tiled = |data: &[[f32; 3]]| -> Vec<[f32; 3]> {
-        (0..th).flat_map(|y| (0..tw).map(move |x| (x, y))).map(|(x, y)| data[map(x, y)]).collect()
-    };
-    let mut out = Scene::from_color(format!("{} (tiled)", scene.name), tw, th, tiled(&scene.color));
+    fn tiled<T: Copy>(data: &[T], (w, h): (usize, usize), (tw, th): (usize, usize)) -> Vec<T> {
+        (0..th).flat_map(|y| (0..tw).map(move |x| data[(y % h) * w + x % w])).collect()
+    }
+    let mut out = Scene::from_color(format!("{} (tiled)", scene.name), tw, th, tiled(&scene.color, (w, h), (tw, th)));
     out.spp = scene.spp;
-    out.features = scene.features.iter().map(|(f, v)| (*f, tiled(v))).collect();
-    out.variances = scene
-        .variances
-        .iter()
-        .map(|(k, v)| (*k, (0..th).flat_map(|y| (0..tw).map(move |x| (x, y))).map(|(x, y)| v[map(x, y)]).collect()))
-        .collect();
+    out.features = scene.features.iter().map(|(f, v)| (*f, tiled(v, (w, h), (tw, th)))).collect();
+    out.variances = scene.variances.iter().map(|(k, v)| (*k, tiled(v, (w, h), (tw, th)))).collect();
     out
 }
 
@@ -310,7 +302,6 @@ fn measure(
     let e = metrics::errors(&rgb, reference, scene.spp);
     let cell = Cell {
         scene: scene.name.clone(),
-        method: String::new(),
         relmse: Some(e.relmse),
         relmse_half_spp: e.relmse_half_spp,
         mse: Some(e.mse),
@@ -318,7 +309,7 @@ fn measure(
         ms_per_mpx: Some(per_mpx(times[times.len() / 2])),
         ms_per_mpx_range: Some((per_mpx(times[0]), per_mpx(times[times.len() - 1]))),
         flagged_pixels: first.flagged_pixels(),
-        unavailable: None,
+        ..Cell::default()
     };
     Ok((cell, rgb))
 }
