@@ -308,15 +308,18 @@ pub fn hall_of_fame_text(state: &State, k: usize) -> String {
     let mut rank_in_island = vec![0usize; state.islands.len()];
     for (island, m) in entries {
         rank_in_island[island] += 1;
-        let len = crate::lang::parse_expr(&m.expr).map(|e| e.len()).unwrap_or(0);
+        let parsed = crate::lang::parse_expr(&m.expr).ok();
+        let len = parsed.as_ref().map_or(0, |e| e.len());
         let fitness = match &m.fitness.invalid {
             Some(reason) => format!("invalid ({reason})"),
             None => format!("{:.6}", m.fitness.value),
         };
-        text.push_str(&format!(
-            "# fitness {fitness}, length {len}\nisland{island}_rank{} = {}\n",
-            rank_in_island[island], m.expr
-        ));
+        text.push_str(&format!("# fitness {fitness}, length {len}\n"));
+        if let Some(simplified) = parsed.map(|e| crate::simplify::simplify(&e)) {
+            // Beside the raw form that was scored: the same weights, for people.
+            text.push_str(&format!("# simplified (length {}): {simplified}\n", simplified.len()));
+        }
+        text.push_str(&format!("island{island}_rank{} = {}\n", rank_in_island[island], m.expr));
     }
     text
 }
@@ -337,6 +340,8 @@ pub struct TestResult {
 pub struct Summary {
     pub generations: u32,
     pub best: gp::StoredMember,
+    /// The best expression simplified (the same weights; what `export` and `report` use).
+    pub best_simplified: String,
     pub test_scenes: Vec<String>,
     pub test_noisy_relmse: Vec<f64>,
     pub test_best: TestResult,
@@ -415,6 +420,31 @@ impl Tiles {
             Tiles::On => true,
             Tiles::Off => false,
         }
+    }
+}
+
+/// Where `filterjit evolve` writes when no run directory is named.
+pub const DEFAULT_RUN_DIR: &str = "runs/evolve";
+
+/// The run directory used when none is named: `base` itself, or, once it holds
+/// a run, the first of `base-2`, `base-3`, … that does not, so that running
+/// the same command twice starts a second run instead of stopping at an error.
+/// With `resume`, the newest of them that holds a run (or `base`).
+pub fn default_run_dir(base: &Path, resume: bool) -> PathBuf {
+    let numbered = |n: u32| match n {
+        1 => base.to_path_buf(),
+        n => {
+            let mut name = base.file_name().unwrap_or_default().to_os_string();
+            name.push(format!("-{n}"));
+            base.with_file_name(name)
+        }
+    };
+    let holds_run = |dir: &Path| dir.join(CHECKPOINT_FILE).is_file();
+    let first_free = (1..).find(|&n| !holds_run(&numbered(n))).expect("some number is free");
+    if resume && first_free > 1 {
+        numbered(first_free - 1)
+    } else {
+        numbered(first_free)
     }
 }
 
@@ -527,6 +557,7 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     let test_baselines = results.collect();
     let summary = Summary {
         generations: state.generation,
+        best_simplified: crate::simplify::simplify(&compared[0]).to_string(),
         best,
         test_scenes: names,
         test_noisy_relmse: tester.noisy_relmse().to_vec(),

@@ -8,7 +8,8 @@
 
 use serde::Serialize;
 
-use crate::jit::{self, Input, KernelKind, OutputFormat, ValidatedKernel, WORKGROUP};
+use crate::jit::interface::{BindingInterface, Resource, UniformField};
+use crate::jit::{self, Input, KernelKind, OutputFormat, Role, ValidatedKernel, WORKGROUP};
 use crate::lang::{Expr, Feature, ScalarVar};
 
 /// Shading languages an expression can be exported to.
@@ -102,16 +103,7 @@ pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;
 pub struct Uniform {
     pub binding: u32,
     pub size_bytes: u32,
-    pub fields: Vec<Field>,
-}
-
-#[derive(Clone, Debug, Serialize)]
-pub struct Field {
-    pub name: String,
-    #[serde(rename = "type")]
-    pub ty: &'static str,
-    pub offset: u32,
-    pub meaning: String,
+    pub fields: Vec<UniformField>,
 }
 
 /// What a binding is; written `uniform`, `sampled_texture`, `storage_texture`.
@@ -201,22 +193,40 @@ fn content(input: Input) -> String {
 }
 
 /// The target's own name for a binding.
-fn target_slot(target: Target, binding: u32, kind: BindingKind) -> String {
+fn target_slot(target: Target, interface: &BindingInterface, binding: &jit::interface::Binding) -> String {
+    let slot = binding.slot;
     match target {
-        Target::Wgsl | Target::Spirv => format!("set 0, binding {binding}"),
-        Target::Glsl => format!("layout(binding = {binding})"),
+        Target::Wgsl | Target::Spirv => format!("set 0, binding {slot}"),
+        Target::Glsl => format!("layout(binding = {slot})"),
         Target::Hlsl => {
-            let register = match kind {
-                BindingKind::Uniform => 'b',
-                BindingKind::StorageTexture => 'u',
-                BindingKind::SampledTexture => 't',
+            let register = match binding.resource {
+                Resource::Uniform => 'b',
+                Resource::StorageTexture(_) | Resource::Storage { writable: true, .. } => 'u',
+                Resource::SampledTexture | Resource::Storage { writable: false, .. } => 't',
             };
-            format!("register({register}{binding}, space0)")
+            format!("register({register}{slot}, space0)")
         }
-        Target::Msl => match kind {
-            BindingKind::Uniform => "[[buffer(0)]]".into(),
-            _ => format!("[[texture({})]]", binding - 1),
+        Target::Msl => match binding.resource {
+            Resource::Uniform | Resource::Storage { .. } => format!("[[buffer({})]]", msl_index(interface, binding)),
+            _ => format!("[[texture({})]]", msl_index(interface, binding)),
         },
+    }
+}
+
+/// Metal numbers buffers and textures separately: a binding's index among
+/// the bindings of its own class, in slot order.
+fn msl_index(interface: &BindingInterface, binding: &jit::interface::Binding) -> u8 {
+    let is_buffer = |b: &jit::interface::Binding| matches!(b.resource, Resource::Uniform | Resource::Storage { .. });
+    interface.bindings.iter().filter(|b| b.slot < binding.slot && is_buffer(b) == is_buffer(binding)).count() as u8
+}
+
+/// How the manifest names a binding's kind.
+fn binding_kind(resource: Resource) -> BindingKind {
+    match resource {
+        Resource::Uniform => BindingKind::Uniform,
+        Resource::SampledTexture => BindingKind::SampledTexture,
+        Resource::StorageTexture(_) => BindingKind::StorageTexture,
+        Resource::Storage { .. } => unreachable!("exported shaders bind no storage buffers"),
     }
 }
 
@@ -233,73 +243,43 @@ pub fn export(expr: &Expr, target: Target, format: OutputFormat) -> Result<Expor
 }
 
 fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entry_point: String) -> Manifest {
-    let inputs = &kernel.source().layout.inputs;
-    let mut fields = vec![
-        Field { name: "width".into(), ty: "u32", offset: 0, meaning: "image width in pixels".into() },
-        Field { name: "height".into(), ty: "u32", offset: 4, meaning: "image height in pixels".into() },
-        Field { name: "radius".into(), ty: "u32", offset: 8, meaning: "window radius r: (2r+1)^2 pixels".into() },
-        Field { name: "_pad".into(), ty: "u32", offset: 12, meaning: "unused".into() },
-    ];
-    for (k, input) in inputs.iter().enumerate() {
-        fields.push(Field {
-            name: format!("scale[{k}]"),
-            ty: "vec4<f32>",
-            offset: 16 + 16 * k as u32,
-            meaning: format!("x: normalisation scale of {}; y, z, w unused", input.describe()),
-        });
-    }
-    let mut bindings = vec![
-        Binding {
-            group: 0,
-            binding: 0,
-            kind: BindingKind::Uniform,
-            name: "params".into(),
-            role: "params".into(),
-            components: "",
-            content: "the Params struct of the uniform section".into(),
-            scale_index: None,
-            target_slot: String::new(),
-        },
-        Binding {
-            group: 0,
-            binding: 1,
-            kind: BindingKind::SampledTexture,
-            name: "tex_color".into(),
-            role: "color".into(),
-            components: "xyzw",
-            content: "noisy colour, linear RGB; alpha is copied to the output".into(),
-            scale_index: None,
-            target_slot: String::new(),
-        },
-        Binding {
-            group: 0,
-            binding: 2,
-            kind: BindingKind::StorageTexture,
-            name: "tex_out".into(),
-            role: "output".into(),
-            components: "xyzw",
-            content: format!("filtered colour, written with textureStore; format {}", format.wgsl()),
-            scale_index: None,
-            target_slot: String::new(),
-        },
-    ];
-    for (k, input) in inputs.iter().enumerate() {
-        let binding = kernel.source().kind.first_input_binding() + k as u32;
-        bindings.push(Binding {
-            group: 0,
-            binding,
-            kind: BindingKind::SampledTexture,
-            name: format!("tex_{}", input.describe().to_ascii_lowercase()),
-            role: input.describe(),
-            components: if input.components() == 1 { "x" } else { "xyz" },
-            content: content(*input),
-            scale_index: Some(k),
-            target_slot: String::new(),
-        });
-    }
-    for b in &mut bindings {
-        b.target_slot = target_slot(target, b.binding, b.kind);
-    }
+    let interface = &kernel.source().interface;
+    let mut scale_index = 0;
+    let bindings: Vec<Binding> = interface
+        .bindings
+        .iter()
+        .map(|b| {
+            let (role, components, content, scale) = match b.role {
+                Role::Params => ("params".into(), "", "the Params struct of the uniform section".into(), None),
+                Role::Color => {
+                    ("color".into(), "xyzw", "noisy colour, linear RGB; alpha is copied to the output".into(), None)
+                }
+                Role::Output => (
+                    "output".into(),
+                    "xyzw",
+                    format!("filtered colour, written with textureStore; format {}", format.wgsl()),
+                    None,
+                ),
+                Role::Input(input) => {
+                    scale_index += 1;
+                    let components = if input.components() == 1 { "x" } else { "xyz" };
+                    (input.describe(), components, content(input), Some(scale_index - 1))
+                }
+                Role::Flags | Role::Reference => unreachable!("exported shaders bind no {:?}", b.role),
+            };
+            Binding {
+                group: 0,
+                binding: b.slot,
+                kind: binding_kind(b.resource),
+                name: b.ident.clone(),
+                role,
+                components,
+                content,
+                scale_index: scale,
+                target_slot: target_slot(target, interface, b),
+            }
+        })
+        .collect();
     Manifest {
         generator: format!("filterjit {}", env!("CARGO_PKG_VERSION")),
         expression: kernel.source().canonical.clone(),
@@ -309,11 +289,15 @@ fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entr
         workgroup_size: [WORKGROUP[0], WORKGROUP[1], 1],
         dispatch: format!("ceil(width / {}) x ceil(height / {}) x 1 workgroups", WORKGROUP[0], WORKGROUP[1]),
         output_format: format,
-        uniform: Uniform { binding: 0, size_bytes: 16 + 16 * inputs.len() as u32, fields },
+        uniform: Uniform {
+            binding: interface.slot(Role::Params),
+            size_bytes: interface.uniform_bytes,
+            fields: interface.uniform.clone(),
+        },
+        sampled_textures: interface.sampled_textures(),
         bindings,
         normalisation: NORMALISATION,
         semantics: SEMANTICS,
-        sampled_textures: 1 + inputs.len(),
     }
 }
 
@@ -348,17 +332,15 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
     use naga::back;
     let err = backend_error(target);
     let (module, info) = (kernel.module(), kernel.info());
-    let bindings = || {
-        let count = kernel.source().kind.first_input_binding() + kernel.source().layout.inputs.len() as u32;
-        (0..count).map(|binding| naga::ResourceBinding { group: 0, binding })
-    };
+    let interface = &kernel.source().interface;
+    let bindings = || interface.bindings.iter().map(|b| (naga::ResourceBinding { group: 0, binding: b.slot }, b));
     match target {
         Target::Wgsl => Ok((Code::Text(kernel.wgsl().to_string()), "main".into())),
         Target::Glsl => {
             let options = back::glsl::Options {
                 version: back::glsl::Version::Desktop(450),
                 writer_flags: back::glsl::WriterFlags::empty(),
-                binding_map: bindings().map(|b| (b, b.binding as u8)).collect(),
+                binding_map: bindings().map(|(r, b)| (r, b.slot as u8)).collect(),
                 zero_initialize_workgroup_memory: true,
             };
             let pipeline = back::glsl::PipelineOptions {
@@ -391,16 +373,18 @@ fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String),
         }
         Target::Msl => {
             let resources = bindings()
-                .map(|b| {
-                    let target = match b.binding {
-                        0 => back::msl::BindTarget { buffer: Some(0), ..Default::default() },
-                        n => back::msl::BindTarget {
-                            texture: Some((n - 1) as u8),
-                            mutable: n == 2,
-                            ..Default::default()
-                        },
+                .map(|(r, b)| {
+                    let index = Some(msl_index(interface, b));
+                    let target = match b.resource {
+                        Resource::Uniform | Resource::Storage { .. } => {
+                            back::msl::BindTarget { buffer: index, ..Default::default() }
+                        }
+                        Resource::SampledTexture => back::msl::BindTarget { texture: index, ..Default::default() },
+                        Resource::StorageTexture(_) => {
+                            back::msl::BindTarget { texture: index, mutable: true, ..Default::default() }
+                        }
                     };
-                    (b, target)
+                    (r, target)
                 })
                 .collect();
             let mut options =

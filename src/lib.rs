@@ -21,6 +21,7 @@ pub mod report;
 pub mod rng;
 pub mod scene;
 pub mod semantics;
+pub mod simplify;
 pub mod tune;
 
 pub use jit::{compile, ValidatedKernel};

@@ -34,7 +34,15 @@ enum Command {
         output: Option<PathBuf>,
     },
     /// Parse and type-check an expression; print its canonical form, length and inputs.
-    Check { expr: String },
+    Check {
+        expr: String,
+        /// Print the expression as a LaTeX formula instead (for a paper).
+        #[arg(long)]
+        latex: bool,
+    },
+    /// Simplify an expression by equality saturation (rules exact under
+    /// filterjit's numeric semantics) and print the cheapest equivalent form.
+    Simplify { expr: String },
     /// Export an expression as a standalone shader for another program (an
     /// engine): inputs from textures, output to a storage texture; writes a
     /// manifest of the binding interface beside it (FILE.json).
@@ -283,9 +291,14 @@ struct EvolveArgs {
     /// Random seed of the search (and of rendering).
     #[arg(long)]
     seed: Option<u64>,
-    /// Run directory: checkpoint, log, hall of fame, summary.
-    #[arg(short, long, default_value = "runs/evolve")]
-    output: PathBuf,
+    /// Simplify every new individual before it is evaluated (the same
+    /// weights, shorter trees; docs/BENCHMARKS.md measures the effect).
+    #[arg(long)]
+    simplify_offspring: bool,
+    /// Run directory: checkpoint, log, hall of fame, summary [default: runs/evolve, or
+    /// runs/evolve-2, -3, … when it holds a run already; with --resume the newest of them].
+    #[arg(short, long)]
+    output: Option<PathBuf>,
     /// Continue the run in --output from its last checkpoint.
     #[arg(long)]
     resume: bool,
@@ -336,7 +349,8 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Export { expr, target, format, output } => {
-            let expr = resolve_expr(&expr)?;
+            // An engine gets the cheapest equivalent form (the same weights).
+            let expr = filterjit::simplify::simplify(&resolve_expr(&expr)?);
             let exported = filterjit::export::export(&expr, target, format)?;
             let manifest_path = manifest_path(&output);
             let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
@@ -364,7 +378,24 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Check { expr } => {
+        Command::Check { expr, latex: true } => {
+            println!("{}", lang::latex(&resolve_expr(&expr)?));
+            Ok(())
+        }
+        Command::Simplify { expr } => {
+            let expr = resolve_expr(&expr)?;
+            let simplified = filterjit::simplify::simplify(&expr);
+            println!("{simplified}");
+            println!(
+                "length: {} -> {} nodes; kernel cost {:.1} -> {:.1}",
+                expr.len(),
+                simplified.len(),
+                filterjit::simplify::kernel_cost(&expr),
+                filterjit::simplify::kernel_cost(&simplified)
+            );
+            Ok(())
+        }
+        Command::Check { expr, latex: false } => {
             let expr = resolve_expr(&expr)?;
             println!("{expr}");
             println!("length: {} nodes", expr.len());
@@ -634,6 +665,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         seed_share: args.seed_share.unwrap_or(preset.seed_share),
         hall_of_fame: args.hall_of_fame.unwrap_or(preset.hall_of_fame),
         seed: args.seed.unwrap_or(preset.seed),
+        simplify_offspring: args.simplify_offspring,
     };
     let size = args.render.size.unwrap_or(size);
     let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
@@ -652,6 +684,21 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         seed_expr: seed_text,
     };
     let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()));
+    let output = match &args.output {
+        Some(dir) => dir.clone(),
+        None => {
+            let base = Path::new(ev::DEFAULT_RUN_DIR);
+            let dir = ev::default_run_dir(base, args.resume);
+            if dir != base {
+                eprintln!(
+                    "run dir   {} ({} holds an earlier run; -o DIR names another)",
+                    dir.display(),
+                    base.display()
+                );
+            }
+            dir
+        }
+    };
     let gpu = gpu::Gpu::open()?;
     eprintln!(
         "evolve    {} islands x {}, {} generations, max length {}, radius {}, scenes {}x{} on {}",
@@ -688,7 +735,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         ev::RunOptions {
             settings,
             config,
-            output: args.output.clone(),
+            output: output.clone(),
             resume: args.resume,
             threads,
             stop_after: None,
@@ -742,7 +789,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
     println!("time      {:.1} s", summary.seconds);
     println!(
         "wrote     {}/{{{},{},{},{},{}}}",
-        args.output.display(),
+        output.display(),
         ev::HALL_OF_FAME_FILE,
         ev::LOG_FILE,
         ev::CHECKPOINT_FILE,
@@ -911,6 +958,8 @@ fn report(args: ReportArgs) -> Result<()> {
         for (name, text) in corpus::parse_named(&text) {
             let expr =
                 lang::parse_expr(text).map_err(|e| anyhow::anyhow!("{}: entry `{name}`:\n{e}", path.display()))?;
+            // Reported as people read them: simplified (the same weights).
+            let expr = filterjit::simplify::simplify(&expr);
             if taken < args.top && !methods.iter().any(|m| m.expr == expr) {
                 taken += 1;
                 methods.push(Method { name: name.to_string(), origin: Origin::Given, expr: expr.clone() });

@@ -75,6 +75,25 @@ fn a_missing_scene_or_feature_exits_non_zero_naming_it() {
 }
 
 #[test]
+fn without_an_adapter_the_error_names_both_mesa_drivers() {
+    // No Metal adapter exists on Linux: the same path as a machine without any GPU driver.
+    if cfg!(target_os = "macos") {
+        return;
+    }
+    let sample = mitsuba_sample();
+    let run = Command::new(env!("CARGO_BIN_EXE_filterjit"))
+        .args(["filter", "--expr", "@bilateral", sample.to_str().unwrap(), "-o", "/tmp/never.exr"])
+        .env("FILTERJIT_BACKEND", "metal")
+        .output()
+        .unwrap();
+    assert!(!run.status.success());
+    let stderr = text(&run.stderr);
+    assert!(stderr.contains("no GPU adapter"), "{stderr}");
+    assert!(stderr.contains("mesa-vulkan-drivers") && stderr.contains("libgl1-mesa-dri"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
 fn compile_prints_validated_wgsl_and_unknown_names_are_listed() {
     let run = filterjit(&["compile", "@thesis2"]);
     assert!(run.status.success());

@@ -11,12 +11,13 @@ use filterjit::{corpus, scene};
 
 use crate::common::{gpu, mitsuba_sample};
 
-fn temp_dir(name: &str) -> PathBuf {
+pub(crate) fn temp_dir(name: &str) -> PathBuf {
     crate::common::temp_dir("evolve", name)
 }
 
 /// Two tiny rendered datasets shared by the tests: (training, test).
-fn datasets() -> &'static (PathBuf, PathBuf) {
+pub(crate) fn datasets() -> &'static (PathBuf, PathBuf) {
+    let gpu = gpu();
     static SETS: OnceLock<(PathBuf, PathBuf)> = OnceLock::new();
     SETS.get_or_init(|| {
         let root = temp_dir("datasets");
@@ -25,14 +26,14 @@ fn datasets() -> &'static (PathBuf, PathBuf) {
         for name in ["soft-shadows", "cornell"] {
             let d = render::builtin(name).unwrap().unwrap();
             let dir = root.join(name);
-            render::render(gpu(), &d, &settings, &mut |_, _| {}).unwrap().write(&dir, &d, &settings).unwrap();
+            render::render(&gpu, &d, &settings, &mut |_, _| {}).unwrap().write(&dir, &d, &settings).unwrap();
             out.push(dir);
         }
         (out[0].clone(), out[1].clone())
     })
 }
 
-fn small() -> Settings {
+pub(crate) fn small() -> Settings {
     Settings {
         islands: 2,
         island_size: 6,
@@ -44,7 +45,7 @@ fn small() -> Settings {
     }
 }
 
-fn config(training: &Path, test: &Path) -> RunConfig {
+pub(crate) fn config(training: &Path, test: &Path) -> RunConfig {
     RunConfig {
         training: vec![training.display().to_string()],
         test: vec![test.display().to_string()],
@@ -54,7 +55,7 @@ fn config(training: &Path, test: &Path) -> RunConfig {
     }
 }
 
-fn run(
+pub(crate) fn run(
     dir: &Path,
     settings: Settings,
     config: RunConfig,
@@ -72,8 +73,9 @@ fn try_run(
     stop_after: Option<u32>,
     tiles: evolve::Tiles,
 ) -> anyhow::Result<Option<evolve::Summary>> {
+    let gpu = gpu();
     evolve::run(
-        gpu(),
+        &gpu,
         RunOptions {
             settings,
             config,
@@ -180,10 +182,11 @@ fn the_terminal_set_is_what_the_training_scenes_provide() {
 
 #[test]
 fn invalid_individuals_get_the_worst_fitness_and_a_reason() {
+    let gpu = gpu();
     let (training, _) = datasets();
     let request = scene::Request::for_expr(&parse_expr("distance2(color)").unwrap());
     let scenes = vec![scene::load(training, &request).unwrap()];
-    let mut evaluator = GpuEvaluator::new(gpu(), scenes, 2, 2).unwrap();
+    let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
     let exprs: Vec<_> = ["sqrt(distance2(color) - 1)", "exp(-distance2(color))", "asin(2 + distance2(color))", "1"]
         .iter()
         .map(|t| parse_expr(t).unwrap())
@@ -242,13 +245,16 @@ fn killed_runs_resume_to_the_same_hall_of_fame() {
     for trial in 0..trials {
         let dir = temp_dir(&format!("kill-{trial}"));
         let mut resume = false;
+        // A kill that leaves no newer checkpoint doubles the next wait, so
+        // every trial ends however slowly the driver compiles.
+        let (mut patience, mut done) = (1u64, None);
         loop {
             let mut a = args(&dir);
             if resume {
                 a.push("--resume".into());
             }
             let mut child = Command::new(bin).args(&a).stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
-            let delay = std::time::Duration::from_millis(20 + rng.below(700) as u64);
+            let delay = std::time::Duration::from_millis((20 + rng.below(700) as u64) * patience);
             std::thread::sleep(delay);
             match child.try_wait().unwrap() {
                 Some(status) => {
@@ -260,10 +266,15 @@ fn killed_runs_resume_to_the_same_hall_of_fame() {
                     child.wait().unwrap();
                     kills += 1;
                     // Whatever the moment, a checkpoint present is complete.
+                    let mut generation = None;
                     if dir.join(evolve::CHECKPOINT_FILE).is_file() {
-                        evolve::read_checkpoint(&dir).unwrap_or_else(|e| panic!("trial {trial}: {e:#}"));
+                        let checkpoint =
+                            evolve::read_checkpoint(&dir).unwrap_or_else(|e| panic!("trial {trial}: {e:#}"));
+                        generation = Some(checkpoint.state.generation);
                         resume = true;
                     }
+                    patience = if generation > done { 1 } else { patience * 2 };
+                    done = done.max(generation);
                 }
             }
         }
@@ -271,4 +282,22 @@ fn killed_runs_resume_to_the_same_hall_of_fame() {
     }
     eprintln!("{kills} kills over {trials} trials");
     assert!(kills > 0, "no run was interrupted");
+}
+
+#[test]
+fn a_second_run_without_a_directory_gets_a_fresh_one() {
+    let root = temp_dir("default-dir");
+    let base = root.join("evolve");
+    let mark = |dir: &Path| {
+        std::fs::create_dir_all(dir).unwrap();
+        std::fs::write(dir.join(evolve::CHECKPOINT_FILE), "{}").unwrap();
+    };
+    assert_eq!(evolve::default_run_dir(&base, false), base, "the first run takes the base name");
+    assert_eq!(evolve::default_run_dir(&base, true), base, "nothing to resume: the base name");
+    mark(&base);
+    assert_eq!(evolve::default_run_dir(&base, false), root.join("evolve-2"));
+    assert_eq!(evolve::default_run_dir(&base, true), base, "--resume continues the run that exists");
+    mark(&root.join("evolve-2"));
+    assert_eq!(evolve::default_run_dir(&base, false), root.join("evolve-3"));
+    assert_eq!(evolve::default_run_dir(&base, true), root.join("evolve-2"), "--resume takes the newest");
 }

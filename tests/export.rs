@@ -64,7 +64,7 @@ fn compare(expr: &Expr, scene: &Scene, radius: u32, format: OutputFormat) -> f64
         .unwrap_or_else(|e| panic!("the exported shader of `{expr}` fails in plain wgpu: {e}"));
 
     let kernel = jit::compile(expr).unwrap();
-    let mut buffers = SceneBuffers::new(gpu, scene);
+    let mut buffers = SceneBuffers::new(&gpu, scene);
     let filtered = gpu.filter(&kernel, &mut buffers, scene, radius).unwrap();
     ours.iter()
         .zip(&filtered.color)

@@ -112,9 +112,10 @@ fn wgsl_accuracy(op: &str, a: f64, b: f64, c: f64) -> f64 {
 /// gives one-pixel scenes whose inputs are pixel k's moved by one f32 ulp.
 /// Returns the worst relative error seen on well-conditioned inputs.
 fn check_probe(op: &str, expr: &Expr, scene: &Scene, perturbed: impl Fn(usize) -> Vec<Scene>) -> f64 {
+    let gpu = gpu();
     let kernel = jit::compile_kind(expr, KernelKind::Probe).unwrap();
-    let mut buffers = SceneBuffers::new(gpu(), scene);
-    let (values, flags) = gpu().probe(&kernel, &mut buffers, scene).unwrap();
+    let mut buffers = SceneBuffers::new(&gpu, scene);
+    let (values, flags) = gpu.probe(&kernel, &mut buffers, scene).unwrap();
     let mut worst = 0.0f64;
     for k in 0..scene.pixels() {
         let (cpu_value, cpu_flags) = cpu::weight_at(expr, scene, k, k);
@@ -197,14 +198,15 @@ fn agree_fraction(gpu_rgb: &[[f32; 3]], cpu_rgb: &[[f64; 3]]) -> (f64, f64) {
 
 #[test]
 fn corpus_filters_agree_with_the_cpu() {
+    let gpu = gpu();
     let scene = synthetic_scene(20, 14, 3);
-    let mut buffers = SceneBuffers::new(gpu(), &scene);
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
     let mut cases = corpus::named();
     cases.extend(corpus::parse_named(include_str!("data/corpus.txt")));
     for (name, text) in cases {
         let expr = parse_expr(text).unwrap();
         let kernel = jit::compile(&expr).unwrap();
-        let out = gpu().filter(&kernel, &mut buffers, &scene, 3).unwrap();
+        let out = gpu.filter(&kernel, &mut buffers, &scene, 3).unwrap();
         let reference = cpu::filter(&expr, &scene, 3).unwrap();
         let (fraction, worst) = agree_fraction(&out.rgb(), &reference.color);
         assert_eq!(fraction, 1.0, "@{name}: worst relative difference {worst:e}");
@@ -215,9 +217,10 @@ fn corpus_filters_agree_with_the_cpu() {
 
 #[test]
 fn random_expressions_agree_with_the_cpu() {
+    let gpu = gpu();
     let count = env_usize("FILTERJIT_RANDOM_EXPRS", 40);
     let scene = synthetic_scene(12, 10, 9);
-    let mut buffers = SceneBuffers::new(gpu(), &scene);
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
     let alphabet = Alphabet::full();
     let mut rng = Rng::seeded(77);
     let mut fractions = Vec::new();
@@ -225,7 +228,7 @@ fn random_expressions_agree_with_the_cpu() {
         let depth = 2 + rng.below(6);
         let expr = alphabet.grow(&mut rng, depth);
         let kernel = jit::compile(&expr).unwrap_or_else(|e| panic!("{expr}: {e}"));
-        let out = gpu().filter(&kernel, &mut buffers, &scene, 2).unwrap();
+        let out = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap();
         let reference = cpu::filter(&expr, &scene, 2).unwrap();
         let (fraction, worst) = agree_fraction(&out.rgb(), &reference.color);
         assert!(fraction >= 0.98, "`{expr}`: only {:.1}% of channels agree (worst {worst:e})", fraction * 100.0);
@@ -237,12 +240,13 @@ fn random_expressions_agree_with_the_cpu() {
 
 #[test]
 fn split_dispatches_and_windows_larger_than_the_image_match_the_cpu() {
+    let gpu = gpu();
     let scene = synthetic_scene(64, 20, 5);
     let radius = 40; // window of 81x81 over a 64x20 image: several bands, every window clipped
     let expr = parse_expr("exp(-(distance2(normal) / 0.3 + distance1(pixel) / 20))").unwrap();
     let kernel = jit::compile(&expr).unwrap();
-    let mut buffers = SceneBuffers::new(gpu(), &scene);
-    let out = gpu().filter(&kernel, &mut buffers, &scene, radius).unwrap();
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
+    let out = gpu.filter(&kernel, &mut buffers, &scene, radius).unwrap();
     assert!(out.dispatches > 1, "expected several dispatches, got {}", out.dispatches);
     let reference = cpu::filter(&expr, &scene, radius).unwrap();
     let (fraction, worst) = agree_fraction(&out.rgb(), &reference.color);
@@ -251,23 +255,25 @@ fn split_dispatches_and_windows_larger_than_the_image_match_the_cpu() {
 
 #[test]
 fn zero_weights_keep_the_noisy_colour_and_negative_weights_count_as_zero() {
+    let gpu = gpu();
     let scene = synthetic_scene(8, 8, 1);
-    let mut buffers = SceneBuffers::new(gpu(), &scene);
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
     for text in ["0", "-1", "0 * distance2(normal)", "-exp(distance2(color))"] {
         let kernel = jit::compile(&parse_expr(text).unwrap()).unwrap();
-        let out = gpu().filter(&kernel, &mut buffers, &scene, 2).unwrap();
+        let out = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap();
         assert_eq!(out.rgb(), scene.color, "`{text}` leaves the image as it was");
     }
 }
 
 #[test]
 fn thesis1_on_the_mitsuba_sample_beats_the_noisy_input() {
+    let gpu = gpu();
     let expr = parse_expr(corpus::lookup("thesis1").unwrap()).unwrap();
     let request = Request { absent: Absent::Zero, ..Request::for_expr(&expr) };
     let scene = scene::load(&mitsuba_sample(), &request).unwrap();
     let kernel = jit::compile(&expr).unwrap();
-    let mut buffers = SceneBuffers::new(gpu(), &scene);
-    let out = gpu().filter(&kernel, &mut buffers, &scene, 5).unwrap();
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
+    let out = gpu.filter(&kernel, &mut buffers, &scene, 5).unwrap();
     let reference = scene.reference.as_ref().unwrap();
     let noisy = metrics::errors(&scene.color, reference, scene.spp);
     let filtered = metrics::errors(&out.rgb(), reference, scene.spp);
@@ -293,22 +299,24 @@ fn a_kernel_binds_only_what_its_expression_reads() {
 
 #[test]
 fn equal_canonical_text_hits_the_pipeline_cache() {
+    let gpu = gpu();
     let a = jit::compile(&parse_expr("1 + 2 * distance2(normal)").unwrap()).unwrap();
     let b = jit::compile(&parse_expr("(1) + (2 * distance2( normal ))").unwrap()).unwrap();
     let c = jit::compile(&parse_expr("2 + 2 * distance2(normal)").unwrap()).unwrap();
     assert_eq!(a.key(), b.key());
     assert_ne!(a.key(), c.key());
-    let (_, first) = gpu().pipeline(&a).unwrap();
-    let (_, second) = gpu().pipeline(&b).unwrap();
+    let (_, first) = gpu.pipeline(&a).unwrap();
+    let (_, second) = gpu.pipeline(&b).unwrap();
     assert!(!first.cache_hit || second.cache_hit);
     assert!(second.cache_hit, "the same canonical text reuses the pipeline");
 }
 
 #[test]
 fn each_optimisation_gives_the_plain_kernels_results() {
+    let gpu = gpu();
     use filterjit::jit::LowerOptions;
     let scene = synthetic_scene(16, 12, 8);
-    let mut buffers = SceneBuffers::new(gpu(), &scene);
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
     let mut exprs: Vec<Expr> = corpus::named().iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
     exprs.extend(corpus::parse_named(include_str!("data/corpus.txt")).iter().map(|(_, t)| parse_expr(t).unwrap()));
     let alphabet = Alphabet::full();
@@ -329,7 +337,7 @@ fn each_optimisation_gives_the_plain_kernels_results() {
     ];
     let run = |e: &Expr, options: LowerOptions, buffers: &mut SceneBuffers| {
         let kernel = jit::validate(jit::lower_with(e, KernelKind::Filter, options).unwrap()).unwrap();
-        gpu().filter(&kernel, buffers, &scene, 2).unwrap()
+        gpu.filter(&kernel, buffers, &scene, 2).unwrap()
     };
     for e in &exprs {
         let plain = run(e, LowerOptions::NONE, &mut buffers);
@@ -349,20 +357,21 @@ fn each_optimisation_gives_the_plain_kernels_results() {
 
 #[test]
 fn tiled_kernels_agree_across_bands_and_edges() {
+    let gpu = gpu();
     use filterjit::jit::LowerOptions;
     let check = |scene: &Scene, name: &str, radius: u32| {
-        let mut buffers = SceneBuffers::new(gpu(), scene);
+        let mut buffers = SceneBuffers::new(&gpu, scene);
         let e = parse_expr(corpus::lookup(name).unwrap()).unwrap();
         let lower = |options| jit::validate(jit::lower_with(&e, KernelKind::Filter, options).unwrap()).unwrap();
         let (plain, tiled) = (lower(LowerOptions::ALL), lower(LowerOptions::ALL.with_tiles(radius)));
         assert_eq!(tiled.source().tile_radius, Some(radius), "{name} fits in workgroup memory at radius {radius}");
         assert!(tiled.wgsl().contains("var<workgroup> tile_color"));
-        let a = gpu().filter(&plain, &mut buffers, scene, radius).unwrap();
-        let b = gpu().filter(&tiled, &mut buffers, scene, radius).unwrap();
+        let a = gpu.filter(&plain, &mut buffers, scene, radius).unwrap();
+        let b = gpu.filter(&tiled, &mut buffers, scene, radius).unwrap();
         assert_eq!(a.color, b.color, "{name}: tiles read the same data, so the same bits");
         assert_eq!(a.flags, b.flags);
         // A tiled kernel refuses any other radius instead of reading outside its tile.
-        let err = gpu().filter(&tiled, &mut buffers, scene, radius + 1).unwrap_err().to_string();
+        let err = gpu.filter(&tiled, &mut buffers, scene, radius + 1).unwrap_err().to_string();
         assert!(err.contains(&format!("radius {radius}")), "{err}");
         b.dispatches
     };

@@ -18,9 +18,10 @@ fn temp_dir(name: &str) -> std::path::PathBuf {
 /// Our Cornell box against Mitsuba 3's reference of the same scene (box filter, 64x64).
 #[test]
 fn the_cornell_box_agrees_with_mitsuba() {
+    let gpu = gpu();
     let d = render::builtin("cornell").unwrap().unwrap();
     let settings = RenderSettings { width: 64, height: 64, spp: 4, reference_spp: 512, seed: 1 };
-    let rendered = render::render(gpu(), &d, &settings, &mut |_, _| {}).unwrap();
+    let rendered = render::render(&gpu, &d, &settings, &mut |_, _| {}).unwrap();
     let ours = rendered.reference();
     let mitsuba = scene::load(&mitsuba_sample(), &Request { reference: true, ..Default::default() }).unwrap();
     let theirs = mitsuba.reference.as_ref().unwrap();
@@ -42,6 +43,7 @@ fn the_cornell_box_agrees_with_mitsuba() {
 
 #[test]
 fn every_builtin_scene_renders_into_a_loadable_dataset() {
+    let gpu = gpu();
     let all_features: Vec<Feature> = Feature::ALL.to_vec();
     let request = Request {
         features: all_features.iter().copied().collect(),
@@ -57,7 +59,7 @@ fn every_builtin_scene_renders_into_a_loadable_dataset() {
             render::Split::Test => splits.1 += 1,
         }
         let dir = temp_dir(name);
-        let rendered = render::render(gpu(), &d, &tiny(), &mut |_, _| {}).unwrap();
+        let rendered = render::render(&gpu, &d, &tiny(), &mut |_, _| {}).unwrap();
         rendered.write(&dir, &d, &tiny()).unwrap();
         let scene: Scene = scene::load(&dir, &request).unwrap_or_else(|e| panic!("{name}: {e}"));
         assert_eq!(scene.spp, Some(2));
@@ -75,10 +77,11 @@ fn every_builtin_scene_renders_into_a_loadable_dataset() {
 
 #[test]
 fn renders_are_deterministic_for_a_seed() {
+    let gpu = gpu();
     let d = render::builtin("glossy-floor").unwrap().unwrap();
-    let a = render::render(gpu(), &d, &tiny(), &mut |_, _| {}).unwrap();
-    let b = render::render(gpu(), &d, &tiny(), &mut |_, _| {}).unwrap();
-    let c = render::render(gpu(), &d, &RenderSettings { seed: 4, ..tiny() }, &mut |_, _| {}).unwrap();
+    let a = render::render(&gpu, &d, &tiny(), &mut |_, _| {}).unwrap();
+    let b = render::render(&gpu, &d, &tiny(), &mut |_, _| {}).unwrap();
+    let c = render::render(&gpu, &d, &RenderSettings { seed: 4, ..tiny() }, &mut |_, _| {}).unwrap();
     assert_eq!(a.noisy(), b.noisy());
     assert_eq!(a.reference(), b.reference());
     assert_ne!(a.noisy(), c.noisy());
@@ -86,14 +89,15 @@ fn renders_are_deterministic_for_a_seed() {
 
 #[test]
 fn the_cache_renders_once_per_scene_text_and_settings() {
+    let gpu = gpu();
     let root = temp_dir("cache");
     let d = render::builtin("soft-shadows").unwrap().unwrap();
     let settings = RenderSettings { seed: 11, ..tiny() };
     let mut calls = 0;
-    let first = render::cached(gpu(), &root, &d, &settings, &mut |_, _| calls += 1).unwrap();
+    let first = render::cached(&gpu, &root, &d, &settings, &mut |_, _| calls += 1).unwrap();
     assert!(calls > 0, "the first call renders");
     let mut again = 0;
-    let second = render::cached(gpu(), &root, &d, &settings, &mut |_, _| again += 1).unwrap();
+    let second = render::cached(&gpu, &root, &d, &settings, &mut |_, _| again += 1).unwrap();
     assert_eq!((first.clone(), again), (second, 0), "the second call reads the cache");
     assert!(first.join("meta.json").is_file());
     let key = |d: &render::Description, s: &RenderSettings| render::cache_dir(&root, d, s);

@@ -95,8 +95,9 @@ fn a_report_on_the_mitsuba_sample_writes_a_complete_folder() {
 
 #[test]
 fn tuning_improves_on_the_hand_set_sigmas_and_reports_what_it_found() {
+    let gpu = gpu();
     let scenes = vec![synthetic_scene(24, 20, 5), synthetic_scene(20, 24, 6)];
-    let mut evaluator = GpuEvaluator::new(gpu(), scenes, 2, 2).unwrap();
+    let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
     let mut steps = 0;
     let tuned = tune::tune(&mut evaluator, 1, &mut |_, _| steps += 1).unwrap();
     assert!(steps >= 6, "one report per sigma and one at the start");

@@ -10,5 +10,6 @@ mod lang;
 mod render;
 mod report;
 mod scenes;
+mod simplify;
 mod snapshots;
 mod stability;

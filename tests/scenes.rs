@@ -78,6 +78,7 @@ fn write_exr(path: &Path, width: usize, height: usize, channels: &[(&str, Vec<f3
 
 #[test]
 fn pbrt_gbuffer_files_load_with_old_and_new_channel_names() {
+    let gpu = crate::common::gpu();
     let dir = temp_dir("pbrt");
     let (w, h) = (6, 5);
     let n = w * h;
@@ -115,8 +116,8 @@ fn pbrt_gbuffer_files_load_with_old_and_new_channel_names() {
     let expr =
         filterjit::parse_expr("exp(-(distance2(normal) + distance2(texture) + distance2(worldPosition)))").unwrap();
     let kernel = filterjit::jit::compile(&expr).unwrap();
-    let mut buffers = filterjit::gpu::SceneBuffers::new(crate::common::gpu(), &scene);
-    let out = crate::common::gpu().filter(&kernel, &mut buffers, &scene, 2).unwrap();
+    let mut buffers = filterjit::gpu::SceneBuffers::new(&gpu, &scene);
+    let out = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap();
     assert!(out.rgb().iter().flatten().all(|v| v.is_finite()));
 }
 

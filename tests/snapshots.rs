@@ -44,3 +44,25 @@ fn exported_shaders_match_snapshots() {
         insta::assert_snapshot!("export__thesis1.wgsl.json", serde_json::to_string_pretty(&manifest).unwrap());
     });
 }
+
+/// Every corpus expression and the bench's bloated ones next to their
+/// simplified forms and the simplified kernels' WGSL.
+#[test]
+fn simplified_corpus_matches_snapshots() {
+    let mut cases = corpus::named();
+    cases.extend(corpus::parse_named(CORPUS));
+    let bloated: Vec<(String, &str)> =
+        filterjit::bench::BLOATED.iter().enumerate().map(|(k, t)| (format!("bloated{}", k + 1), *t)).collect();
+    let mut table = String::new();
+    settings().bind(|| {
+        for (name, text) in cases.iter().map(|(n, t)| (n.to_string(), *t)).chain(bloated.iter().cloned()) {
+            let expr = parse_expr(text).unwrap();
+            let simplified = filterjit::simplify::simplify(&expr);
+            table += &format!("{name} ({} -> {} nodes)\n  {expr}\n  {simplified}\n", expr.len(), simplified.len());
+            if name.starts_with("bloated") {
+                insta::assert_snapshot!(format!("simplified__{name}"), jit::compile(&simplified).unwrap().wgsl());
+            }
+        }
+        insta::assert_snapshot!("simplified__corpus", table);
+    });
+}

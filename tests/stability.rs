@@ -39,9 +39,10 @@ fn shipped() -> Vec<(&'static str, filterjit::Expr)> {
 /// than the corpus test in gpu_vs_cpu.rs: thesis3 divides by asin(x)², which
 /// amplifies the 4096-ulp error WGSL allows asin, and these scenes reach it).
 fn check(scene: &Scene, expr: &filterjit::Expr, radius: u32) -> Vec<[f32; 3]> {
+    let gpu = gpu();
     let kernel = jit::compile(expr).unwrap();
-    let mut buffers = SceneBuffers::new(gpu(), scene);
-    let out = gpu().filter(&kernel, &mut buffers, scene, radius).unwrap().rgb();
+    let mut buffers = SceneBuffers::new(&gpu, scene);
+    let out = gpu.filter(&kernel, &mut buffers, scene, radius).unwrap().rgb();
     let reference = cpu::filter(expr, scene, radius).unwrap();
     for (k, (g, c)) in out.iter().zip(&reference.color).enumerate() {
         for q in 0..3 {
@@ -117,14 +118,15 @@ fn extreme_weights_behave() {
 
 #[test]
 fn large_windows_sum_accurately_in_f32() {
+    let gpu = gpu();
     // A 61x61 window: 3721 terms per pixel, compared with the CPU's compensated f64 sum.
     let scene = synthetic_scene(48, 40, 13);
     let mut worst = 0.0f64;
     for text in ["1", "exp(-distance2(color))", "biweight(distance2(normal) / 4) + 1e-6"] {
         let expr = parse_expr(text).unwrap();
         let kernel = jit::compile(&expr).unwrap();
-        let mut buffers = SceneBuffers::new(gpu(), &scene);
-        let out = gpu().filter(&kernel, &mut buffers, &scene, 30).unwrap().rgb();
+        let mut buffers = SceneBuffers::new(&gpu, &scene);
+        let out = gpu.filter(&kernel, &mut buffers, &scene, 30).unwrap().rgb();
         let reference = cpu::filter(&expr, &scene, 30).unwrap();
         for (g, c) in out.iter().zip(&reference.color) {
             for q in 0..3 {
@@ -179,15 +181,16 @@ fn the_parser_survives_random_and_mutated_text() {
 
 #[test]
 fn random_expressions_far_past_the_length_limit_compile_and_run() {
+    let gpu = gpu();
     let scene = synthetic_scene(8, 6, 4);
-    let mut buffers = SceneBuffers::new(gpu(), &scene);
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
     let alphabet = Alphabet::full();
     let mut rng = Rng::seeded(31);
     for length in [5, 20, 50, 75, 100, 150, 250, 400] {
         let expr = alphabet.of_length(&mut rng, length);
         assert!(expr.len() >= length);
         let kernel = jit::compile(&expr).unwrap_or_else(|e| panic!("length {length}: {e}"));
-        match gpu().filter(&kernel, &mut buffers, &scene, 1) {
+        match gpu.filter(&kernel, &mut buffers, &scene, 1) {
             Ok(out) => assert!(out.rgb().iter().flatten().all(|v| v.is_finite()), "length {}", expr.len()),
             // Some devices (llvmpipe through GL: 16) allow fewer storage buffers than a
             // kernel reading 19 inputs needs: a clear error, not a crash.

@@ -68,6 +68,27 @@ pub struct ExpressionResult {
     pub gp_ops_per_second: f64,
 }
 
+/// A bloated expression against its simplified form.
+#[derive(Clone, Debug, Serialize)]
+pub struct SimplifiedResult {
+    pub raw: String,
+    pub simplified: String,
+    pub raw_length: usize,
+    pub simplified_length: usize,
+    pub raw_ms: Stat,
+    pub simplified_ms: Stat,
+    /// simplified / raw, median warm times.
+    pub ratio: f64,
+}
+
+/// Expressions as GP leaves them (the first is the default run's best of an
+/// earlier version, from the simplification issue).
+pub const BLOATED: &[&str] = &[
+    "exp(-(pow(distance1(pixel), 2) / (exp(-(pow(distance2(texture), 2) + pow(distance1(normal, color), distance2(dovGradient, color)) / 1)) * pow(3, 2)) + pow(3, 2) / 1))",
+    "exp(-(distance2(normal) / 1 + pow(pow(3, 2), 1) * distance2(color) / (2 + 2))) * (1 + 0 * dot(texture))",
+    "exp(-(pow(distance2(pixel), 2) / (2 * pow(3, 2)) + pow(distance2(color), 2) / (2 * pow(0.5, 2)))) / 1",
+];
+
 #[derive(Clone, Debug, Serialize)]
 pub struct PopulationResult {
     pub individuals: usize,
@@ -119,6 +140,7 @@ pub struct Report {
     pub gp_ops_per_second_median: f64,
     pub population: PopulationResult,
     pub handwritten: HandWrittenResult,
+    pub simplified: Vec<SimplifiedResult>,
     pub generations: Vec<GenerationResult>,
 }
 
@@ -391,11 +413,13 @@ pub fn run(
     // Generated against hand-written, for the bilateral seed's formula.
     progress("hand-written bilateral");
     let bilateral = parse_expr(crate::corpus::lookup("bilateral").expect("shipped"))?;
+    let layout = KernelLayout::of(&bilateral);
     let handwritten = jit::validate(KernelSource {
         kind: KernelKind::Filter,
         options: LowerOptions::NONE,
         canonical: "<hand-written bilateral>".into(),
-        layout: KernelLayout::of(&bilateral),
+        interface: jit::BindingInterface::of(KernelKind::Filter, &layout),
+        layout,
         tile_radius: None,
         expr: bilateral.clone(),
         wgsl: HANDWRITTEN_BILATERAL.to_string(),
@@ -421,6 +445,32 @@ pub fn run(
         generated_ms,
         generated_plain_ms,
     };
+
+    // Bloated expressions against their simplified forms.
+    progress("simplified expressions");
+    let mut simplified = Vec::new();
+    for text in BLOATED {
+        let raw = parse_expr(text)?;
+        let simple = crate::simplify::simplify(&raw);
+        let kernels = [jit::compile(&raw)?, jit::compile(&simple)?];
+        let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
+        for k in &refs {
+            gpu.filter(k, &mut buffers, scene, settings.radius)?;
+        }
+        let [raw_ms, simplified_ms]: [Stat; 2] =
+            interleaved(gpu, &refs, &mut buffers, scene, settings.radius, settings.repeats * 2)?
+                .try_into()
+                .expect("two kernels");
+        simplified.push(SimplifiedResult {
+            raw: raw.to_string(),
+            simplified: simple.to_string(),
+            raw_length: raw.len(),
+            simplified_length: simple.len(),
+            ratio: simplified_ms.median / raw_ms.median,
+            raw_ms,
+            simplified_ms,
+        });
+    }
 
     // One GP generation of the thesis's size.
     let mut generations = Vec::new();
@@ -474,6 +524,7 @@ pub fn run(
         gp_ops_per_second_median,
         population: population_result,
         handwritten: handwritten_result,
+        simplified,
         generations,
     })
 }
@@ -537,6 +588,15 @@ pub fn table(r: &Report) -> String {
         h.generated_plain_ms.median,
         h.plain_ratio
     );
+    if !r.simplified.is_empty() {
+        t += "\nsimplified against raw (warm dispatch, ms):\n";
+        for s in &r.simplified {
+            t += &format!(
+                "  length {:>3} -> {:>3}: {:.3} -> {:.3} ({:.2}x)\n",
+                s.raw_length, s.simplified_length, s.raw_ms.median, s.simplified_ms.median, s.ratio
+            );
+        }
+    }
     if !r.generations.is_empty() {
         t += "\none GP generation (this device) next to the thesis's Table 4.1 (GTX 980 Ti, population 200: another machine)\n";
         t += &format!(

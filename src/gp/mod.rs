@@ -85,6 +85,10 @@ pub struct Settings {
     pub hall_of_fame: usize,
     /// Random seed.
     pub seed: u64,
+    /// Replace every new individual by its simplified form (`crate::simplify`,
+    /// the same weights) before it is evaluated.
+    #[serde(default)]
+    pub simplify_offspring: bool,
 }
 
 impl Default for Settings {
@@ -103,6 +107,7 @@ impl Default for Settings {
             seed_share: 0.1,
             hall_of_fame: 10,
             seed: 0,
+            simplify_offspring: false,
         }
     }
 }
@@ -288,6 +293,15 @@ impl<'e> Engine<'e> {
     }
 
     /// One generation after `state`.
+    /// A new individual, simplified first when the settings ask for it.
+    fn offspring(&self, child: Expr) -> Member {
+        if self.settings.simplify_offspring {
+            Self::member(crate::simplify::simplify(&child))
+        } else {
+            Self::member(child)
+        }
+    }
+
     pub fn step(&mut self, state: &State) -> anyhow::Result<(State, Report)> {
         let start = Instant::now();
         let generation = state.generation + 1;
@@ -316,12 +330,13 @@ impl<'e> Engine<'e> {
                     } else {
                         child
                     };
-                    new.push(Self::member(child));
+                    new.push(self.offspring(child));
                 }
             }
             while new.len() < n {
                 let parent = self.tournament(island, &mut rng).expr.clone();
-                new.push(Self::member(self.mutated(&parent, &mut rng)));
+                let child = self.mutated(&parent, &mut rng);
+                new.push(self.offspring(child));
             }
             next.push(new);
         }

@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, PipelineTiming};
-use crate::jit::{Input, ValidatedKernel, FIRST_INPUT_BINDING, WORKGROUP};
+use crate::jit::{Input, Params, Role, ValidatedKernel, WORKGROUP};
 use crate::scene::Scene;
 
 /// Upper bound on weight evaluations in one dispatch. Large images and radii
@@ -50,15 +50,6 @@ impl Filtered {
     pub fn all_flags(&self) -> u32 {
         self.flags.iter().fold(0, |a, f| a | f)
     }
-}
-
-#[repr(C)]
-#[derive(Clone, Copy, bytemuck::Pod, bytemuck::Zeroable)]
-struct Params {
-    width: u32,
-    height: u32,
-    radius: u32,
-    row_offset: u32,
 }
 
 impl SceneBuffers {
@@ -123,8 +114,8 @@ impl Gpu {
         super::check_radius(kernel, radius)?;
         let (pipeline, timing) = self.pipeline(kernel)?;
         let _turn = self.gl_turn();
-        for input in &kernel.source().layout.inputs {
-            buffers.ensure(self, scene, *input)?;
+        for (_, input) in kernel.source().interface.inputs() {
+            buffers.ensure(self, scene, input)?;
         }
         let device = self.device();
         let pixels = (buffers.width * buffers.height) as u64;
@@ -148,7 +139,6 @@ impl Gpu {
         });
 
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let layout = pipeline.get_bind_group_layout(0);
         let band = rows_per_dispatch(buffers.width, radius);
         let start = Instant::now();
         let mut dispatches = 0;
@@ -161,28 +151,19 @@ impl Gpu {
                 contents: bytemuck::bytes_of(&params),
                 usage: wgpu::BufferUsages::UNIFORM,
             });
-            let mut entries = vec![
-                wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: buffers.color.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: out.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: flags.as_entire_binding() },
-            ];
-            for (k, input) in kernel.source().layout.inputs.iter().enumerate() {
-                entries.push(wgpu::BindGroupEntry {
-                    binding: FIRST_INPUT_BINDING + k as u32,
-                    resource: buffers.inputs[input].as_entire_binding(),
-                });
-            }
-            let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: None,
-                layout: &layout,
-                entries: &entries,
+            let bind_group = self.bind_group(&pipeline, &kernel.source().interface, |role| match role {
+                Role::Params => params.as_entire_binding(),
+                Role::Color => buffers.color.as_entire_binding(),
+                Role::Output => out.as_entire_binding(),
+                Role::Flags => flags.as_entire_binding(),
+                Role::Input(input) => buffers.inputs[&input].as_entire_binding(),
+                Role::Reference => unreachable!("filter kernels bind no reference"),
             });
             let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
             {
                 let mut pass =
                     encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-                pass.set_pipeline(&pipeline);
+                pass.set_pipeline(&pipeline.pipeline);
                 pass.set_bind_group(0, &bind_group, &[]);
                 pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
             }

@@ -6,7 +6,7 @@ use wgpu::util::DeviceExt;
 
 use super::filter::{rows_per_dispatch, SceneBuffers};
 use super::{Gpu, GpuError};
-use crate::jit::{KernelKind, ValidatedKernel, FIRST_INPUT_BINDING, WORKGROUP};
+use crate::jit::{KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
 use crate::scene::Scene;
 
 /// Dispatches per submission: small enough to keep each submission short.
@@ -96,8 +96,8 @@ impl Gpu {
         let _turn = self.gl_turn();
         for k in kernels {
             for (fs, scene) in scenes.iter_mut().zip(data) {
-                for input in &k.source().layout.inputs {
-                    fs.buffers.ensure(self, scene, *input)?;
+                for (_, input) in k.source().interface.inputs() {
+                    fs.buffers.ensure(self, scene, input)?;
                 }
             }
         }
@@ -138,10 +138,10 @@ impl Gpu {
                 (0..fs.height)
                     .step_by(rows as usize)
                     .map(|row| {
-                        let params = [fs.width, fs.height, radius, row];
+                        let params = Params { width: fs.width, height: fs.height, radius, row_offset: row };
                         let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                             label: Some("params"),
-                            contents: bytemuck::cast_slice(&params),
+                            contents: bytemuck::bytes_of(&params),
                             usage: wgpu::BufferUsages::UNIFORM,
                         });
                         (buffer, rows.min(fs.height - row))
@@ -154,51 +154,23 @@ impl Gpu {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         let mut pending = 0;
         for (k, (kernel, pipeline)) in kernels.iter().zip(&pipelines).enumerate() {
-            let layout = pipeline.get_bind_group_layout(0);
             for (s, fs) in scenes.iter().enumerate() {
                 let offset = offsets[k * scenes.len() + s] * 4;
                 let size = std::num::NonZeroU64::new(fs.groups() * 4);
+                let partial = |buffer| wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size });
                 for (params, rows) in &bands[s] {
-                    let mut entries = vec![
-                        wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-                        wgpu::BindGroupEntry { binding: 1, resource: fs.buffers.color.as_entire_binding() },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                                buffer: &partials,
-                                offset,
-                                size,
-                            }),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                                buffer: &partial_flags,
-                                offset,
-                                size,
-                            }),
-                        },
-                    ];
-                    let inputs = &kernel.source().layout.inputs;
-                    for (n, input) in inputs.iter().enumerate() {
-                        entries.push(wgpu::BindGroupEntry {
-                            binding: FIRST_INPUT_BINDING + n as u32,
-                            resource: fs.buffers.inputs[input].as_entire_binding(),
-                        });
-                    }
-                    entries.push(wgpu::BindGroupEntry {
-                        binding: FIRST_INPUT_BINDING + inputs.len() as u32,
-                        resource: fs.reference.as_entire_binding(),
-                    });
-                    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                        label: None,
-                        layout: &layout,
-                        entries: &entries,
+                    let bind_group = self.bind_group(pipeline, &kernel.source().interface, |role| match role {
+                        Role::Params => params.as_entire_binding(),
+                        Role::Color => fs.buffers.color.as_entire_binding(),
+                        Role::Output => partial(&partials),
+                        Role::Flags => partial(&partial_flags),
+                        Role::Input(input) => fs.buffers.inputs[&input].as_entire_binding(),
+                        Role::Reference => fs.reference.as_entire_binding(),
                     });
                     {
                         let mut pass = encoder
                             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-                        pass.set_pipeline(pipeline);
+                        pass.set_pipeline(&pipeline.pipeline);
                         pass.set_bind_group(0, &bind_group, &[]);
                         pass.dispatch_workgroups(fs.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
                     }

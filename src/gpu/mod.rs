@@ -16,7 +16,7 @@ pub use fitness::{FitnessScene, SceneError as FitnessError};
 pub use raw::{RawBuffer, RawKernel};
 pub use trace::{TraceScene, PATHTRACE_WGSL};
 
-use crate::jit::{KernelKey, ValidatedKernel, FIRST_INPUT_BINDING};
+use crate::jit::{Access, BindingInterface, KernelKey, OutputFormat, Role, Slot, ValidatedKernel, ValidatedModule};
 
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -62,8 +62,8 @@ pub struct Gpu {
     queue: wgpu::Queue,
     info: wgpu::AdapterInfo,
     limits: wgpu::Limits,
-    pipelines: Mutex<HashMap<KernelKey, Arc<wgpu::ComputePipeline>>>,
-    tracer: OnceLock<wgpu::ComputePipeline>,
+    pipelines: Mutex<HashMap<KernelKey, Arc<Pipeline>>>,
+    tracer: OnceLock<Pipeline>,
     /// wgpu's GL backend shares one context per device and panics when a
     /// thread waits more than a second for it (as it does while another
     /// thread waits for a long dispatch or links a large program). On GL,
@@ -160,10 +160,7 @@ impl Gpu {
     /// Whether the device allows as many storage buffers as the kernel binds.
     pub fn check_bindings(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
         let source = kernel.source();
-        // Colour, output (or partial sums), flags, the inputs, and a fitness kernel's reference.
-        let needed = FIRST_INPUT_BINDING - 1
-            + source.layout.inputs.len() as u32
-            + u32::from(source.kind == crate::jit::KernelKind::Fitness);
+        let needed = source.interface.storage_buffers();
         let limit = self.limits.max_storage_buffers_per_shader_stage;
         if needed > limit {
             return Err(GpuError::TooManyBindings {
@@ -177,37 +174,46 @@ impl Gpu {
     }
 
     /// Get the pipeline of a kernel: from the cache, or created and cached.
-    pub fn pipeline(&self, kernel: &ValidatedKernel) -> Result<(Arc<wgpu::ComputePipeline>, PipelineTiming), GpuError> {
+    pub fn pipeline(&self, kernel: &ValidatedKernel) -> Result<(Arc<Pipeline>, PipelineTiming), GpuError> {
         if let Some(p) = self.pipelines.lock().expect("pipeline cache lock").get(&kernel.key()) {
             return Ok((p.clone(), PipelineTiming { create: Duration::ZERO, cache_hit: true }));
         }
         self.check_bindings(kernel)?;
         let start = Instant::now();
-        let pipeline = self.create_pipeline(kernel.module().clone(), "filterjit kernel").map_err(|message| {
-            GpuError::Pipeline {
+        let pipeline =
+            self.create_pipeline(kernel.validated(), "filterjit kernel").map_err(|message| GpuError::Pipeline {
                 expression: kernel.source().canonical.clone(),
                 message,
                 wgsl: kernel.wgsl().to_string(),
-            }
-        })?;
+            })?;
         let pipeline = Arc::new(pipeline);
         let create = start.elapsed();
         self.pipelines.lock().expect("pipeline cache lock").insert(kernel.key(), pipeline.clone());
         Ok((pipeline, PipelineTiming { create, cache_hit: false }))
     }
 
-    /// A compute pipeline (entry point `main`) from a validated naga module,
-    /// inside a validation error scope; the error's text on failure.
-    pub(crate) fn create_pipeline(&self, module: naga::Module, label: &str) -> Result<wgpu::ComputePipeline, String> {
+    /// A compute pipeline (entry point `main`) from a validated module, with
+    /// an explicit layout made from the module's slots, inside a validation
+    /// error scope; the error's text on failure.
+    pub(crate) fn create_pipeline(&self, validated: &ValidatedModule, label: &str) -> Result<Pipeline, String> {
         let _turn = self.gl_turn();
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let entries: Vec<wgpu::BindGroupLayoutEntry> = validated.slots().iter().map(layout_entry).collect();
+        let layout = self
+            .device
+            .create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: Some(label), entries: &entries });
+        let pipeline_layout = self.device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
         let shader = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some(label),
-            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(module)),
+            source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(validated.module().clone())),
         });
         let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some(label),
-            layout: None,
+            layout: Some(&pipeline_layout),
             module: &shader,
             entry_point: Some("main"),
             compilation_options: Default::default(),
@@ -215,7 +221,85 @@ impl Gpu {
         });
         match pollster::block_on(scope.pop()) {
             Some(error) => Err(error.to_string()),
-            None => Ok(pipeline),
+            None => Ok(Pipeline { pipeline, layout, slots: validated.slots().iter().map(|s| s.slot).collect() }),
         }
     }
+}
+
+impl Gpu {
+    /// The bind group of one dispatch of a kernel: every binding of its
+    /// interface, filled by role.
+    pub(crate) fn bind_group<'b>(
+        &self,
+        pipeline: &Pipeline,
+        interface: &BindingInterface,
+        resource: impl Fn(Role) -> wgpu::BindingResource<'b>,
+    ) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = interface
+            .bindings
+            .iter()
+            .map(|b| wgpu::BindGroupEntry { binding: b.slot, resource: resource(b.role) })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.layout,
+            entries: &entries,
+        })
+    }
+}
+
+impl Gpu {
+    /// The bind group of a module that is not a filterjit kernel (path
+    /// tracer, interpreter): `resources` in the order of its slots.
+    pub(crate) fn bind_in_slot_order(
+        &self,
+        pipeline: &Pipeline,
+        resources: Vec<wgpu::BindingResource<'_>>,
+    ) -> wgpu::BindGroup {
+        assert_eq!(resources.len(), pipeline.slots.len(), "one resource per binding of the module");
+        let entries: Vec<wgpu::BindGroupEntry> = pipeline
+            .slots
+            .iter()
+            .zip(resources)
+            .map(|(slot, resource)| wgpu::BindGroupEntry { binding: *slot, resource })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.layout,
+            entries: &entries,
+        })
+    }
+}
+
+/// A compute pipeline and the layout of its bind group 0.
+#[derive(Debug)]
+pub struct Pipeline {
+    pub(crate) pipeline: wgpu::ComputePipeline,
+    pub(crate) layout: wgpu::BindGroupLayout,
+    /// The module's binding slots, ascending.
+    slots: Vec<u32>,
+}
+
+/// The bind-group layout entry of one slot.
+fn layout_entry(slot: &Slot) -> wgpu::BindGroupLayoutEntry {
+    let buffer = |ty| wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None };
+    let ty = match slot.access {
+        Access::Uniform => buffer(wgpu::BufferBindingType::Uniform),
+        Access::StorageRead => buffer(wgpu::BufferBindingType::Storage { read_only: true }),
+        Access::StorageReadWrite => buffer(wgpu::BufferBindingType::Storage { read_only: false }),
+        Access::SampledTexture => wgpu::BindingType::Texture {
+            sample_type: wgpu::TextureSampleType::Float { filterable: false },
+            view_dimension: wgpu::TextureViewDimension::D2,
+            multisampled: false,
+        },
+        Access::StorageTexture(format) => wgpu::BindingType::StorageTexture {
+            access: wgpu::StorageTextureAccess::WriteOnly,
+            format: match format {
+                OutputFormat::Rgba16float => wgpu::TextureFormat::Rgba16Float,
+                OutputFormat::Rgba32float => wgpu::TextureFormat::Rgba32Float,
+            },
+            view_dimension: wgpu::TextureViewDimension::D2,
+        },
+    };
+    wgpu::BindGroupLayoutEntry { binding: slot.slot, visibility: wgpu::ShaderStages::COMPUTE, ty, count: None }
 }

@@ -5,14 +5,14 @@ use std::time::{Duration, Instant};
 
 use wgpu::util::DeviceExt;
 
-use super::{Gpu, GpuError};
+use super::{Gpu, GpuError, Pipeline};
 
 /// A validated, compiled WGSL module with entry point `main`.
 pub struct RawKernel {
-    pipeline: wgpu::ComputePipeline,
+    pipeline: Pipeline,
 }
 
-/// One binding of a raw dispatch, in binding order after the uniform at 0.
+/// One binding of a raw dispatch, in slot order after the uniform (the module's first binding).
 pub enum RawBuffer<'a> {
     Read(&'a [u8]),
     /// A zeroed read-write buffer of this many bytes, read back after the dispatch.
@@ -23,11 +23,8 @@ impl Gpu {
     pub fn raw_kernel(&self, wgsl: &str) -> Result<RawKernel, GpuError> {
         let invalid =
             |message: String| GpuError::Pipeline { expression: "<raw kernel>".into(), message, wgsl: wgsl.to_string() };
-        let module = naga::front::wgsl::parse_str(wgsl).map_err(|e| invalid(e.emit_to_string(wgsl)))?;
-        naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-            .validate(&module)
-            .map_err(|e| invalid(e.emit_to_string(wgsl)))?;
-        let pipeline = self.create_pipeline(module, "raw").map_err(invalid)?;
+        let validated = crate::jit::validate_module(wgsl, "<raw kernel>").map_err(|e| invalid(e.to_string()))?;
+        let pipeline = self.create_pipeline(&validated, "raw").map_err(invalid)?;
         Ok(RawKernel { pipeline })
     }
 
@@ -69,20 +66,15 @@ impl Gpu {
                 ),
             })
             .collect();
-        let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() }];
-        for (k, (buffer, _)) in made.iter().enumerate() {
-            entries.push(wgpu::BindGroupEntry { binding: k as u32 + 1, resource: buffer.as_entire_binding() });
-        }
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &kernel.pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
+        let resources = std::iter::once(uniform.as_entire_binding())
+            .chain(made.iter().map(|(buffer, _)| buffer.as_entire_binding()))
+            .collect();
+        let bind_group = self.bind_in_slot_order(&kernel.pipeline, resources);
         let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&kernel.pipeline);
+            pass.set_pipeline(&kernel.pipeline.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }

@@ -5,23 +5,18 @@ use std::sync::OnceLock;
 
 use wgpu::util::DeviceExt;
 
-use super::{Gpu, GpuError};
+use super::{Gpu, GpuError, Pipeline};
+use crate::jit::ValidatedModule;
 use crate::render::packed::{PackedScene, TraceParams, SUMS_PER_PIXEL};
 
 /// The path tracer's source.
 pub const PATHTRACE_WGSL: &str = include_str!("../../templates/pathtrace.wgsl");
 
 /// The tracer's WGSL, parsed and validated once.
-fn module() -> Result<&'static naga::Module, GpuError> {
-    static MODULE: OnceLock<Result<naga::Module, String>> = OnceLock::new();
+fn module() -> Result<&'static ValidatedModule, GpuError> {
+    static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
     MODULE
-        .get_or_init(|| {
-            let module = naga::front::wgsl::parse_str(PATHTRACE_WGSL).map_err(|e| e.emit_to_string(PATHTRACE_WGSL))?;
-            naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::empty())
-                .validate(&module)
-                .map_err(|e| e.emit_to_string(PATHTRACE_WGSL))?;
-            Ok(module)
-        })
+        .get_or_init(|| crate::jit::validate_module(PATHTRACE_WGSL, "<path tracer>").map_err(|e| e.to_string()))
         .as_ref()
         .map_err(|message| GpuError::Pipeline {
             expression: "<path tracer>".into(),
@@ -38,11 +33,11 @@ pub struct TraceScene {
 }
 
 impl Gpu {
-    fn trace_pipeline(&self) -> Result<&wgpu::ComputePipeline, GpuError> {
+    fn trace_pipeline(&self) -> Result<&Pipeline, GpuError> {
         if let Some(p) = self.tracer.get() {
             return Ok(p);
         }
-        let pipeline = self.create_pipeline(module()?.clone(), "filterjit path tracer").map_err(|message| {
+        let pipeline = self.create_pipeline(module()?, "filterjit path tracer").map_err(|message| {
             GpuError::Pipeline { expression: "<path tracer>".into(), message, wgsl: String::new() }
         })?;
         Ok(self.tracer.get_or_init(|| pipeline))
@@ -94,22 +89,14 @@ impl Gpu {
             usage: wgpu::BufferUsages::UNIFORM,
         });
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry { binding: 0, resource: uniform.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 1, resource: scene.prims.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 2, resource: scene.materials.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 3, resource: scene.lights.as_entire_binding() },
-                wgpu::BindGroupEntry { binding: 4, resource: sums.as_entire_binding() },
-            ],
-        });
+        // pathtrace.wgsl declares params, prims, materials, lights, sums in this order.
+        let resources = [&uniform, &scene.prims, &scene.materials, &scene.lights, &sums];
+        let bind_group = self.bind_in_slot_order(pipeline, resources.iter().map(|b| b.as_entire_binding()).collect());
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         {
             let mut pass =
                 encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-            pass.set_pipeline(pipeline);
+            pass.set_pipeline(&pipeline.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(params.width.div_ceil(8), rows.div_ceil(8), 1);
         }

@@ -9,6 +9,7 @@ use std::sync::OnceLock;
 
 use serde::Serialize;
 
+use super::interface::{BindingInterface, Element, Role};
 use crate::lang::{Expr, Feature, FeatureSource, ScalarVar, UnaryOp};
 use crate::semantics;
 
@@ -38,17 +39,6 @@ impl Input {
         }
     }
 
-    fn ident(self) -> String {
-        match self {
-            Input::Feature(f) => format!("buf_{}", f.name().to_ascii_lowercase()),
-            Input::Variance(v) => format!("buf_{}", v.name().to_ascii_lowercase()),
-        }
-    }
-
-    fn texture_ident(self) -> String {
-        self.ident().replacen("buf_", "tex_", 1)
-    }
-
     pub fn describe(self) -> String {
         match self {
             Input::Feature(f) => f.name().to_string(),
@@ -57,15 +47,12 @@ impl Input {
     }
 }
 
-/// The binding interface of a kernel: group 0, binding 0 the parameters,
-/// 1 the colour, 2 the output, 3 the domain-error flags, then `inputs` in order.
+/// The per-pixel inputs a kernel reads besides the colour, in a canonical
+/// order; [`BindingInterface::of`] gives them their slots.
 #[derive(Clone, Debug, PartialEq, Eq, Hash)]
 pub struct KernelLayout {
     pub inputs: Vec<Input>,
 }
-
-/// Index of the first per-expression input binding.
-pub const FIRST_INPUT_BINDING: u32 = 4;
 
 impl KernelLayout {
     /// Exactly the inputs `expr` reads, in a canonical order.
@@ -136,17 +123,18 @@ impl KernelKind {
         }
     }
 
-    /// Binding of the first per-expression input. Exported shaders have no
-    /// flags buffer, so their inputs follow the output directly.
-    pub fn first_input_binding(self) -> u32 {
+    /// A stable name of the kind, for cache keys.
+    pub fn encode(self) -> String {
         match self {
-            KernelKind::Export(_) => FIRST_INPUT_BINDING - 1,
-            _ => FIRST_INPUT_BINDING,
+            KernelKind::Filter => "filter".into(),
+            KernelKind::Probe => "probe".into(),
+            KernelKind::Fitness => "fitness".into(),
+            KernelKind::Export(format) => format!("export-{}", format.wgsl()),
         }
     }
 
     /// Whether the kernel reads its inputs from textures (else from storage buffers).
-    fn reads_textures(self) -> bool {
+    pub fn reads_textures(self) -> bool {
         matches!(self, KernelKind::Export(_))
     }
 }
@@ -226,6 +214,8 @@ pub struct KernelSource {
     /// The expression's canonical text.
     pub canonical: String,
     pub layout: KernelLayout,
+    /// Every binding and the uniform; the only owner of slot numbers.
+    pub interface: BindingInterface,
     /// The radius the kernel's workgroup tiles were made for, if it has them:
     /// it must be dispatched with exactly this radius.
     pub tile_radius: Option<u32>,
@@ -259,8 +249,9 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     // Folding never turns a non-variance into a variance or back, so the unfolded root tells.
     let root_in_range = in_range(expr);
 
-    let loads = Loads::of(kind, &layout);
-    let tile = options.tile_radius.and_then(|radius| Tile::plan(expr, kind, radius));
+    let interface = BindingInterface::of(kind, &layout);
+    let loads = Loads::of(&interface);
+    let tile = options.tile_radius.and_then(|radius| Tile::plan(expr, &interface, radius));
     let neighbour_side = if tile.is_some() { Loads::Tiled } else { loads };
     let centre_lines: Vec<String> = centre_loads(expr, &loads).into_iter().chain(body.centre).collect();
     let neighbour_lines: Vec<String> = neighbour_side
@@ -270,23 +261,21 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
         .chain(body.lines)
         .collect();
 
+    /// An input binding as the templates' header comments describe it.
     #[derive(Serialize)]
     struct BindingView {
         index: u32,
-        ident: String,
         element: &'static str,
         describes: String,
         /// Index into the exported shader's `params.scale`.
         scale_index: usize,
     }
-    let bindings: Vec<BindingView> = layout
-        .inputs
-        .iter()
+    let bindings: Vec<BindingView> = interface
+        .inputs()
         .enumerate()
-        .map(|(k, input)| BindingView {
-            index: kind.first_input_binding() + k as u32,
-            ident: if kind.reads_textures() { input.texture_ident() } else { input.ident() },
-            element: if input.components() == 1 { "f32" } else { "vec4<f32>" },
+        .map(|(k, (binding, input))| BindingView {
+            index: binding.slot,
+            element: Element::of_input(input).wgsl(),
             describes: input.describe(),
             scale_index: k,
         })
@@ -306,19 +295,20 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     context.insert("ops", &helpers_for(&wgsl_body_text(&centre_lines, &neighbour_lines, &weight)));
     context.insert("weight", &weight);
     context.insert("bindings", &bindings);
+    context.insert("declarations", &interface.declarations());
+    context.insert("params_struct", &interface.params_struct());
     context.insert("workgroup_x", &WORKGROUP[0]);
     context.insert("workgroup_y", &WORKGROUP[1]);
     context.insert("centre_lines", &centre_lines);
     context.insert("neighbour_lines", &neighbour_lines);
     context.insert("result", &result);
-    context.insert("reference_binding", &(FIRST_INPUT_BINDING + layout.inputs.len() as u32));
     if let KernelKind::Export(format) = kind {
         context.insert("output_format", format.wgsl());
     }
     context.insert("tile", &tile);
     let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
     let tile_radius = tile.map(|t| t.radius);
-    Ok(KernelSource { kind, options, expr: expr.clone(), canonical, layout, tile_radius, wgsl })
+    Ok(KernelSource { kind, options, expr: expr.clone(), canonical, layout, interface, tile_radius, wgsl })
 }
 
 /// A workgroup tile: the (8 + 2r)² window of colour and neighbour features
@@ -341,26 +331,28 @@ struct TileArray {
 impl Tile {
     /// The tile of `expr`'s neighbour-side features for `radius`, if the
     /// kind reads storage buffers through a window and the tile fits.
-    fn plan(expr: &Expr, kind: KernelKind, radius: u32) -> Option<Tile> {
-        if !matches!(kind, KernelKind::Filter | KernelKind::Fitness) {
+    fn plan(expr: &Expr, interface: &BindingInterface, radius: u32) -> Option<Tile> {
+        if !matches!(interface.kind, KernelKind::Filter | KernelKind::Fitness) {
             return None;
         }
         let (_, neighbour) = pair_sides(expr);
-        let arrays: Vec<TileArray> = neighbour
+        let elements: Vec<(Feature, Element)> = neighbour
             .into_iter()
             .filter(|f| !matches!(f, Feature::Color | Feature::Pixel))
-            .map(|f| {
-                let input = Input::Feature(f);
-                TileArray {
-                    ident: tile_ident(f),
-                    source: input.ident(),
-                    element: if input.components() == 1 { "f32" } else { "vec4<f32>" },
-                }
-            })
+            .map(|f| (f, Element::of_input(Input::Feature(f))))
             .collect();
         let width = WORKGROUP[0] + 2 * radius;
         let count = width * (WORKGROUP[1] + 2 * radius);
-        let bytes_per_cell = 16 + arrays.iter().map(|a| if a.element == "f32" { 4 } else { 16 }).sum::<usize>();
+        let bytes_per_cell = Element::Vec4F32.bytes() + elements.iter().map(|(_, e)| e.bytes()).sum::<u32>();
+        let arrays = elements
+            .into_iter()
+            .map(|(f, element)| TileArray {
+                ident: tile_ident(f),
+                source: interface.ident(Role::Input(Input::Feature(f))).to_string(),
+                element: element.wgsl(),
+            })
+            .collect();
+        let bytes_per_cell = bytes_per_cell as usize;
         (count as usize * bytes_per_cell <= WORKGROUP_STORAGE_BUDGET).then_some(Tile { radius, width, count, arrays })
     }
 }
@@ -507,46 +499,46 @@ fn var_ident(v: ScalarVar) -> String {
     format!("var_{}", v.name().to_ascii_lowercase())
 }
 
-/// How loads are spelled in a kernel of one kind.
+/// How loads are spelled in a kernel of one kind; names come from its interface.
 #[derive(Clone, Copy)]
 enum Loads<'a> {
     /// Storage buffers indexed by pixel, already normalised (filterjit's own kernels).
-    Buffers,
+    Buffers(&'a BindingInterface),
     /// Sampled textures read with `textureLoad`, normalised in the shader by
-    /// `params.scale[k]`, k the input's index in the layout (exported shaders).
-    Textures(&'a KernelLayout),
+    /// `params.scale[k]`, k the input's index among the inputs (exported shaders).
+    Textures(&'a BindingInterface),
     /// The workgroup tile, at cell `t` (neighbour side of tiled kernels).
     Tiled,
 }
 
 impl<'a> Loads<'a> {
-    fn of(kind: KernelKind, layout: &'a KernelLayout) -> Self {
-        if kind.reads_textures() {
-            Loads::Textures(layout)
+    fn of(interface: &'a BindingInterface) -> Self {
+        if interface.kind.reads_textures() {
+            Loads::Textures(interface)
         } else {
-            Loads::Buffers
+            Loads::Buffers(interface)
         }
     }
 
     /// Load of feature `f` at pixel index `index` / coordinates `coords`, as a zero-padded vec3.
     fn feature(&self, f: Feature, index: &str, coords: (&str, &str)) -> String {
+        let input = Role::Input(Input::Feature(f));
         match (self, f) {
             (_, Feature::Pixel) => format!("vec3<f32>(f32({}), f32({}), 0.0)", coords.0, coords.1),
-            (Loads::Buffers, Feature::Color) => format!("buf_color[{index}].xyz"),
-            (Loads::Buffers, _) if f.dimension() == 1 => {
-                format!("vec3<f32>({}[{index}], 0.0, 0.0)", Input::Feature(f).ident())
+            (Loads::Buffers(i), Feature::Color) => format!("{}[{index}].xyz", i.ident(Role::Color)),
+            (Loads::Buffers(i), _) if f.dimension() == 1 => {
+                format!("vec3<f32>({}[{index}], 0.0, 0.0)", i.ident(input))
             }
-            (Loads::Buffers, _) => format!("{}[{index}].xyz", Input::Feature(f).ident()),
+            (Loads::Buffers(i), _) => format!("{}[{index}].xyz", i.ident(input)),
             (Loads::Tiled, Feature::Color) => "tile_color[t].xyz".to_string(),
             (Loads::Tiled, _) if f.dimension() == 1 => format!("vec3<f32>({}[t], 0.0, 0.0)", tile_ident(f)),
             (Loads::Tiled, _) => format!("{}[t].xyz", tile_ident(f)),
-            (Loads::Textures(_), Feature::Color) => format!("{}.xyz", texel("tex_color", coords)),
-            (Loads::Textures(layout), _) => {
-                let input = Input::Feature(f);
-                let texel = texel(&input.texture_ident(), coords);
+            (Loads::Textures(i), Feature::Color) => format!("{}.xyz", texel(i.ident(Role::Color), coords)),
+            (Loads::Textures(i), _) => {
+                let texel = texel(i.ident(input), coords);
                 let raw =
                     if f.dimension() == 1 { format!("vec3<f32>({texel}.x, 0.0, 0.0)") } else { format!("{texel}.xyz") };
-                format!("fj_normalised({raw}, {})", scale_of(layout, input))
+                format!("fj_normalised({raw}, {})", scale_of(i, Input::Feature(f)))
             }
         }
     }
@@ -554,8 +546,10 @@ impl<'a> Loads<'a> {
     /// The first lines of the neighbour loop: where neighbour j is, and its colour `color_j`.
     fn neighbour_prelude(&self) -> Vec<String> {
         match self {
-            Loads::Buffers => vec!["let j = u32(yj * w + xj);".into(), "let color_j = buf_color[j].xyz;".into()],
-            Loads::Textures(_) => vec![format!("let color_j = {}.xyz;", texel("tex_color", ("xj", "yj")))],
+            Loads::Buffers(i) => {
+                vec!["let j = u32(yj * w + xj);".into(), format!("let color_j = {}[j].xyz;", i.ident(Role::Color))]
+            }
+            Loads::Textures(i) => vec![format!("let color_j = {}.xyz;", texel(i.ident(Role::Color), ("xj", "yj")))],
             Loads::Tiled => vec![
                 "let t = u32((yj - tile_y) * TILE_W + (xj - tile_x));".into(),
                 "let color_j = tile_color[t].xyz;".into(),
@@ -565,12 +559,13 @@ impl<'a> Loads<'a> {
 
     /// Load of variance `v` at the centre pixel.
     fn variance(&self, v: ScalarVar) -> String {
+        let input = Input::Variance(v);
         match self {
-            Loads::Buffers | Loads::Tiled => format!("{}[i]", Input::Variance(v).ident()),
-            Loads::Textures(layout) => {
-                let input = Input::Variance(v);
-                let texel = texel(&input.texture_ident(), ("x", "y"));
-                format!("fj_normalised(vec3<f32>({texel}.x, 0.0, 0.0), {}).x", scale_of(layout, input))
+            Loads::Buffers(i) => format!("{}[i]", i.ident(Role::Input(input))),
+            Loads::Tiled => unreachable!("variances are read at the centre pixel, never from a tile"),
+            Loads::Textures(i) => {
+                let texel = texel(i.ident(Role::Input(input)), ("x", "y"));
+                format!("fj_normalised(vec3<f32>({texel}.x, 0.0, 0.0), {}).x", scale_of(i, input))
             }
         }
     }
@@ -580,8 +575,8 @@ fn texel(texture: &str, coords: (&str, &str)) -> String {
     format!("textureLoad({texture}, vec2<i32>(i32({}), i32({})), 0)", coords.0, coords.1)
 }
 
-fn scale_of(layout: &KernelLayout, input: Input) -> String {
-    let k = layout.inputs.iter().position(|i| *i == input).expect("every input of the expression is in its layout");
+fn scale_of(interface: &BindingInterface, input: Input) -> String {
+    let k = interface.inputs().position(|(_, i)| i == input).expect("every input of the expression is bound");
     format!("params.scale[{k}].x")
 }
 

@@ -1,14 +1,16 @@
 //! The JIT: typed expression → WGSL (lower) → naga-validated kernel (validate).
 //! Nothing here talks to wgpu; [`crate::gpu`] turns a [`ValidatedKernel`] into a pipeline.
 
+pub mod interface;
 pub mod lower;
 pub mod validate;
 
+pub use interface::{Access, BindingInterface, Params, Role, Slot};
 pub use lower::{
     lower, lower_kind, lower_with, Input, KernelKind, KernelLayout, KernelSource, LowerError, LowerOptions,
-    OutputFormat, FIRST_INPUT_BINDING, TEMPLATE_VERSION, WORKGROUP,
+    OutputFormat, TEMPLATE_VERSION, WORKGROUP,
 };
-pub use validate::{validate, KernelKey, ValidateError, ValidatedKernel};
+pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 
 /// Lower and validate in one step.
 pub fn compile(expr: &crate::lang::Expr) -> Result<ValidatedKernel, CompileError> {

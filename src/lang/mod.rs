@@ -4,6 +4,7 @@
 pub mod check;
 pub mod error;
 pub mod expr;
+pub mod latex;
 pub mod ops;
 pub mod parse;
 pub mod random;
@@ -11,4 +12,5 @@ pub mod random;
 pub use check::parse_expr;
 pub use error::{ExprError, ExprErrorKind};
 pub use expr::Expr;
+pub use latex::latex;
 pub use ops::{BinaryOp, Feature, FeatureSource, PairOp, ScalarVar, Type, UnaryOp};

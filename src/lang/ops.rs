@@ -151,6 +151,27 @@ impl UnaryOp {
         format!("fj_{}", self.name().to_ascii_lowercase())
     }
 
+    /// Whether the operator can raise a domain-error flag on some input.
+    pub fn can_flag(self) -> bool {
+        matches!(self, UnaryOp::Sqrt | UnaryOp::Asin | UnaryOp::Acos)
+    }
+
+    /// Relative cost in a kernel, in units of one add: transcendental
+    /// functions and the reconstruction kernels cost several (see
+    /// `filterjit bench`); what the simplifier minimises.
+    pub fn cost(self) -> f64 {
+        match self {
+            UnaryOp::Neg | UnaryOp::Abs => 1.0,
+            UnaryOp::Sqrt => 4.0,
+            UnaryOp::Exp => 6.0,
+            UnaryOp::Sin | UnaryOp::Cos | UnaryOp::Atan => 8.0,
+            UnaryOp::Tan | UnaryOp::Asin | UnaryOp::Acos => 10.0,
+            UnaryOp::Epanechnikov | UnaryOp::Biweight => 3.0,
+            UnaryOp::Tricube | UnaryOp::Mitchell => 5.0,
+            UnaryOp::Sinc => 12.0,
+        }
+    }
+
     /// The f64 semantics, shared with the GPU by construction of
     /// `templates/ops.wgsl` (see docs/SEMANTICS.md).
     pub fn eval(self, a: f64, flags: &mut u32) -> f64 {
@@ -190,6 +211,20 @@ impl BinaryOp {
         format!("fj_{}", self.name())
     }
 
+    /// Whether the operator can raise a domain-error flag on some input.
+    pub fn can_flag(self) -> bool {
+        self == BinaryOp::Pow
+    }
+
+    /// Relative cost in a kernel, in units of one add (see [`UnaryOp::cost`]).
+    pub fn cost(self) -> f64 {
+        match self {
+            BinaryOp::Add | BinaryOp::Sub | BinaryOp::Mul => 1.0,
+            BinaryOp::Div => 2.0,
+            BinaryOp::Pow => 12.0,
+        }
+    }
+
     pub fn eval(self, a: f64, b: f64, flags: &mut u32) -> f64 {
         use semantics as s;
         match self {
@@ -205,6 +240,15 @@ impl BinaryOp {
 impl PairOp {
     pub fn wgsl_helper(self) -> String {
         format!("fj_{}", self.name().to_ascii_lowercase())
+    }
+
+    /// Relative cost in a kernel, in units of one add, loads of the two
+    /// features included (see [`UnaryOp::cost`]).
+    pub fn cost(self) -> f64 {
+        match self {
+            PairOp::Dot | PairOp::Distance1 | PairOp::DistanceMax => 5.0,
+            PairOp::Distance2 => 6.0,
+        }
     }
 
     pub fn eval(self, u: [f64; 3], v: [f64; 3]) -> f64 {

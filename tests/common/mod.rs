@@ -3,23 +3,51 @@
 use std::path::PathBuf;
 use std::sync::OnceLock;
 
+use parking_lot::{ReentrantMutex, ReentrantMutexGuard};
+
 use filterjit::gpu::Gpu;
 use filterjit::lang::{Feature, ScalarVar};
 use filterjit::rng::Rng;
 use filterjit::Scene;
 
-/// The device every GPU test shares. There is no skipping: without an adapter
-/// the GPU tests fail, saying what to install.
-pub fn gpu() -> &'static Gpu {
+/// The device every GPU test shares, held for as long as the returned value
+/// lives. Call it first in a test (`let gpu = gpu();`) so the turn covers the
+/// whole test, drops of its buffers included.
+///
+/// On GL the tests take turns: wgpu's GL backend keeps one context per device
+/// and holds it for a whole dispatch or program link (on llvmpipe: the driver's
+/// compile), and a thread that waits for it longer than a few seconds panics
+/// ("Could not lock adapter context"). Whether a test passes must not depend on
+/// how fast the driver compiles, so GPU tests run one at a time on GL and in
+/// parallel elsewhere. The lock is re-entrant, so helpers may call `gpu()` too.
+///
+/// There is no skipping: without an adapter the GPU tests fail, saying what to install.
+pub fn gpu() -> GpuTurn {
     static GPU: OnceLock<Gpu> = OnceLock::new();
-    GPU.get_or_init(|| {
+    static GL_TESTS: ReentrantMutex<()> = ReentrantMutex::new(());
+    let gpu = GPU.get_or_init(|| {
         // As the binary does: Mesa's Vulkan device-select layer probes for a display
         // and prints warnings without one. std's environment lock guards this write.
         if std::env::var_os("NODEVICE_SELECT").is_none() {
             std::env::set_var("NODEVICE_SELECT", "1");
         }
         open()
-    })
+    });
+    let turn = (gpu.info().backend == wgpu::Backend::Gl).then(|| GL_TESTS.lock());
+    GpuTurn { gpu, _turn: turn }
+}
+
+/// The shared test device and, on GL, this test's turn on it.
+pub struct GpuTurn {
+    gpu: &'static Gpu,
+    _turn: Option<ReentrantMutexGuard<'static, ()>>,
+}
+
+impl std::ops::Deref for GpuTurn {
+    type Target = Gpu;
+    fn deref(&self) -> &Gpu {
+        self.gpu
+    }
 }
 
 fn open() -> Gpu {
@@ -32,9 +60,9 @@ fn open() -> Gpu {
     }
 }
 
-/// The Mitsuba sample beside the repository (tests may read ../shared; the program never does).
+/// The Mitsuba render shipped in `scenes/` (tests read only what the repository holds).
 pub fn mitsuba_sample() -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/samples/mitsuba-cornell-64");
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/mitsuba-cornell-64");
     assert!(dir.join("noisy.exr").is_file(), "the Mitsuba sample is missing at {}", dir.display());
     dir
 }

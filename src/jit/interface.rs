@@ -1,0 +1,359 @@
+//! The binding interface of a kernel: the only place where binding slots,
+//! resource types, access and the uniform's fields and offsets are assigned.
+//!
+//! [`BindingInterface::of`] builds it from the kernel kind and the inputs the
+//! expression reads. The templates receive its WGSL declarations, `gpu` builds
+//! explicit bind-group and pipeline layouts and fills bind groups by role from
+//! it, and `export` derives its manifest and each target's slots from it.
+
+use serde::Serialize;
+
+use super::lower::{Input, KernelKind, KernelLayout, OutputFormat};
+
+/// What a binding is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Role {
+    /// The uniform [`Params`] (export: with one normalisation scale per input).
+    Params,
+    /// The noisy colour.
+    Color,
+    /// The filtered colour (filter, probe, export), or per-workgroup relMSE sums (fitness).
+    Output,
+    /// Per-pixel domain-error bits (filter, probe), or per-workgroup bits (fitness).
+    Flags,
+    /// A per-pixel input the expression reads.
+    Input(Input),
+    /// The reference image (fitness).
+    Reference,
+}
+
+/// Element type of a storage buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Element {
+    F32,
+    U32,
+    Vec4F32,
+}
+
+impl Element {
+    pub fn wgsl(self) -> &'static str {
+        match self {
+            Element::F32 => "f32",
+            Element::U32 => "u32",
+            Element::Vec4F32 => "vec4<f32>",
+        }
+    }
+
+    pub fn bytes(self) -> u32 {
+        match self {
+            Element::F32 | Element::U32 => 4,
+            Element::Vec4F32 => 16,
+        }
+    }
+
+    /// The element a buffer of `input` holds (1-D features and variances: f32).
+    pub fn of_input(input: Input) -> Element {
+        if input.components() == 1 {
+            Element::F32
+        } else {
+            Element::Vec4F32
+        }
+    }
+}
+
+/// The kind of resource bound at a slot.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Resource {
+    Uniform,
+    Storage {
+        element: Element,
+        writable: bool,
+    },
+    /// `texture_2d<f32>`, read with `textureLoad` (no sampler).
+    SampledTexture,
+    /// `texture_storage_2d<format, write>`.
+    StorageTexture(OutputFormat),
+}
+
+/// One binding of group 0.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct Binding {
+    pub slot: u32,
+    pub role: Role,
+    /// The WGSL variable's name.
+    pub ident: String,
+    pub resource: Resource,
+}
+
+impl Binding {
+    /// The WGSL declaration of this binding.
+    pub fn declaration(&self) -> String {
+        let ty = match self.resource {
+            Resource::Uniform => {
+                return format!("@group(0) @binding({}) var<uniform> {}: Params;", self.slot, self.ident)
+            }
+            Resource::Storage { element, writable } => {
+                let access = if writable { "read_write" } else { "read" };
+                return format!(
+                    "@group(0) @binding({}) var<storage, {access}> {}: array<{}>;",
+                    self.slot,
+                    self.ident,
+                    element.wgsl()
+                );
+            }
+            Resource::SampledTexture => "texture_2d<f32>".to_string(),
+            Resource::StorageTexture(format) => format!("texture_storage_2d<{}, write>", format.wgsl()),
+        };
+        format!("@group(0) @binding({}) var {}: {ty};", self.slot, self.ident)
+    }
+}
+
+/// The uniform header every windowed kernel reads (`struct Params` in the
+/// templates). An exported shader follows it with one `vec4<f32>` scale per input.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Params {
+    pub width: u32,
+    pub height: u32,
+    pub radius: u32,
+    /// First image row of this dispatch (banded dispatches); unused by exported shaders.
+    pub row_offset: u32,
+}
+
+/// One field of the uniform, as an exported shader's manifest lists it.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
+pub struct UniformField {
+    pub name: String,
+    #[serde(rename = "type")]
+    pub ty: &'static str,
+    pub offset: u32,
+    pub meaning: String,
+}
+
+/// How a pipeline accesses one slot: what its bind-group layout entry needs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Access {
+    Uniform,
+    StorageRead,
+    StorageReadWrite,
+    SampledTexture,
+    StorageTexture(OutputFormat),
+}
+
+/// One slot of group 0 and how it is accessed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct Slot {
+    pub slot: u32,
+    pub access: Access,
+}
+
+impl Resource {
+    pub fn access(self) -> Access {
+        match self {
+            Resource::Uniform => Access::Uniform,
+            Resource::Storage { writable: false, .. } => Access::StorageRead,
+            Resource::Storage { writable: true, .. } => Access::StorageReadWrite,
+            Resource::SampledTexture => Access::SampledTexture,
+            Resource::StorageTexture(format) => Access::StorageTexture(format),
+        }
+    }
+}
+
+/// Every binding of a kernel and the layout of its uniform.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub struct BindingInterface {
+    pub kind: KernelKind,
+    /// Group 0, dense from slot 0, in slot order.
+    pub bindings: Vec<Binding>,
+    pub uniform: Vec<UniformField>,
+    pub uniform_bytes: u32,
+}
+
+impl BindingInterface {
+    /// The interface of a `kind` kernel reading `layout`'s inputs: slot 0 the
+    /// uniform, 1 the colour, 2 the output, then (except exported shaders) 3 the
+    /// flags, then the inputs in `layout` order, then (fitness) the reference.
+    pub fn of(kind: KernelKind, layout: &KernelLayout) -> BindingInterface {
+        let textures = matches!(kind, KernelKind::Export(_));
+        let mut roles: Vec<(Role, Resource, String)> = Vec::new();
+        roles.push((Role::Params, Resource::Uniform, "params".into()));
+        let colour = if textures {
+            Resource::SampledTexture
+        } else {
+            Resource::Storage { element: Element::Vec4F32, writable: false }
+        };
+        roles.push((Role::Color, colour, if textures { "tex_color" } else { "buf_color" }.into()));
+        match kind {
+            KernelKind::Filter | KernelKind::Probe => {
+                roles.push((
+                    Role::Output,
+                    Resource::Storage { element: Element::Vec4F32, writable: true },
+                    "buf_out".into(),
+                ));
+                roles.push((
+                    Role::Flags,
+                    Resource::Storage { element: Element::U32, writable: true },
+                    "buf_flags".into(),
+                ));
+            }
+            KernelKind::Fitness => {
+                roles.push((
+                    Role::Output,
+                    Resource::Storage { element: Element::F32, writable: true },
+                    "buf_partials".into(),
+                ));
+                roles.push((
+                    Role::Flags,
+                    Resource::Storage { element: Element::U32, writable: true },
+                    "buf_partial_flags".into(),
+                ));
+            }
+            KernelKind::Export(format) => {
+                roles.push((Role::Output, Resource::StorageTexture(format), "tex_out".into()));
+            }
+        }
+        for input in &layout.inputs {
+            let resource = if textures {
+                Resource::SampledTexture
+            } else {
+                Resource::Storage { element: Element::of_input(*input), writable: false }
+            };
+            let prefix = if textures { "tex_" } else { "buf_" };
+            roles.push((Role::Input(*input), resource, format!("{prefix}{}", input.describe().to_ascii_lowercase())));
+        }
+        if kind == KernelKind::Fitness {
+            roles.push((
+                Role::Reference,
+                Resource::Storage { element: Element::Vec4F32, writable: false },
+                "buf_reference".into(),
+            ));
+        }
+        let bindings = roles
+            .into_iter()
+            .enumerate()
+            .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident, resource })
+            .collect();
+
+        let mut uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("radius", "u32", 8, "window radius r: (2r+1)^2 pixels"),
+        ];
+        if textures {
+            uniform.push(field("_pad", "u32", 12, "unused"));
+            for (k, input) in layout.inputs.iter().enumerate() {
+                uniform.push(UniformField {
+                    name: format!("scale[{k}]"),
+                    ty: "vec4<f32>",
+                    offset: 16 + 16 * k as u32,
+                    meaning: format!("x: normalisation scale of {}; y, z, w unused", input.describe()),
+                });
+            }
+        } else {
+            uniform.push(field("row_offset", "u32", 12, "first image row of this dispatch"));
+        }
+        let uniform_bytes =
+            std::mem::size_of::<Params>() as u32 + if textures { 16 * layout.inputs.len() as u32 } else { 0 };
+        BindingInterface { kind, bindings, uniform, uniform_bytes }
+    }
+
+    /// The binding that plays `role`, if the kernel has one.
+    pub fn binding(&self, role: Role) -> Option<&Binding> {
+        self.bindings.iter().find(|b| b.role == role)
+    }
+
+    /// The WGSL name of `role`'s binding; panics if the kernel has none (a filterjit bug).
+    pub fn ident(&self, role: Role) -> &str {
+        &self.binding(role).unwrap_or_else(|| panic!("a {:?} kernel has no {role:?} binding", self.kind)).ident
+    }
+
+    /// The slot of `role`; panics if the kernel has none (a filterjit bug).
+    pub fn slot(&self, role: Role) -> u32 {
+        self.binding(role).unwrap_or_else(|| panic!("a {:?} kernel has no {role:?} binding", self.kind)).slot
+    }
+
+    /// Every slot and its access, in slot order.
+    pub fn slots(&self) -> Vec<Slot> {
+        self.bindings.iter().map(|b| Slot { slot: b.slot, access: b.resource.access() }).collect()
+    }
+
+    /// The per-pixel inputs, in slot order.
+    pub fn inputs(&self) -> impl Iterator<Item = (&Binding, Input)> {
+        self.bindings.iter().filter_map(|b| match b.role {
+            Role::Input(input) => Some((b, input)),
+            _ => None,
+        })
+    }
+
+    /// Storage buffers the kernel binds (device limits count them per stage).
+    pub fn storage_buffers(&self) -> u32 {
+        self.bindings.iter().filter(|b| matches!(b.resource, Resource::Storage { .. })).count() as u32
+    }
+
+    /// Sampled textures the kernel binds.
+    pub fn sampled_textures(&self) -> usize {
+        self.bindings.iter().filter(|b| b.resource == Resource::SampledTexture).count()
+    }
+
+    /// The WGSL declarations of every binding, one line each.
+    pub fn declarations(&self) -> String {
+        self.bindings.iter().map(|b| b.declaration() + "\n").collect()
+    }
+
+    /// The WGSL `struct Params` of the uniform: the [`Params`] header, and in
+    /// exported shaders one `vec4<f32>` normalisation scale per input.
+    pub fn params_struct(&self) -> String {
+        let mut text = String::from("struct Params {\n");
+        for f in self.uniform.iter().filter(|f| !f.name.starts_with("scale[")) {
+            text.push_str(&format!("    {}: {},\n", f.name, f.ty));
+        }
+        let scales = self.uniform.iter().filter(|f| f.name.starts_with("scale[")).count();
+        if scales > 0 {
+            text.push_str(&format!("    scale: array<vec4<f32>, {scales}>,\n"));
+        }
+        text.push_str("}\n");
+        text
+    }
+
+    /// A stable text encoding, for cache keys.
+    pub fn encode(&self) -> String {
+        self.bindings
+            .iter()
+            .map(|b| format!("{}:{}:{}", b.slot, b.ident, b.declaration()))
+            .collect::<Vec<_>>()
+            .join("\n")
+    }
+}
+
+fn field(name: &str, ty: &'static str, offset: u32, meaning: &str) -> UniformField {
+    UniformField { name: name.into(), ty, offset, meaning: meaning.into() }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lang::{Feature, ScalarVar};
+
+    #[test]
+    fn slots_are_dense_and_roles_unique() {
+        let layout =
+            KernelLayout { inputs: vec![Input::Feature(Feature::Normal), Input::Variance(ScalarVar::ColorVariance)] };
+        for kind in
+            [KernelKind::Filter, KernelKind::Probe, KernelKind::Fitness, KernelKind::Export(OutputFormat::Rgba16float)]
+        {
+            let interface = BindingInterface::of(kind, &layout);
+            for (k, b) in interface.bindings.iter().enumerate() {
+                assert_eq!(b.slot, k as u32, "{kind:?}");
+                assert_eq!(interface.bindings.iter().filter(|o| o.role == b.role).count(), 1, "{kind:?}");
+            }
+            assert_eq!(interface.inputs().count(), 2);
+        }
+        let fitness = BindingInterface::of(KernelKind::Fitness, &layout);
+        assert_eq!(fitness.slot(Role::Reference), 6);
+        assert_eq!(fitness.storage_buffers(), 6);
+        let export = BindingInterface::of(KernelKind::Export(OutputFormat::Rgba16float), &layout);
+        assert_eq!(export.binding(Role::Flags), None);
+        assert_eq!(export.uniform_bytes, 16 + 32);
+        assert_eq!(export.sampled_textures(), 3);
+    }
+}

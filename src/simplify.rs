@@ -1,0 +1,391 @@
+//! Algebraic simplification of weight expressions by equality saturation
+//! (the `egg` crate): `Expr` → e-graph → rewrite to saturation → the
+//! cheapest equivalent `Expr`.
+//!
+//! Every rule holds under filterjit's numeric semantics (docs/SEMANTICS.md):
+//! results saturate at ±BIG and flush below TINY, division protects its
+//! divisor, and undefined maths raises a domain flag. So `x / 1 → x` holds
+//! but `x / x → 1` does not (x = 0 gives 0), associativity does not (it moves
+//! saturation), and a rule that drops a subterm applies only where that
+//! subterm can never raise a flag. Constant subtrees are folded with the CPU
+//! semantics, unless folding raises a flag (as the JIT does). Tests check
+//! every rule against the CPU evaluator: same weights within
+//! [`WEIGHT_TOLERANCE`], same flags.
+//!
+//! The cost that picks the result is the operator table's kernel cost
+//! ([`UnaryOp::cost`] and friends) plus a small charge per node, so among
+//! equally fast forms the shorter one wins.
+
+use egg::{Analysis, CostFunction, DidMerge, EGraph, Extractor, Id, Language, RecExpr, Rewrite, Runner};
+
+use crate::lang::{BinaryOp, Expr, Feature, PairOp, ScalarVar, UnaryOp};
+use crate::semantics;
+
+/// Largest relative difference (to max(1, |w|)) between an expression's
+/// weight and its simplified form's, on the CPU: folded constants are
+/// rounded to f32 once, as literals are, where the original rounded each one.
+pub const WEIGHT_TOLERANCE: f64 = 1e-6;
+
+/// One e-node: the expression language with children as e-class ids.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Node {
+    /// A literal, by the bits of its f64 value (finite, non-negative, ≤ BIG).
+    Const(u64),
+    Var(ScalarVar),
+    Pair(PairOp, Feature, Feature),
+    Unary(UnaryOp, [Id; 1]),
+    Binary(BinaryOp, [Id; 2]),
+}
+
+impl Node {
+    fn constant(value: f64) -> Node {
+        Node::Const(value.to_bits())
+    }
+}
+
+impl Language for Node {
+    type Discriminant = std::mem::Discriminant<Node>;
+
+    fn discriminant(&self) -> Self::Discriminant {
+        std::mem::discriminant(self)
+    }
+
+    fn matches(&self, other: &Self) -> bool {
+        match (self, other) {
+            (Node::Unary(a, _), Node::Unary(b, _)) => a == b,
+            (Node::Binary(a, _), Node::Binary(b, _)) => a == b,
+            (a, b) => a == b,
+        }
+    }
+
+    fn children(&self) -> &[Id] {
+        match self {
+            Node::Unary(_, c) => c,
+            Node::Binary(_, c) => c,
+            _ => &[],
+        }
+    }
+
+    fn children_mut(&mut self) -> &mut [Id] {
+        match self {
+            Node::Unary(_, c) => c,
+            Node::Binary(_, c) => c,
+            _ => &mut [],
+        }
+    }
+}
+
+impl std::fmt::Display for Node {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Node::Const(bits) => write!(f, "{}", f64::from_bits(*bits)),
+            Node::Var(v) => f.write_str(v.name()),
+            Node::Pair(op, a, b) => write!(f, "{}:{}:{}", op.name(), a.name(), b.name()),
+            Node::Unary(op, _) => f.write_str(op.name()),
+            Node::Binary(op, _) => f.write_str(op.name()),
+        }
+    }
+}
+
+/// Patterns spell operators by their names in the operator table (`neg`,
+/// `add`, `pow`, …) or by their infix symbols, and literals as numbers.
+impl egg::FromOp for Node {
+    type Error = String;
+
+    fn from_op(op: &str, children: Vec<Id>) -> Result<Self, Self::Error> {
+        let binary = |op| BinaryOp::ALL.iter().copied().find(|b: &BinaryOp| b.name() == op || symbol(*b) == Some(op));
+        match children.as_slice() {
+            [] => match (op.parse::<f64>(), ScalarVar::from_name(op)) {
+                (Ok(value), _) if crate::lang::expr::literal_in_range(value) => Ok(Node::constant(value)),
+                (_, Some(v)) => Ok(Node::Var(v)),
+                _ => Err(format!("`{op}` is no literal or variable")),
+            },
+            [a] => UnaryOp::from_name(op).map(|u| Node::Unary(u, [*a])).ok_or_else(|| format!("no unary `{op}`")),
+            [a, b] => binary(op).map(|o| Node::Binary(o, [*a, *b])).ok_or_else(|| format!("no binary `{op}`")),
+            _ => Err(format!("`{op}` with {} operands", children.len())),
+        }
+    }
+}
+
+/// The shortest decimal within two f32 ulps of `value`: literals are held
+/// as f32, so `2 * pow(0.1, 2)` folds to `0.02`, not `0.020000001`, and
+/// `exp(1)` to `2.7182817`. (Two ulps is below [`WEIGHT_TOLERANCE`].)
+fn readable(value: f64) -> f64 {
+    let target = value as f32;
+    let ulp = (f32::from_bits(target.to_bits() + 1) - target).abs() as f64;
+    (1..=9)
+        .filter_map(|digits| format!("{value:.*e}", digits - 1).parse::<f64>().ok())
+        .find(|candidate| (candidate - target as f64).abs() <= 2.0 * ulp)
+        .unwrap_or(target as f64)
+}
+
+fn symbol(op: BinaryOp) -> Option<&'static str> {
+    match op.fixity() {
+        crate::lang::ops::Fixity::Infix { symbol, .. } => Some(symbol),
+        _ => None,
+    }
+}
+
+/// What the e-graph knows of a class.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Facts {
+    /// The class's value when it is constant (evaluated with the CPU semantics, no flag raised).
+    constant: Option<f64>,
+    /// Whether some input can make the class raise a domain flag. Members of
+    /// a class agree on flags (every rule keeps them), so one member that
+    /// provably never flags clears it for the class.
+    may_flag: bool,
+}
+
+/// The e-graph analysis: constant values and whether a class may flag.
+#[derive(Default)]
+pub struct Semantics;
+
+impl Analysis<Node> for Semantics {
+    type Data = Facts;
+
+    fn make(egraph: &mut EGraph<Node, Self>, node: &Node, _: Id) -> Facts {
+        let facts = |id: &Id| &egraph[*id].data;
+        match node {
+            Node::Const(bits) => Facts { constant: Some(semantics::literal(f64::from_bits(*bits))), may_flag: false },
+            Node::Var(_) | Node::Pair(..) => Facts { constant: None, may_flag: false },
+            Node::Unary(op, [a]) => {
+                let a = facts(a);
+                let mut flags = 0;
+                let folded = a.constant.map(|x| op.eval(x, &mut flags));
+                match folded {
+                    Some(value) if flags == 0 => Facts { constant: Some(value), may_flag: false },
+                    _ => Facts { constant: None, may_flag: a.may_flag || op.can_flag() },
+                }
+            }
+            Node::Binary(op, [a, b]) => {
+                let (a, b) = (facts(a), facts(b));
+                let mut flags = 0;
+                let folded = a.constant.zip(b.constant).map(|(x, y)| op.eval(x, y, &mut flags));
+                match folded {
+                    Some(value) if flags == 0 => Facts { constant: Some(value), may_flag: false },
+                    _ => Facts { constant: None, may_flag: a.may_flag || b.may_flag || op.can_flag() },
+                }
+            }
+        }
+    }
+
+    fn merge(&mut self, a: &mut Facts, b: Facts) -> DidMerge {
+        let mut changed_a = false;
+        if a.constant.is_none() && b.constant.is_some() {
+            a.constant = b.constant;
+            changed_a = true;
+        }
+        if a.may_flag && !b.may_flag {
+            a.may_flag = false;
+            changed_a = true;
+        }
+        let changed_b = (b.constant.is_none() && a.constant.is_some()) || (b.may_flag && !a.may_flag);
+        DidMerge(changed_a, changed_b)
+    }
+
+    fn modify(egraph: &mut EGraph<Node, Self>, id: Id) {
+        let Some(value) = egraph[id].data.constant else { return };
+        let magnitude = readable(value.abs());
+        let literal = egraph.add(Node::constant(magnitude));
+        let folded = if value < 0.0 { egraph.add(Node::Unary(UnaryOp::Neg, [literal])) } else { literal };
+        egraph.union(id, folded);
+    }
+}
+
+/// When a rule may fire.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Condition {
+    Always,
+    /// Only where `?x` can never raise a domain flag (the rule drops it).
+    XNeverFlags,
+}
+
+/// Commutativity is left out on purpose: it would let extraction reorder
+/// operands for nothing; each identity is listed for both operand orders.
+///
+/// A rewrite rule as data: name, left side, right side (egg's s-expression
+/// patterns, operators spelled as in the operator table or by their infix
+/// symbols), and when it applies. Each is exact under the semantics up to
+/// [`WEIGHT_TOLERANCE`] (pow by exp2/log2 rounds) and keeps the domain flags;
+/// `tests/simplify.rs` checks every one against the CPU evaluator.
+pub const RULES: &[(&str, &str, &str, Condition)] = &[
+    ("div-one", "(/ ?x 1)", "?x", Condition::Always),
+    ("mul-one", "(* ?x 1)", "?x", Condition::Always),
+    ("add-zero", "(+ ?x 0)", "?x", Condition::Always),
+    ("sub-zero", "(- ?x 0)", "?x", Condition::Always),
+    ("zero-sub", "(- 0 ?x)", "(neg ?x)", Condition::Always),
+    ("pow-one", "(pow ?x 1)", "?x", Condition::Always),
+    ("pow-neg-square", "(pow (neg ?x) 2)", "(pow ?x 2)", Condition::Always),
+    ("one-mul", "(* 1 ?x)", "?x", Condition::Always),
+    ("zero-add", "(+ 0 ?x)", "?x", Condition::Always),
+    ("neg-neg", "(neg (neg ?x))", "?x", Condition::Always),
+    ("abs-neg", "(abs (neg ?x))", "(abs ?x)", Condition::Always),
+    ("abs-abs", "(abs (abs ?x))", "(abs ?x)", Condition::Always),
+    ("sub-neg", "(- ?x (neg ?y))", "(+ ?x ?y)", Condition::Always),
+    ("add-neg", "(+ ?x (neg ?y))", "(- ?x ?y)", Condition::Always),
+    ("neg-add", "(+ (neg ?y) ?x)", "(- ?x ?y)", Condition::Always),
+    ("mul-neg", "(* ?x (neg ?y))", "(neg (* ?x ?y))", Condition::Always),
+    ("neg-mul", "(* (neg ?x) ?y)", "(neg (* ?x ?y))", Condition::Always),
+    ("add-self", "(+ ?x ?x)", "(* 2 ?x)", Condition::Always),
+    ("mul-zero", "(* ?x 0)", "0", Condition::XNeverFlags),
+    ("zero-mul", "(* 0 ?x)", "0", Condition::XNeverFlags),
+    ("zero-div", "(/ 0 ?x)", "0", Condition::XNeverFlags),
+    ("pow-zero", "(pow ?x 0)", "1", Condition::XNeverFlags),
+    ("sub-self", "(- ?x ?x)", "0", Condition::XNeverFlags),
+];
+
+/// [`RULES`] as egg rewrites.
+pub fn rules() -> Vec<Rewrite<Node, Semantics>> {
+    let x: egg::Var = "?x".parse().expect("a pattern variable");
+    RULES
+        .iter()
+        .map(|(name, lhs, rhs, condition)| {
+            let lhs: egg::Pattern<Node> = lhs.parse().expect("a valid pattern");
+            let rhs: egg::Pattern<Node> = rhs.parse().expect("a valid pattern");
+            match condition {
+                Condition::Always => Rewrite::new(*name, lhs, rhs),
+                Condition::XNeverFlags => Rewrite::new(
+                    *name,
+                    lhs,
+                    egg::ConditionalApplier {
+                        condition: move |egraph: &mut EGraph<Node, Semantics>, _: Id, subst: &egg::Subst| {
+                            !egraph[subst[x]].data.may_flag
+                        },
+                        applier: rhs,
+                    },
+                ),
+            }
+            .expect("a well-formed rule")
+        })
+        .collect()
+}
+
+/// One side of a rule with its pattern variables replaced (`?x` by `x`, `?y` by `y`).
+pub fn instantiate(pattern: &str, x: &Expr, y: &Expr) -> Expr {
+    let pattern: egg::Pattern<Node> = pattern.parse().expect("a valid pattern");
+    let ast = &pattern.ast;
+    fn build(ast: &RecExpr<egg::ENodeOrVar<Node>>, id: Id, x: &Expr, y: &Expr) -> Expr {
+        match &ast[id] {
+            egg::ENodeOrVar::Var(v) if v.to_string() == "?x" => x.clone(),
+            egg::ENodeOrVar::Var(_) => y.clone(),
+            egg::ENodeOrVar::ENode(node) => match node {
+                Node::Const(bits) => Expr::Const(f64::from_bits(*bits)),
+                Node::Var(v) => Expr::Var(*v),
+                Node::Pair(op, a, b) => Expr::Pair(*op, *a, *b),
+                Node::Unary(op, [a]) => Expr::unary(*op, build(ast, *a, x, y)),
+                Node::Binary(op, [a, b]) => Expr::binary(*op, build(ast, *a, x, y), build(ast, *b, x, y)),
+            },
+        }
+    }
+    build(ast, Id::from(ast.as_ref().len() - 1), x, y)
+}
+
+/// What extraction minimises: the operator table's kernel cost plus a
+/// tenth per node (literals cost only that: they are folded into the code),
+/// counted in tenths so that sums are exact and ties stay ties.
+struct KernelCost;
+
+impl CostFunction<Node> for KernelCost {
+    type Cost = u64;
+
+    fn cost<C: FnMut(Id) -> u64>(&mut self, node: &Node, mut costs: C) -> u64 {
+        let own = match node {
+            Node::Const(_) => 0.0,
+            Node::Var(_) => 1.0,
+            Node::Pair(op, ..) => op.cost(),
+            Node::Unary(op, _) => op.cost(),
+            Node::Binary(op, _) => op.cost(),
+        };
+        node.fold((own * 10.0).round() as u64 + 1, |sum, id| sum + costs(id))
+    }
+}
+
+/// `expr` as an e-graph term.
+fn to_rec(expr: &Expr, rec: &mut RecExpr<Node>) -> Id {
+    let node = match expr {
+        Expr::Const(c) => Node::constant(*c),
+        Expr::Var(v) => Node::Var(*v),
+        Expr::Pair(op, a, b) => Node::Pair(*op, *a, *b),
+        Expr::Unary(op, a) => Node::Unary(*op, [to_rec(a, rec)]),
+        Expr::Binary(op, a, b) => Node::Binary(*op, [to_rec(a, rec), to_rec(b, rec)]),
+    };
+    rec.add(node)
+}
+
+fn from_rec(rec: &RecExpr<Node>, id: Id) -> Expr {
+    match &rec[id] {
+        Node::Const(bits) => Expr::Const(f64::from_bits(*bits)),
+        Node::Var(v) => Expr::Var(*v),
+        Node::Pair(op, a, b) => Expr::Pair(*op, *a, *b),
+        Node::Unary(op, [a]) => Expr::unary(*op, from_rec(rec, *a)),
+        Node::Binary(op, [a, b]) => Expr::binary(*op, from_rec(rec, *a), from_rec(rec, *b)),
+    }
+}
+
+/// Limits of one saturation run: node and iteration counts only, never
+/// time, so that the result does not depend on how busy the machine is.
+const NODE_LIMIT: usize = 20_000;
+const ITERATION_LIMIT: usize = 30;
+
+/// The cheapest expression equal to `expr` under the rules (never costlier than `expr`).
+pub fn simplify(expr: &Expr) -> Expr {
+    let mut rec = RecExpr::default();
+    to_rec(expr, &mut rec);
+    let runner = Runner::<Node, Semantics, ()>::default()
+        .with_node_limit(NODE_LIMIT)
+        .with_iter_limit(ITERATION_LIMIT)
+        .with_time_limit(std::time::Duration::from_secs(3600))
+        .with_expr(&rec)
+        .run(&rules());
+    let root = runner.roots[0];
+    let (_, best) = Extractor::new(&runner.egraph, KernelCost).find_best(root);
+    let last = Id::from(best.as_ref().len() - 1);
+    let simplified = from_rec(&best, last);
+    // Ties keep the original, so an already simple expression prints as written.
+    if kernel_cost(&simplified) < kernel_cost(expr) {
+        simplified
+    } else {
+        expr.clone()
+    }
+}
+
+/// The cost extraction minimises, of a whole expression, in units of one add.
+pub fn kernel_cost(expr: &Expr) -> f64 {
+    let mut rec = RecExpr::default();
+    let root = to_rec(expr, &mut rec);
+    let mut cost = KernelCost;
+    let mut costs = vec![0u64; rec.as_ref().len()];
+    for (k, node) in rec.as_ref().iter().enumerate() {
+        costs[k] = cost.cost(node, |id| costs[usize::from(id)]);
+    }
+    costs[usize::from(root)] as f64 / 10.0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lang::parse_expr;
+
+    fn simplified(text: &str) -> String {
+        simplify(&parse_expr(text).unwrap()).to_string()
+    }
+
+    #[test]
+    fn literal_subtrees_fold_and_identities_vanish() {
+        assert_eq!(simplified("pow(pow(3, 2), 1)"), "9");
+        assert_eq!(simplified("distance2(normal) / 1 + (2 + 2) * 0"), "distance2(normal)");
+        assert_eq!(simplified("exp(-distance2(normal) / (2 * pow(0.5, 2)))"), "exp(-distance2(normal) / 0.5)");
+        assert_eq!(simplified("0 - exp(1)"), "-2.718282");
+        assert_eq!(simplified("--distance1(color)"), "distance1(color)");
+    }
+
+    #[test]
+    fn what_the_semantics_forbid_is_left_alone() {
+        // x / x is 0 at x = 0; sqrt of a negative flags, so its product with 0 stays.
+        assert_eq!(simplified("distance2(normal) / distance2(normal)"), "distance2(normal) / distance2(normal)");
+        assert_eq!(simplified("sqrt(dot(normal)) * 0"), "sqrt(dot(normal)) * 0");
+        // Folding that would raise a flag is not done.
+        assert_eq!(simplified("sqrt(0 - 1)"), "sqrt(-1)");
+    }
+}

@@ -1,0 +1,190 @@
+//! The simplifier: every rule keeps the CPU evaluator's weights and domain
+//! flags; simplified expressions are never costlier, and give the same
+//! fitness on rendered built-in scenes.
+
+use filterjit::cpu;
+use filterjit::lang::random::Alphabet;
+use filterjit::lang::{parse_expr, BinaryOp, Expr, UnaryOp};
+use filterjit::rng::Rng;
+use filterjit::simplify::{self, Condition, RULES, WEIGHT_TOLERANCE};
+use filterjit::Scene;
+
+use crate::common::{env_usize, synthetic_scene};
+
+/// (weight, flags) of `expr` at several centre/neighbour pairs.
+fn evaluations(expr: &Expr, scene: &Scene) -> Vec<(f64, u32)> {
+    let n = scene.pixels();
+    (0..n)
+        .step_by(7)
+        .flat_map(|i| [(i, i), (i, (i * 13 + 5) % n)])
+        .map(|(i, j)| cpu::weight_at(expr, scene, i, j))
+        .collect()
+}
+
+fn close(a: f64, b: f64) -> bool {
+    (a - b).abs() <= WEIGHT_TOLERANCE * a.abs().max(1.0)
+}
+
+fn can_flag(expr: &Expr) -> bool {
+    let mut flags = false;
+    expr.visit(&mut |e| {
+        flags |= match e {
+            Expr::Unary(op, _) => op.can_flag(),
+            Expr::Binary(op, ..) => op.can_flag(),
+            _ => false,
+        }
+    });
+    flags
+}
+
+/// Operands for the pattern variables: random expressions, and values at
+/// the edges of the semantics (zero, the saturation bound, raw variances,
+/// subterms that raise flags).
+fn operands(rng: &mut Rng, count: usize) -> Vec<Expr> {
+    let mut out: Vec<Expr> = [
+        "0",
+        "1",
+        "-1000000000000000",
+        "colorVariance",
+        "1e-20 * distance2(normal)",
+        "sqrt(-dot(normal, texture))",
+        "pow(-distance2(normal), 0.5)",
+        "distance2(normal) * 1000000000000",
+        "exp(-distance1(color))",
+    ]
+    .iter()
+    .map(|t| parse_expr(t).unwrap())
+    .collect();
+    let alphabet = Alphabet::full();
+    while out.len() < count {
+        let depth = 1 + rng.below(4);
+        out.push(alphabet.grow(rng, depth));
+    }
+    out
+}
+
+#[test]
+fn every_rule_keeps_weights_and_flags_on_the_cpu() {
+    let scene = synthetic_scene(9, 7, 4);
+    let mut rng = Rng::seeded(31);
+    let xs = operands(&mut rng, env_usize("FILTERJIT_RULE_CASES", 60));
+    for (name, lhs, rhs, condition) in RULES {
+        let mut checked = 0;
+        for (k, x) in xs.iter().enumerate() {
+            if *condition == Condition::XNeverFlags && can_flag(x) {
+                continue;
+            }
+            let y = &xs[(k * 7 + 3) % xs.len()];
+            let (before, after) = (simplify::instantiate(lhs, x, y), simplify::instantiate(rhs, x, y));
+            for ((wb, fb), (wa, fa)) in evaluations(&before, &scene).into_iter().zip(evaluations(&after, &scene)) {
+                assert!(close(wb, wa), "rule {name}: `{before}` gives {wb:e}, `{after}` gives {wa:e}");
+                assert_eq!(fb, fa, "rule {name}: flags of `{before}` and `{after}` differ");
+            }
+            checked += 1;
+        }
+        assert!(checked >= 5, "rule {name} was checked on only {checked} operands");
+    }
+}
+
+#[test]
+fn simplified_random_expressions_agree_and_are_never_costlier() {
+    let scene = synthetic_scene(9, 7, 5);
+    let mut rng = Rng::seeded(8);
+    let alphabet = Alphabet::full();
+    let count = env_usize("FILTERJIT_RANDOM_EXPRS", 40) * 5;
+    let (mut agree, mut total, mut shorter) = (0usize, 0usize, 0usize);
+    for _ in 0..count {
+        // Bloat the way GP does: identities and literal arithmetic around random terms.
+        let depth = 2 + rng.below(4);
+        let core = alphabet.grow(&mut rng, depth);
+        let bloated = Expr::binary(
+            BinaryOp::Div,
+            Expr::binary(BinaryOp::Add, core, Expr::binary(BinaryOp::Mul, Expr::Const(0.0), Expr::Const(3.0))),
+            Expr::binary(BinaryOp::Pow, Expr::Const(1.0), Expr::unary(UnaryOp::Abs, Expr::Const(2.0))),
+        );
+        let simplified = simplify::simplify(&bloated);
+        assert!(simplify::kernel_cost(&simplified) <= simplify::kernel_cost(&bloated), "`{bloated}` → `{simplified}`");
+        assert_eq!(parse_expr(&simplified.to_string()).unwrap(), simplified, "prints and parses back");
+        shorter += usize::from(simplified.len() < bloated.len());
+        for ((wb, fb), (wa, fa)) in evaluations(&bloated, &scene).into_iter().zip(evaluations(&simplified, &scene)) {
+            total += 1;
+            agree += usize::from(close(wb, wa) && fb == fa);
+        }
+    }
+    // Folding rounds a constant subtree to f32 once where the CPU reference
+    // rounds each literal: a long chain through sin or exp can amplify that
+    // past the tolerance, as it does between the CPU and the GPU.
+    let fraction = agree as f64 / total as f64;
+    assert!(fraction >= 0.99, "only {:.2}% of weights agree", 100.0 * fraction);
+    assert_eq!(shorter, count, "every bloated expression got shorter");
+}
+
+#[test]
+fn the_default_runs_bloat_is_removed() {
+    let raw = "exp(-(pow(distance1(pixel), 2) / (exp(-(pow(distance2(texture), 2) + pow(distance1(normal, color), distance2(dovGradient, color)) / 1)) * pow(3, 2)) + pow(3, 2) / 1))";
+    let simplified = simplify::simplify(&parse_expr(raw).unwrap());
+    assert_eq!(
+        simplified.to_string(),
+        "exp(-(pow(distance1(pixel), 2) / (exp(-(pow(distance2(texture), 2) + pow(distance1(normal, color), distance2(dovGradient, color)))) * 9) + 9))"
+    );
+}
+
+#[test]
+fn simplified_expressions_score_the_same_fitness_on_built_in_scenes() {
+    use filterjit::evolve::GpuEvaluator;
+    use filterjit::gp::Evaluator;
+    let gpu = crate::common::gpu();
+    let (training, test) = crate::evolve::datasets();
+    let raw: Vec<Expr> = filterjit::bench::BLOATED.iter().map(|t| parse_expr(t).unwrap()).collect();
+    let simplified: Vec<Expr> = raw.iter().map(simplify::simplify).collect();
+    for (r, s) in raw.iter().zip(&simplified) {
+        assert!(s.len() < r.len(), "`{r}` did not get shorter");
+    }
+    let mut request = filterjit::scene::Request { reference: true, ..Default::default() };
+    for e in &raw {
+        request.features.extend(e.features());
+        request.variances.extend(e.variables());
+    }
+    let scenes = [training, test].iter().map(|d| filterjit::scene::load(d, &request).unwrap()).collect::<Vec<_>>();
+    let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
+    let before = evaluator.evaluate(&raw).unwrap();
+    let after = evaluator.evaluate(&simplified).unwrap();
+    for ((r, b), a) in raw.iter().zip(&before).zip(&after) {
+        assert_eq!(b.invalid, a.invalid, "`{r}`");
+        assert!(
+            (b.value - a.value).abs() <= 1e-5 * b.value.abs().max(1e-3),
+            "`{r}`: fitness {} then {}",
+            b.value,
+            a.value
+        );
+    }
+}
+
+#[test]
+fn a_run_that_simplifies_offspring_has_a_hall_of_fame_whose_simplified_forms_score_the_same() {
+    use filterjit::evolve::GpuEvaluator;
+    use filterjit::gp::Evaluator;
+    let (training, test) = crate::evolve::datasets();
+    let dir = crate::evolve::temp_dir("simplify-offspring");
+    let settings = filterjit::gp::Settings { simplify_offspring: true, ..crate::evolve::small() };
+    crate::evolve::run(&dir, settings, crate::evolve::config(training, test), false, None).expect("finished");
+    let text = std::fs::read_to_string(dir.join(filterjit::evolve::HALL_OF_FAME_FILE)).unwrap();
+    let raw: Vec<Expr> = filterjit::corpus::parse_named(&text).iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
+    let noted = text.lines().filter(|l| l.starts_with("# simplified (length ")).count();
+    assert_eq!(noted, raw.len(), "every entry carries its simplified form");
+    let simplified: Vec<Expr> = raw.iter().map(simplify::simplify).collect();
+    let mut request = filterjit::scene::Request { reference: true, ..Default::default() };
+    for e in &raw {
+        request.features.extend(e.features());
+        request.variances.extend(e.variables());
+    }
+    let gpu = crate::common::gpu();
+    let scenes = vec![filterjit::scene::load(training, &request).unwrap()];
+    let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
+    let before = evaluator.evaluate(&raw).unwrap();
+    let after = evaluator.evaluate(&simplified).unwrap();
+    for ((r, b), a) in raw.iter().zip(&before).zip(&after) {
+        assert_eq!(b.invalid, a.invalid, "`{r}`");
+        assert!((b.value - a.value).abs() <= 1e-5 * b.value.abs().max(1e-3), "`{r}`: {} then {}", b.value, a.value);
+    }
+}
