@@ -748,6 +748,9 @@ fn evolve(args: EvolveArgs) -> Result<()> {
     .expect("runs to the end");
     bar.finish();
     println!("best      {}", summary.best.expr);
+    if summary.best_simplified != summary.best.expr {
+        println!("          = {} (simplified)", summary.best_simplified);
+    }
     println!(
         "fitness   {:.5} (training: mean relMSE / noisy relMSE), length {}",
         summary.best.fitness.value,

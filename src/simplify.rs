@@ -135,6 +135,9 @@ pub struct Facts {
     /// a class agree on flags (every rule keeps them), so one member that
     /// provably never flags clears it for the class.
     may_flag: bool,
+    /// Whether the class is ≥ 0 on every input (members are equal, so one
+    /// member that provably is makes the class so).
+    nonneg: bool,
 }
 
 /// The e-graph analysis: constant values and whether a class may flag.
@@ -146,25 +149,47 @@ impl Analysis<Node> for Semantics {
 
     fn make(egraph: &mut EGraph<Node, Self>, node: &Node, _: Id) -> Facts {
         let facts = |id: &Id| &egraph[*id].data;
+        let constant = |value: f64| Facts { constant: Some(value), may_flag: false, nonneg: value >= 0.0 };
         match node {
-            Node::Const(bits) => Facts { constant: Some(semantics::literal(f64::from_bits(*bits))), may_flag: false },
-            Node::Var(_) | Node::Pair(..) => Facts { constant: None, may_flag: false },
+            Node::Const(bits) => constant(semantics::literal(f64::from_bits(*bits))),
+            Node::Var(_) => Facts { constant: None, may_flag: false, nonneg: false },
+            Node::Pair(op, ..) => Facts { constant: None, may_flag: false, nonneg: *op != PairOp::Dot },
             Node::Unary(op, [a]) => {
                 let a = facts(a);
                 let mut flags = 0;
-                let folded = a.constant.map(|x| op.eval(x, &mut flags));
-                match folded {
-                    Some(value) if flags == 0 => Facts { constant: Some(value), may_flag: false },
-                    _ => Facts { constant: None, may_flag: a.may_flag || op.can_flag() },
+                match a.constant.map(|x| op.eval(x, &mut flags)) {
+                    Some(value) if flags == 0 => constant(value),
+                    _ => Facts {
+                        constant: None,
+                        may_flag: a.may_flag || op.can_flag(),
+                        nonneg: match op {
+                            UnaryOp::Abs
+                            | UnaryOp::Exp
+                            | UnaryOp::Sqrt
+                            | UnaryOp::Epanechnikov
+                            | UnaryOp::Biweight
+                            | UnaryOp::Tricube => true,
+                            _ => false,
+                        },
+                    },
                 }
             }
             Node::Binary(op, [a, b]) => {
                 let (a, b) = (facts(a), facts(b));
                 let mut flags = 0;
-                let folded = a.constant.zip(b.constant).map(|(x, y)| op.eval(x, y, &mut flags));
-                match folded {
-                    Some(value) if flags == 0 => Facts { constant: Some(value), may_flag: false },
-                    _ => Facts { constant: None, may_flag: a.may_flag || b.may_flag || op.can_flag() },
+                match a.constant.zip(b.constant).map(|(x, y)| op.eval(x, y, &mut flags)) {
+                    Some(value) if flags == 0 => constant(value),
+                    _ => Facts {
+                        constant: None,
+                        may_flag: a.may_flag || b.may_flag || op.can_flag(),
+                        // fin keeps signs, protect moves +0 to +DIV_EPS, and
+                        // pow of a non-negative base is a magnitude.
+                        nonneg: match op {
+                            BinaryOp::Add | BinaryOp::Mul | BinaryOp::Div => a.nonneg && b.nonneg,
+                            BinaryOp::Pow => a.nonneg,
+                            BinaryOp::Sub => false,
+                        },
+                    },
                 }
             }
         }
@@ -180,12 +205,27 @@ impl Analysis<Node> for Semantics {
             a.may_flag = false;
             changed_a = true;
         }
-        let changed_b = (b.constant.is_none() && a.constant.is_some()) || (b.may_flag && !a.may_flag);
+        if !a.nonneg && b.nonneg {
+            a.nonneg = true;
+            changed_a = true;
+        }
+        let changed_b =
+            (b.constant.is_none() && a.constant.is_some()) || (b.may_flag && !a.may_flag) || (!b.nonneg && a.nonneg);
         DidMerge(changed_a, changed_b)
     }
 
     fn modify(egraph: &mut EGraph<Node, Self>, id: Id) {
         let Some(value) = egraph[id].data.constant else { return };
+        // Once per class: a class that holds a literal (or the negation of
+        // one) has its folded form already.
+        let folded = |node: &Node| match node {
+            Node::Const(_) => true,
+            Node::Unary(UnaryOp::Neg, [a]) => egraph[*a].nodes.iter().any(|n| matches!(n, Node::Const(_))),
+            _ => false,
+        };
+        if egraph[id].nodes.iter().any(folded) {
+            return;
+        }
         let magnitude = readable(value.abs());
         let literal = egraph.add(Node::constant(magnitude));
         let folded = if value < 0.0 { egraph.add(Node::Unary(UnaryOp::Neg, [literal])) } else { literal };
@@ -199,6 +239,12 @@ pub enum Condition {
     Always,
     /// Only where `?x` can never raise a domain flag (the rule drops it).
     XNeverFlags,
+    /// Only where `?x` is never negative.
+    XNonNegative,
+    /// `pow(pow(?x, ?p), ?q)` with `?x` never negative, `?p` a constant > 0
+    /// and `?q` a constant ≥ 1: then saturation and flushing of the inner
+    /// power carry through the outer one, and one power of `?x` gives the same.
+    NestedPower,
 }
 
 /// Commutativity is left out on purpose: it would let extraction reorder
@@ -233,6 +279,11 @@ pub const RULES: &[(&str, &str, &str, Condition)] = &[
     ("zero-div", "(/ 0 ?x)", "0", Condition::XNeverFlags),
     ("pow-zero", "(pow ?x 0)", "1", Condition::XNeverFlags),
     ("sub-self", "(- ?x ?x)", "0", Condition::XNeverFlags),
+    ("one-pow", "(pow 1 ?x)", "1", Condition::XNeverFlags),
+    ("abs-nonneg", "(abs ?x)", "?x", Condition::XNonNegative),
+    ("pow-half", "(pow ?x 0.5)", "(sqrt ?x)", Condition::XNonNegative),
+    ("sqrt-half", "(sqrt ?x)", "(pow ?x 0.5)", Condition::XNonNegative),
+    ("pow-pow", "(pow (pow ?x ?p) ?q)", "(pow ?x (* ?p ?q))", Condition::NestedPower),
 ];
 
 /// [`RULES`] as egg rewrites.
@@ -243,42 +294,68 @@ pub fn rules() -> Vec<Rewrite<Node, Semantics>> {
         .map(|(name, lhs, rhs, condition)| {
             let lhs: egg::Pattern<Node> = lhs.parse().expect("a valid pattern");
             let rhs: egg::Pattern<Node> = rhs.parse().expect("a valid pattern");
-            match condition {
-                Condition::Always => Rewrite::new(*name, lhs, rhs),
-                Condition::XNeverFlags => Rewrite::new(
-                    *name,
-                    lhs,
-                    egg::ConditionalApplier {
-                        condition: move |egraph: &mut EGraph<Node, Semantics>, _: Id, subst: &egg::Subst| {
-                            !egraph[subst[x]].data.may_flag
-                        },
-                        applier: rhs,
-                    },
-                ),
+            if *condition == Condition::Always {
+                return Rewrite::new(*name, lhs, rhs).expect("a well-formed rule");
             }
+            let condition = *condition;
+            Rewrite::new(
+                *name,
+                lhs,
+                egg::ConditionalApplier {
+                    condition: move |egraph: &mut EGraph<Node, Semantics>, _: Id, subst: &egg::Subst| {
+                        let facts = |var: egg::Var| egraph[subst[var]].data.clone();
+                        let (p, q) = ("?p".parse().expect("a variable"), "?q".parse().expect("a variable"));
+                        holds(condition, &facts(x), || (facts(p).constant, facts(q).constant))
+                    },
+                    applier: rhs,
+                },
+            )
             .expect("a well-formed rule")
         })
         .collect()
 }
 
+/// Whether a conditional rule may fire, from the facts of `?x` and the
+/// constants of `?p` and `?q` (asked for only by the rule that needs them).
+fn holds(condition: Condition, x: &Facts, exponents: impl FnOnce() -> (Option<f64>, Option<f64>)) -> bool {
+    match condition {
+        Condition::Always => true,
+        Condition::XNeverFlags => !x.may_flag,
+        Condition::XNonNegative => x.nonneg,
+        // Constant bases are folded already; merging their powers would only
+        // make new constants without end.
+        Condition::NestedPower => {
+            x.nonneg && x.constant.is_none() && matches!(exponents(), (Some(p), Some(q)) if p > 0.0 && q >= 1.0)
+        }
+    }
+}
+
 /// One side of a rule with its pattern variables replaced (`?x` by `x`, `?y` by `y`).
 pub fn instantiate(pattern: &str, x: &Expr, y: &Expr) -> Expr {
+    instantiate_with(pattern, &[("?x", x), ("?y", y)])
+}
+
+/// One side of a rule with each named pattern variable replaced.
+pub fn instantiate_with(pattern: &str, values: &[(&str, &Expr)]) -> Expr {
     let pattern: egg::Pattern<Node> = pattern.parse().expect("a valid pattern");
     let ast = &pattern.ast;
-    fn build(ast: &RecExpr<egg::ENodeOrVar<Node>>, id: Id, x: &Expr, y: &Expr) -> Expr {
+    fn build(ast: &RecExpr<egg::ENodeOrVar<Node>>, id: Id, values: &[(&str, &Expr)]) -> Expr {
         match &ast[id] {
-            egg::ENodeOrVar::Var(v) if v.to_string() == "?x" => x.clone(),
-            egg::ENodeOrVar::Var(_) => y.clone(),
+            egg::ENodeOrVar::Var(v) => {
+                let name = v.to_string();
+                let (_, value) = values.iter().find(|(n, _)| *n == name).expect("every pattern variable has a value");
+                (*value).clone()
+            }
             egg::ENodeOrVar::ENode(node) => match node {
                 Node::Const(bits) => Expr::Const(f64::from_bits(*bits)),
                 Node::Var(v) => Expr::Var(*v),
                 Node::Pair(op, a, b) => Expr::Pair(*op, *a, *b),
-                Node::Unary(op, [a]) => Expr::unary(*op, build(ast, *a, x, y)),
-                Node::Binary(op, [a, b]) => Expr::binary(*op, build(ast, *a, x, y), build(ast, *b, x, y)),
+                Node::Unary(op, [a]) => Expr::unary(*op, build(ast, *a, values)),
+                Node::Binary(op, [a, b]) => Expr::binary(*op, build(ast, *a, values), build(ast, *b, values)),
             },
         }
     }
-    build(ast, Id::from(ast.as_ref().len() - 1), x, y)
+    build(ast, Id::from(ast.as_ref().len() - 1), values)
 }
 
 /// What extraction minimises: the operator table's kernel cost plus a
@@ -348,6 +425,18 @@ pub fn simplify(expr: &Expr) -> Expr {
     } else {
         expr.clone()
     }
+}
+
+/// Whether `condition` holds for `expr` as `?x` as the e-graph's analysis
+/// sees it (the same test a conditional rule makes; exponents of
+/// [`Condition::NestedPower`] are the caller's to choose).
+pub fn condition_holds(condition: Condition, expr: &Expr) -> bool {
+    let mut rec = RecExpr::default();
+    to_rec(expr, &mut rec);
+    let mut egraph = EGraph::<Node, Semantics>::default();
+    let root = egraph.add_expr(&rec);
+    egraph.rebuild();
+    holds(condition, &egraph[root].data, || (None, None))
 }
 
 /// The cost extraction minimises, of a whole expression, in units of one add.
