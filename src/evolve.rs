@@ -147,6 +147,17 @@ impl<'g> GpuEvaluator<'g> {
     }
 }
 
+/// The thesis's fitness (section 3.2.3): the mean over scenes of relMSE /
+/// the noisy input's relMSE. Training fitness and test results both use it.
+pub fn normalised_error(per_scene: &[crate::gpu::FitnessError], noisy: &[f64]) -> f64 {
+    per_scene.iter().zip(noisy).map(|(e, n)| e.relmse / n).sum::<f64>() / per_scene.len().max(1) as f64
+}
+
+/// Every domain-error bit raised on any scene.
+pub fn domain_flags(per_scene: &[crate::gpu::FitnessError]) -> u32 {
+    per_scene.iter().fold(0, |a, e| a | e.flags)
+}
+
 impl Evaluator for GpuEvaluator<'_> {
     fn evaluate(&mut self, exprs: &[Expr]) -> Result<Vec<Fitness>> {
         let errors = self.errors(exprs)?;
@@ -157,16 +168,14 @@ impl Evaluator for GpuEvaluator<'_> {
                     Ok(per_scene) => per_scene,
                     Err(reason) => return Fitness::invalid(reason.clone()),
                 };
-                let flags = per_scene.iter().fold(0, |a, e| a | e.flags);
+                let flags = domain_flags(per_scene);
                 if flags != 0 {
                     return Fitness::invalid(format!("domain error: {}", semantics::flag::describe(flags).join("; ")));
                 }
                 if per_scene.iter().any(|e| !e.finite || !e.relmse.is_finite()) {
                     return Fitness::invalid("non-finite error");
                 }
-                let mean =
-                    per_scene.iter().zip(&self.noisy).map(|(e, n)| e.relmse / n).sum::<f64>() / per_scene.len() as f64;
-                Fitness::valid(mean)
+                Fitness::valid(normalised_error(per_scene, &self.noisy))
             })
             .collect())
     }
@@ -371,13 +380,11 @@ pub fn test(evaluator: &mut GpuEvaluator<'_>, exprs: &[Expr]) -> Result<Vec<Test
                     }
                 }
             };
-            let flags = per_scene.iter().fold(0, |a, s| a | s.flags);
-            let relmse: Vec<f64> = per_scene.iter().map(|s| s.relmse).collect();
-            let normalised = relmse.iter().zip(&noisy).map(|(r, n)| r / n).sum::<f64>() / relmse.len().max(1) as f64;
+            let flags = domain_flags(&per_scene);
             TestResult {
                 expr: e.to_string(),
-                relmse,
-                normalised,
+                relmse: per_scene.iter().map(|s| s.relmse).collect(),
+                normalised: normalised_error(&per_scene, &noisy),
                 invalid: (flags != 0).then(|| semantics::flag::describe(flags).join("; ")),
             }
         })

@@ -18,6 +18,16 @@ pub struct Errors {
     pub relmse_half_spp: Option<f64>,
 }
 
+/// One pixel's term of equation 3.5: Σ_rgb (c − g)² / (g² + ε).
+pub fn pixel_relative_error<A: Copy + Into<f64>, B: Copy + Into<f64>>(c: &[A; 3], g: &[B; 3]) -> f64 {
+    (0..3)
+        .map(|q| {
+            let (c, g): (f64, f64) = (c[q].into(), g[q].into());
+            (c - g) * (c - g) / (g * g + RELMSE_EPSILON)
+        })
+        .sum()
+}
+
 /// Compare `image` with `reference`, both linear RGB.
 pub fn errors<A: Copy + Into<f64>, B: Copy + Into<f64>>(
     image: &[[A; 3]],
@@ -29,10 +39,9 @@ pub fn errors<A: Copy + Into<f64>, B: Copy + Into<f64>>(
     for (c, g) in image.iter().zip(reference) {
         for q in 0..3 {
             let (c, g): (f64, f64) = (c[q].into(), g[q].into());
-            let d2 = (c - g) * (c - g);
-            se += d2;
-            rel += d2 / (g * g + RELMSE_EPSILON);
+            se += (c - g) * (c - g);
         }
+        rel += pixel_relative_error(c, g);
     }
     let n = image.len().max(1) as f64;
     let relmse = rel / n;

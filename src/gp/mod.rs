@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
 
-use crate::lang::{parse_expr, Expr, Feature};
+use crate::lang::{parse_expr, Expr, Feature, ScalarVar};
 use crate::rng::Rng;
 use operators::{crossover, mutate, Codebook, Mutation, Terminals};
 
@@ -435,18 +435,16 @@ pub fn hall_of_fame(state: &State, k: usize) -> Vec<(usize, StoredMember)> {
     out
 }
 
-/// How often each feature occurs in the populations (thesis section 4.3).
+/// How often each terminal occurs in the populations (thesis section 4.3;
+/// [`crate::lang::terminal_usage`]), every terminal listed.
 pub fn feature_frequencies(state: &State) -> BTreeMap<String, usize> {
-    let mut counts: BTreeMap<String, usize> = Feature::ALL.iter().map(|f| (f.name().to_string(), 0)).collect();
-    for m in state.islands.iter().flatten() {
-        if let Ok(e) = parse_expr(&m.expr) {
-            e.visit(&mut |node| {
-                if let Expr::Pair(_, i, j) = node {
-                    *counts.get_mut(i.name()).expect("listed") += 1;
-                    *counts.get_mut(j.name()).expect("listed") += 1;
-                }
-            });
-        }
-    }
+    let exprs: Vec<Expr> = state.islands.iter().flatten().filter_map(|m| parse_expr(&m.expr).ok()).collect();
+    let mut counts: BTreeMap<String, usize> = Feature::ALL
+        .iter()
+        .map(|f| f.name())
+        .chain(ScalarVar::ALL.iter().map(|v| v.name()))
+        .map(|n| (n.to_string(), 0))
+        .collect();
+    counts.extend(crate::lang::terminal_usage(&exprs));
     counts
 }

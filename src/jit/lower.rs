@@ -15,7 +15,7 @@ use crate::semantics;
 
 /// Bumped whenever the template or the lowering changes what a kernel computes
 /// or how it binds its inputs; part of every pipeline-cache key.
-pub const TEMPLATE_VERSION: u32 = 2;
+pub const TEMPLATE_VERSION: u32 = 3;
 
 /// Workgroup shape of every filter kernel.
 pub const WORKGROUP: [u32; 2] = [8, 8];
@@ -296,6 +296,7 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
     context.insert("weight", &weight);
     context.insert("bindings", &bindings);
     context.insert("declarations", &interface.declarations());
+    context.insert("relmse_epsilon", &format!("{:?}", crate::metrics::RELMSE_EPSILON as f32));
     context.insert("params_struct", &interface.params_struct());
     context.insert("workgroup_x", &WORKGROUP[0]);
     context.insert("workgroup_y", &WORKGROUP[1]);
@@ -762,6 +763,46 @@ impl Body {
             Some(v) if v >= 0.0 => Expr::Const(semantics::fin(v)),
             Some(v) => Expr::unary(crate::lang::UnaryOp::Neg, Expr::Const(semantics::fin(-v))),
             None => e,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::OPS_WGSL;
+    use crate::semantics;
+
+    /// `templates/ops.wgsl` restates the semantics' constants in WGSL: they must agree.
+    #[test]
+    fn the_wgsl_constants_are_the_semantics_constants() {
+        let constant = |name: &str| -> f64 {
+            let line = OPS_WGSL
+                .lines()
+                .find(|l| l.starts_with(&format!("const {name}: ")))
+                .unwrap_or_else(|| panic!("ops.wgsl declares {name}"));
+            let value = line.split('=').nth(1).unwrap().trim().trim_end_matches(';').trim_end_matches('u');
+            value.parse().unwrap_or_else(|_| panic!("{name} = {value}"))
+        };
+        let f32_eq = |name: &str, value: f64| {
+            assert_eq!(constant(name) as f32, value as f32, "{name} in ops.wgsl differs from semantics.rs");
+        };
+        f32_eq("FJ_BIG", semantics::BIG);
+        f32_eq("FJ_TINY", semantics::TINY);
+        f32_eq("FJ_DIV_EPS", semantics::DIV_EPS);
+        f32_eq("FJ_EXP_MIN", semantics::EXP_MIN);
+        f32_eq("FJ_EXP_MAX", semantics::EXP_MAX);
+        f32_eq("FJ_LOG2_BIG", semantics::BIG.log2());
+        f32_eq("FJ_SINC_SMALL", semantics::SINC_SMALL);
+        f32_eq("FJ_SINC_TAU", semantics::SINC_TAU);
+        f32_eq("FJ_PI", std::f64::consts::PI);
+        f32_eq("FJ_TAU", std::f64::consts::TAU);
+        for (name, bit) in [
+            ("FJ_FLAG_SQRT", semantics::flag::SQRT),
+            ("FJ_FLAG_ASIN", semantics::flag::ASIN),
+            ("FJ_FLAG_ACOS", semantics::flag::ACOS),
+            ("FJ_FLAG_POW", semantics::flag::POW),
+        ] {
+            assert_eq!(constant(name), bit as f64, "{name}");
         }
     }
 }

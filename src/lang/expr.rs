@@ -165,6 +165,27 @@ impl fmt::Display for Expr {
     }
 }
 
+/// How many of `exprs`' operators read each terminal: a feature once per
+/// pair operator that compares it (`distance2(normal)` counts `normal` once,
+/// `dot(normal, texture)` each once), a variance once per occurrence. The one
+/// definition of "feature usage" (evolve's `features.json`, `report`).
+pub fn terminal_usage<'a>(exprs: impl IntoIterator<Item = &'a Expr>) -> std::collections::BTreeMap<String, usize> {
+    let mut counts = std::collections::BTreeMap::new();
+    for e in exprs {
+        e.visit(&mut |node| match node {
+            Expr::Pair(_, i, j) => {
+                *counts.entry(i.name().to_string()).or_default() += 1;
+                if i != j {
+                    *counts.entry(j.name().to_string()).or_default() += 1;
+                }
+            }
+            Expr::Var(v) => *counts.entry(v.name().to_string()).or_default() += 1,
+            _ => {}
+        });
+    }
+    counts
+}
+
 /// Whether a literal satisfies the language's invariant.
 pub fn literal_in_range(c: f64) -> bool {
     c.is_finite() && (0.0..=semantics::BIG).contains(&c)

@@ -11,6 +11,6 @@ pub mod random;
 
 pub use check::parse_expr;
 pub use error::{ExprError, ExprErrorKind};
-pub use expr::Expr;
+pub use expr::{terminal_usage, Expr};
 pub use latex::latex;
 pub use ops::{BinaryOp, Feature, FeatureSource, PairOp, ScalarVar, Type, UnaryOp};

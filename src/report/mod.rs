@@ -10,7 +10,7 @@
 
 pub mod plot;
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -18,7 +18,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 
 use crate::gpu::{Gpu, SceneBuffers};
-use crate::lang::{Expr, Feature};
+use crate::lang::Expr;
 use crate::scene::{self, Request, Scene};
 use crate::tune::Tuned;
 use crate::{io, jit, metrics, preview};
@@ -316,21 +316,7 @@ fn measure(
 
 /// How often each feature occurs in a set of expressions (feature pairs count once per occurrence).
 pub fn feature_usage(exprs: &[Expr]) -> BTreeMap<String, usize> {
-    let mut counts: BTreeMap<String, usize> = BTreeMap::new();
-    for e in exprs {
-        e.visit(&mut |node| {
-            if let Expr::Pair(_, i, j) = node {
-                let features: BTreeSet<Feature> = [*i, *j].into_iter().collect();
-                for f in features {
-                    *counts.entry(f.to_string()).or_default() += 1;
-                }
-            }
-        });
-        for v in e.variables() {
-            *counts.entry(v.to_string()).or_default() += 1;
-        }
-    }
-    counts
+    crate::lang::terminal_usage(exprs)
 }
 
 /// The `side`² window where the noisy input is furthest from the reference
@@ -343,11 +329,8 @@ fn crop_window(
     side: usize,
 ) -> (usize, usize, usize) {
     let side = side.min(width).min(height).max(1);
-    let error: Vec<f64> = noisy
-        .iter()
-        .zip(reference)
-        .map(|(c, g)| (0..3).map(|q| (c[q] as f64 - g[q] as f64).powi(2) / ((g[q] as f64).powi(2) + 0.01)).sum::<f64>())
-        .collect();
+    let error: Vec<f64> =
+        noisy.iter().zip(reference).map(|(c, g)| crate::metrics::pixel_relative_error(c, g)).collect();
     // Summed-area table for O(1) window sums.
     let mut table = vec![0.0; (width + 1) * (height + 1)];
     for y in 0..height {
