@@ -162,15 +162,15 @@ impl Analysis<Node> for Semantics {
                     _ => Facts {
                         constant: None,
                         may_flag: a.may_flag || op.can_flag(),
-                        nonneg: match op {
+                        nonneg: matches!(
+                            op,
                             UnaryOp::Abs
-                            | UnaryOp::Exp
-                            | UnaryOp::Sqrt
-                            | UnaryOp::Epanechnikov
-                            | UnaryOp::Biweight
-                            | UnaryOp::Tricube => true,
-                            _ => false,
-                        },
+                                | UnaryOp::Exp
+                                | UnaryOp::Sqrt
+                                | UnaryOp::Epanechnikov
+                                | UnaryOp::Biweight
+                                | UnaryOp::Tricube
+                        ),
                     },
                 }
             }
