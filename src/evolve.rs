@@ -4,7 +4,7 @@
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
@@ -85,19 +85,30 @@ impl<'g> GpuEvaluator<'g> {
     }
 
     /// relMSE of every expression on every scene (`[expr][scene]`), with
-    /// domain-error bits; `Err(reason)` for an expression this device cannot
-    /// run (more inputs than it allows storage buffers).
+    /// domain-error bits; `Err(reason)` for an expression that does not
+    /// compile or that this device cannot run (more inputs than it allows
+    /// storage buffers).
     pub fn errors(
         &mut self,
         exprs: &[Expr],
     ) -> Result<Vec<std::result::Result<Vec<crate::gpu::FitnessError>, String>>> {
         let start = Instant::now();
         let threads = self.threads.max(1);
-        let kernels = jit::compile_all_with(exprs, KernelKind::Fitness, self.options, threads)?;
-        let unsupported: Vec<Option<String>> =
-            kernels.iter().map(|k| self.gpu.check_bindings(k).err().map(|e| e.to_string())).collect();
-        let refs: Vec<&jit::ValidatedKernel> =
-            kernels.iter().zip(&unsupported).filter(|(_, u)| u.is_none()).map(|(k, _)| k).collect();
+        // A candidate that does not compile, or binds more than this device
+        // allows, is an invalid individual with its reason, never a failed batch.
+        let kernels = jit::compile_each_with(exprs, KernelKind::Fitness, self.options, threads);
+        let unsupported: Vec<Option<String>> = kernels
+            .iter()
+            .map(|k| match k {
+                Ok(k) => self.gpu.check_bindings(k).err().map(|e| e.to_string()),
+                Err(e) => Some(format!("does not compile: {e}")),
+            })
+            .collect();
+        let refs: Vec<&jit::ValidatedKernel> = kernels
+            .iter()
+            .zip(&unsupported)
+            .filter_map(|(k, u)| if u.is_none() { k.as_ref().ok() } else { None })
+            .collect();
         let devices: Vec<&Gpu> = std::iter::once(self.gpu).chain(self.more.iter()).collect();
         // Contiguous shares, one per device; results come back in order.
         let share = refs.len().div_ceil(devices.len()).max(1);
@@ -105,11 +116,12 @@ impl<'g> GpuEvaluator<'g> {
         for (device, part) in devices.iter().zip(&parts) {
             device.prepare_pipelines(part, threads)?;
         }
-        self.time.compile += start.elapsed();
+        let compiled = start.elapsed();
         let start = Instant::now();
         let data: Vec<&Scene> = self.scenes.iter().collect();
         let radius = self.radius;
-        let results: Vec<Result<Vec<Vec<crate::gpu::FitnessError>>, crate::gpu::GpuError>> = std::thread::scope(|s| {
+        type DeviceResult = Result<(Duration, Vec<Vec<crate::gpu::FitnessError>>), crate::gpu::GpuError>;
+        let results: Vec<DeviceResult> = std::thread::scope(|s| {
             let handles: Vec<_> = devices
                 .iter()
                 .zip(self.device_scenes.iter_mut())
@@ -117,15 +129,24 @@ impl<'g> GpuEvaluator<'g> {
                 .map(|((device, scenes), part)| {
                     let data = &data;
                     s.spawn(move || {
+                        // The driver's compile first, timed on its own (software drivers compile here).
+                        let primed = Instant::now();
+                        device.prime_fitness(part, scenes, data, radius)?;
+                        let primed = primed.elapsed();
                         let out = device.evaluate_fitness(part, scenes, data, radius);
                         // Each generation's kernels are new: the memo keeps their fitness, not their pipelines.
                         device.prune_pipelines(|_| false);
-                        out
+                        Ok((primed, out?))
                     })
                 })
                 .collect();
             handles.into_iter().map(|h| h.join().expect("evaluation thread panicked")).collect()
         });
+        // Devices work in parallel: the slowest one's compile is the batch's.
+        let driver_compile = results.iter().filter_map(|r| r.as_ref().ok().map(|(t, _)| *t)).max().unwrap_or_default();
+        self.time.compile += compiled + driver_compile;
+        let results: Vec<Result<Vec<Vec<crate::gpu::FitnessError>>, crate::gpu::GpuError>> =
+            results.into_iter().map(|r| r.map(|(_, out)| out)).collect();
         let mut evaluated = Vec::with_capacity(refs.len());
         for r in results {
             evaluated.extend(r?);
@@ -138,7 +159,7 @@ impl<'g> GpuEvaluator<'g> {
                 None => Ok(evaluated.next().expect("one result per supported kernel")),
             })
             .collect();
-        self.time.evaluate += start.elapsed();
+        self.time.evaluate += start.elapsed().saturating_sub(driver_compile);
         Ok(out)
     }
 

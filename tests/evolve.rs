@@ -192,6 +192,18 @@ fn invalid_individuals_get_the_worst_fitness_and_a_reason() {
         .map(|t| parse_expr(t).unwrap())
         .collect();
     let fitness = evaluator.evaluate(&exprs).unwrap();
+    // A literal out of range does not lower: that candidate alone is invalid.
+    let mut batch = exprs.clone();
+    batch.push(filterjit::Expr::binary(
+        filterjit::lang::BinaryOp::Mul,
+        parse_expr("distance2(color)").unwrap(),
+        filterjit::Expr::Const(1e20),
+    ));
+    let with_bad = evaluator.evaluate(&batch).unwrap();
+    assert_eq!(with_bad[..exprs.len()], fitness[..], "the others are scored as before");
+    let bad = &with_bad[exprs.len()];
+    assert_eq!(bad.value, filterjit::gp::WORST);
+    assert!(bad.invalid.as_deref().unwrap().contains("does not compile"), "{bad:?}");
     assert_eq!(fitness[0].value, filterjit::gp::WORST);
     assert!(fitness[0].invalid.as_deref().unwrap().contains("sqrt"), "{:?}", fitness[0]);
     assert!(fitness[1].invalid.is_none() && fitness[1].value < 1.0, "{:?}", fitness[1]);

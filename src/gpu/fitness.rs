@@ -56,6 +56,13 @@ impl FitnessScene {
     }
 }
 
+/// A full evaluation, or one workgroup per kernel to make the driver compile.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Pass {
+    Prime,
+    Full,
+}
+
 impl Gpu {
     /// Create the pipelines of `kernels` on up to `threads` threads (cache hits are free).
     pub fn prepare_pipelines(&self, kernels: &[&ValidatedKernel], threads: usize) -> Result<(), GpuError> {
@@ -82,6 +89,33 @@ impl Gpu {
         scenes: &mut [FitnessScene],
         data: &[&Scene],
         radius: u32,
+    ) -> Result<Vec<Vec<SceneError>>, GpuError> {
+        self.run_fitness(kernels, scenes, data, radius, Pass::Full)
+    }
+
+    /// One workgroup of every kernel on the first scene, results discarded:
+    /// drivers that compile a pipeline at its first dispatch (Mesa's
+    /// lavapipe and llvmpipe) do it here, so that the time of this call is
+    /// the driver's compile and [`Gpu::evaluate_fitness`] afterwards is the
+    /// evaluation alone. It changes no result.
+    pub fn prime_fitness(
+        &self,
+        kernels: &[&ValidatedKernel],
+        scenes: &mut [FitnessScene],
+        data: &[&Scene],
+        radius: u32,
+    ) -> Result<(), GpuError> {
+        let first = scenes.len().min(1);
+        self.run_fitness(kernels, &mut scenes[..first], &data[..first], radius, Pass::Prime).map(|_| ())
+    }
+
+    fn run_fitness(
+        &self,
+        kernels: &[&ValidatedKernel],
+        scenes: &mut [FitnessScene],
+        data: &[&Scene],
+        radius: u32,
+        run: Pass,
     ) -> Result<Vec<Vec<SceneError>>, GpuError> {
         assert_eq!(scenes.len(), data.len(), "one FitnessScene per Scene");
         for k in kernels {
@@ -158,7 +192,7 @@ impl Gpu {
                 let offset = offsets[k * scenes.len() + s] * 4;
                 let size = std::num::NonZeroU64::new(fs.groups() * 4);
                 let partial = |buffer| wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size });
-                for (params, rows) in &bands[s] {
+                for (params, rows) in bands[s].iter().take(if run == Pass::Prime { 1 } else { usize::MAX }) {
                     let bind_group = self.bind_group(pipeline, &kernel.source().interface, |role| match role {
                         Role::Params => params.as_entire_binding(),
                         Role::Color => fs.buffers.color.as_entire_binding(),
@@ -172,7 +206,11 @@ impl Gpu {
                             .begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
                         pass.set_pipeline(&pipeline.pipeline);
                         pass.set_bind_group(0, &bind_group, &[]);
-                        pass.dispatch_workgroups(fs.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
+                        let groups = match run {
+                            Pass::Prime => (1, 1),
+                            Pass::Full => (fs.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1])),
+                        };
+                        pass.dispatch_workgroups(groups.0, groups.1, 1);
                     }
                     pending += 1;
                     if pending == DISPATCHES_PER_SUBMISSION {
@@ -182,6 +220,14 @@ impl Gpu {
                     }
                 }
             }
+        }
+        if run == Pass::Prime {
+            self.queue().submit([encoder.finish()]);
+            self.wait("compiling fitness kernels")?;
+            if let Some(error) = pollster::block_on(scope.pop()) {
+                return Err(GpuError::Runtime { during: "compiling fitness kernels", message: error.to_string() });
+            }
+            return Ok(Vec::new());
         }
         encoder.copy_buffer_to_buffer(&partials, 0, &staging, 0, total * 4);
         encoder.copy_buffer_to_buffer(&partial_flags, 0, &staging, total * 4, total * 4);

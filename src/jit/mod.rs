@@ -47,19 +47,24 @@ pub fn compile_all_with(
     options: LowerOptions,
     threads: usize,
 ) -> Result<Vec<ValidatedKernel>, CompileError> {
+    compile_each_with(exprs, kind, options, threads).into_iter().collect()
+}
+
+/// Lower and validate many expressions on up to `threads` threads, each on
+/// its own: one that fails does not stop the others. Results in order.
+pub fn compile_each_with(
+    exprs: &[crate::lang::Expr],
+    kind: KernelKind,
+    options: LowerOptions,
+    threads: usize,
+) -> Vec<Result<ValidatedKernel, CompileError>> {
     let chunk = exprs.len().div_ceil(threads.max(1)).max(1);
     std::thread::scope(|s| {
         let handles: Vec<_> = exprs
             .chunks(chunk)
-            .map(|part| {
-                s.spawn(move || part.iter().map(|e| compile_with(e, kind, options)).collect::<Result<Vec<_>, _>>())
-            })
+            .map(|part| s.spawn(move || part.iter().map(|e| compile_with(e, kind, options)).collect::<Vec<_>>()))
             .collect();
-        let mut out = Vec::with_capacity(exprs.len());
-        for h in handles {
-            out.extend(h.join().expect("compile thread panicked")?);
-        }
-        Ok(out)
+        handles.into_iter().flat_map(|h| h.join().expect("compile thread panicked")).collect()
     })
 }
 
