@@ -130,27 +130,28 @@ impl<'g> GpuEvaluator<'g> {
                     let data = &data;
                     s.spawn(move || {
                         // The driver's compile first, timed on its own (software drivers compile here).
-                        let primed = Instant::now();
-                        device.prime_fitness(part, scenes, data, radius)?;
-                        let primed = primed.elapsed();
-                        let out = device.evaluate_fitness(part, scenes, data, radius);
+                        let start = Instant::now();
+                        let out = device.prime_fitness(part, scenes, data, radius).and_then(|()| {
+                            let primed = start.elapsed();
+                            Ok((primed, device.evaluate_fitness(part, scenes, data, radius)?))
+                        });
                         // Each generation's kernels are new: the memo keeps their fitness, not their pipelines.
                         device.prune_pipelines(|_| false);
-                        Ok((primed, out?))
+                        out
                     })
                 })
                 .collect();
             handles.into_iter().map(|h| h.join().expect("evaluation thread panicked")).collect()
         });
         // Devices work in parallel: the slowest one's compile is the batch's.
-        let driver_compile = results.iter().filter_map(|r| r.as_ref().ok().map(|(t, _)| *t)).max().unwrap_or_default();
-        self.time.compile += compiled + driver_compile;
-        let results: Vec<Result<Vec<Vec<crate::gpu::FitnessError>>, crate::gpu::GpuError>> =
-            results.into_iter().map(|r| r.map(|(_, out)| out)).collect();
+        let mut driver_compile = Duration::ZERO;
         let mut evaluated = Vec::with_capacity(refs.len());
         for r in results {
-            evaluated.extend(r?);
+            let (primed, out) = r?;
+            driver_compile = driver_compile.max(primed);
+            evaluated.extend(out);
         }
+        self.time.compile += compiled + driver_compile;
         let mut evaluated = evaluated.into_iter();
         let out = unsupported
             .into_iter()

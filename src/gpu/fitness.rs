@@ -157,12 +157,6 @@ impl Gpu {
         };
         let partials = make("partials", wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
         let partial_flags = make("partial flags", wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
-        let staging = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("fitness readback"),
-            size: total * 8,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
 
         // Parameters per scene and band, shared by every kernel.
         let bands: Vec<Vec<(wgpu::Buffer, u32)>> = scenes
@@ -229,6 +223,12 @@ impl Gpu {
             }
             return Ok(Vec::new());
         }
+        let staging = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("fitness readback"),
+            size: total * 8,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
         encoder.copy_buffer_to_buffer(&partials, 0, &staging, 0, total * 4);
         encoder.copy_buffer_to_buffer(&partial_flags, 0, &staging, total * 4, total * 4);
         let bytes = self.finish_and_read(encoder, scope, "evaluating fitness", &staging)?;

@@ -224,9 +224,7 @@ impl Gpu {
             None => Ok(Pipeline { pipeline, layout, slots: validated.slots().iter().map(|s| s.slot).collect() }),
         }
     }
-}
 
-impl Gpu {
     /// The bind group of one dispatch of a kernel: every binding of its
     /// interface, filled by role.
     pub(crate) fn bind_group<'b>(
@@ -246,9 +244,7 @@ impl Gpu {
             entries: &entries,
         })
     }
-}
 
-impl Gpu {
     /// The bind group of a module that is not a filterjit kernel (path
     /// tracer, interpreter): `resources` in the order of its slots.
     pub(crate) fn bind_in_slot_order(

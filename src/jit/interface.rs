@@ -88,23 +88,16 @@ pub struct Binding {
 impl Binding {
     /// The WGSL declaration of this binding.
     pub fn declaration(&self) -> String {
-        let ty = match self.resource {
-            Resource::Uniform => {
-                return format!("@group(0) @binding({}) var<uniform> {}: Params;", self.slot, self.ident)
+        let (space, ty) = match self.resource {
+            Resource::Uniform => ("<uniform>", "Params".to_string()),
+            Resource::Storage { element, writable: false } => ("<storage, read>", format!("array<{}>", element.wgsl())),
+            Resource::Storage { element, writable: true } => {
+                ("<storage, read_write>", format!("array<{}>", element.wgsl()))
             }
-            Resource::Storage { element, writable } => {
-                let access = if writable { "read_write" } else { "read" };
-                return format!(
-                    "@group(0) @binding({}) var<storage, {access}> {}: array<{}>;",
-                    self.slot,
-                    self.ident,
-                    element.wgsl()
-                );
-            }
-            Resource::SampledTexture => "texture_2d<f32>".to_string(),
-            Resource::StorageTexture(format) => format!("texture_storage_2d<{}, write>", format.wgsl()),
+            Resource::SampledTexture => ("", "texture_2d<f32>".to_string()),
+            Resource::StorageTexture(format) => ("", format!("texture_storage_2d<{}, write>", format.wgsl())),
         };
-        format!("@group(0) @binding({}) var {}: {ty};", self.slot, self.ident)
+        format!("@group(0) @binding({}) var{space} {}: {ty};", self.slot, self.ident)
     }
 }
 
@@ -175,58 +168,39 @@ impl BindingInterface {
     /// flags, then the inputs in `layout` order, then (fitness) the reference.
     pub fn of(kind: KernelKind, layout: &KernelLayout) -> BindingInterface {
         let textures = matches!(kind, KernelKind::Export(_));
-        let mut roles: Vec<(Role, Resource, String)> = Vec::new();
-        roles.push((Role::Params, Resource::Uniform, "params".into()));
-        let colour = if textures {
-            Resource::SampledTexture
-        } else {
-            Resource::Storage { element: Element::Vec4F32, writable: false }
+        // What the kernel reads: textures in exported shaders, storage buffers in filterjit's own.
+        let prefix = if textures { "tex_" } else { "buf_" };
+        let read = |element| {
+            if textures {
+                Resource::SampledTexture
+            } else {
+                Resource::Storage { element, writable: false }
+            }
         };
-        roles.push((Role::Color, colour, if textures { "tex_color" } else { "buf_color" }.into()));
+        let written = |element| Resource::Storage { element, writable: true };
+        let mut roles: Vec<(Role, Resource, String)> = vec![
+            (Role::Params, Resource::Uniform, "params".into()),
+            (Role::Color, read(Element::Vec4F32), format!("{prefix}color")),
+        ];
         match kind {
             KernelKind::Filter | KernelKind::Probe => {
-                roles.push((
-                    Role::Output,
-                    Resource::Storage { element: Element::Vec4F32, writable: true },
-                    "buf_out".into(),
-                ));
-                roles.push((
-                    Role::Flags,
-                    Resource::Storage { element: Element::U32, writable: true },
-                    "buf_flags".into(),
-                ));
+                roles.push((Role::Output, written(Element::Vec4F32), "buf_out".into()));
+                roles.push((Role::Flags, written(Element::U32), "buf_flags".into()));
             }
             KernelKind::Fitness => {
-                roles.push((
-                    Role::Output,
-                    Resource::Storage { element: Element::F32, writable: true },
-                    "buf_partials".into(),
-                ));
-                roles.push((
-                    Role::Flags,
-                    Resource::Storage { element: Element::U32, writable: true },
-                    "buf_partial_flags".into(),
-                ));
+                roles.push((Role::Output, written(Element::F32), "buf_partials".into()));
+                roles.push((Role::Flags, written(Element::U32), "buf_partial_flags".into()));
             }
             KernelKind::Export(format) => {
-                roles.push((Role::Output, Resource::StorageTexture(format), "tex_out".into()));
+                roles.push((Role::Output, Resource::StorageTexture(format), "tex_out".into()))
             }
         }
         for input in &layout.inputs {
-            let resource = if textures {
-                Resource::SampledTexture
-            } else {
-                Resource::Storage { element: Element::of_input(*input), writable: false }
-            };
-            let prefix = if textures { "tex_" } else { "buf_" };
-            roles.push((Role::Input(*input), resource, format!("{prefix}{}", input.describe().to_ascii_lowercase())));
+            let ident = format!("{prefix}{}", input.describe().to_ascii_lowercase());
+            roles.push((Role::Input(*input), read(Element::of_input(*input)), ident));
         }
         if kind == KernelKind::Fitness {
-            roles.push((
-                Role::Reference,
-                Resource::Storage { element: Element::Vec4F32, writable: false },
-                "buf_reference".into(),
-            ));
+            roles.push((Role::Reference, read(Element::Vec4F32), "buf_reference".into()));
         }
         let bindings = roles
             .into_iter()
