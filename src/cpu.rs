@@ -2,6 +2,7 @@
 //! with the semantics of [`crate::semantics`]. Slow and simple on purpose.
 
 use crate::lang::{Expr, Feature, ScalarVar};
+use crate::pipeline::{self, FilterPipeline, Form};
 use crate::scene::Scene;
 use crate::semantics;
 
@@ -84,23 +85,40 @@ pub fn check_inputs(expr: &Expr, scene: &Scene) -> Result<(), MissingData> {
 /// Filter `scene` with weight expression `expr` over a (2r+1)² window.
 pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, MissingData> {
     check_inputs(expr, scene)?;
-    let (w, h, r) = (scene.width as i64, scene.height as i64, radius as i64);
+    let r = radius as i64;
+    let offsets: Vec<(i64, i64, f64)> = (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (dx, dy, 1.0))).collect();
+    Ok(pass(expr, scene, &offsets, false).0)
+}
+
+/// One pass over `offsets` (dx, dy, stencil weight): every pixel's weighted
+/// mean of its neighbours inside the image, and with `carry_variance` the
+/// colour variance of that mean, Σ w² v_j / (Σ w)² (SVGF's rule).
+fn pass(expr: &Expr, scene: &Scene, offsets: &[(i64, i64, f64)], carry_variance: bool) -> (CpuFiltered, Vec<f64>) {
+    let (w, h) = (scene.width as i64, scene.height as i64);
+    let variance = carry_variance.then(|| scene.variance(ScalarVar::ColorVariance).expect("checked before filtering"));
     let mut color = Vec::with_capacity(scene.pixels());
     let mut flags = Vec::with_capacity(scene.pixels());
+    let mut carried = Vec::with_capacity(if carry_variance { scene.pixels() } else { 0 });
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
             let mut pixel_flags = 0u32;
-            let (mut sum_w, mut sum_c) = (Neumaier::default(), [Neumaier::default(); 3]);
-            for yj in (y - r).max(0)..=(y + r).min(h - 1) {
-                for xj in (x - r).max(0)..=(x + r).min(w - 1) {
-                    let j = (yj * w + xj) as usize;
-                    let px = Pixels { scene, i, j, width: scene.width };
-                    let weight = semantics::weight(eval(expr, &px, &mut pixel_flags));
-                    sum_w.add(weight);
-                    for (sum, c) in sum_c.iter_mut().zip(scene.color[j]) {
-                        sum.add(weight * c as f64);
-                    }
+            let (mut sum_w, mut sum_c, mut sum_wwv) =
+                (Neumaier::default(), [Neumaier::default(); 3], Neumaier::default());
+            for &(dx, dy, stencil) in offsets {
+                let (xj, yj) = (x + dx, y + dy);
+                if xj < 0 || yj < 0 || xj >= w || yj >= h {
+                    continue;
+                }
+                let j = (yj * w + xj) as usize;
+                let px = Pixels { scene, i, j, width: scene.width };
+                let weight = stencil * semantics::weight(eval(expr, &px, &mut pixel_flags));
+                sum_w.add(weight);
+                for (sum, c) in sum_c.iter_mut().zip(scene.color[j]) {
+                    sum.add(weight * c as f64);
+                }
+                if let Some(v) = variance {
+                    sum_wwv.add(weight * weight * v[j] as f64);
                 }
             }
             let centre = scene.color[i];
@@ -110,10 +128,114 @@ pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, Mi
             } else {
                 [centre[0] as f64, centre[1] as f64, centre[2] as f64]
             });
+            if let Some(v) = variance {
+                carried.push(if sum_w > 0.0 { sum_wwv.total() / (sum_w * sum_w) } else { v[i] as f64 });
+            }
             flags.push(pixel_flags);
         }
     }
-    Ok(CpuFiltered { color, flags })
+    (CpuFiltered { color, flags }, carried)
+}
+
+/// What the pre-pass hands the form: the colour it filters, and the factor
+/// remodulation multiplies the result by (with demodulation).
+#[derive(Clone, Debug)]
+pub struct Prepared {
+    /// Stored as f32, as on the device.
+    pub color: Vec<[f32; 3]>,
+    pub modulation: Option<Vec<[f32; 3]>>,
+}
+
+/// The pre-pass of `pipeline` (outliers, then demodulation) on `scene`'s colour.
+pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, MissingData> {
+    let (w, h) = (scene.width as i64, scene.height as i64);
+    let f64s = |c: [f32; 3]| c.map(|v| v as f64);
+    let modulation = match (pipeline.demodulate, &scene.albedo) {
+        (false, _) => None,
+        (true, Some(albedo)) => Some(albedo.iter().map(|a| pipeline::modulation(f64s(*a))).collect::<Vec<_>>()),
+        (true, None) => return Err(MissingData { scene: scene.name.clone(), name: "albedo (for demodulate)".into() }),
+    };
+    let r = pipeline::OUTLIER_RADIUS as i64;
+    let mut color = Vec::with_capacity(scene.pixels());
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let mut c = f64s(scene.color[i]);
+            if let Some(pipeline::Outliers { k }) = pipeline.outliers {
+                let neighbours: Vec<f64> = (y - r..=y + r)
+                    .flat_map(|yj| (x - r..=x + r).map(move |xj| (xj, yj)))
+                    .filter(|&(xj, yj)| (xj, yj) != (x, y) && xj >= 0 && yj >= 0 && xj < w && yj < h)
+                    .map(|(xj, yj)| pipeline::luminance(f64s(scene.color[(yj * w + xj) as usize])))
+                    .collect();
+                if !neighbours.is_empty() {
+                    let n = neighbours.len() as f64;
+                    let mean = neighbours.iter().sum::<f64>() / n;
+                    let std = (neighbours.iter().map(|l| (l - mean) * (l - mean)).sum::<f64>() / n).sqrt();
+                    let limit = mean + k as f64 * std;
+                    let l = pipeline::luminance(c);
+                    if l > limit {
+                        c = c.map(|v| v * (limit / l));
+                    }
+                }
+            }
+            if let Some(m) = &modulation {
+                c = [c[0] / m[i][0], c[1] / m[i][1], c[2] / m[i][2]];
+            }
+            color.push(c.map(|v| v as f32));
+        }
+    }
+    let modulation = modulation.map(|m| m.into_iter().map(|v| v.map(|x| x as f32)).collect());
+    Ok(Prepared { color, modulation })
+}
+
+/// Filter `scene` with `expr` through the whole `pipeline` (docs/SEMANTICS.md,
+/// "The pipeline"); `radius` is the window form's. Images between stages and
+/// passes are stored as f32, as on the device; each stage computes in f64.
+pub fn filter_pipeline(
+    expr: &Expr,
+    scene: &Scene,
+    pipeline: &FilterPipeline,
+    radius: u32,
+) -> Result<CpuFiltered, MissingData> {
+    check_inputs(expr, scene)?;
+    let prepared = prepass(scene, pipeline)?;
+    let mut working = scene.clone();
+    working.color = prepared.color;
+    let mut out = match pipeline.form {
+        Form::Window => filter(expr, &working, radius)?,
+        Form::Atrous { passes } => {
+            let carry = expr.variables().contains(&ScalarVar::ColorVariance);
+            let mut flags = vec![0u32; scene.pixels()];
+            let mut last = None;
+            for level in 0..passes {
+                let step = FilterPipeline::step(level) as i64;
+                let half = pipeline::ATROUS_HALF_WIDTH as i64;
+                let offsets: Vec<(i64, i64, f64)> = (-half..=half)
+                    .flat_map(|dy| {
+                        (-half..=half).map(move |dx| {
+                            (dx * step, dy * step, pipeline::stencil(dx as i32) * pipeline::stencil(dy as i32))
+                        })
+                    })
+                    .collect();
+                let (filtered, variance) = pass(expr, &working, &offsets, carry);
+                for (a, b) in flags.iter_mut().zip(&filtered.flags) {
+                    *a |= b;
+                }
+                working.color = filtered.color.iter().map(|c| c.map(|v| v as f32)).collect();
+                if carry {
+                    working.variances.insert(ScalarVar::ColorVariance, variance.iter().map(|v| *v as f32).collect());
+                }
+                last = Some(filtered.color);
+            }
+            CpuFiltered { color: last.expect("at least one pass"), flags }
+        }
+    };
+    if let Some(m) = &prepared.modulation {
+        for (c, m) in out.color.iter_mut().zip(m) {
+            *c = [c[0] * m[0] as f64, c[1] * m[1] as f64, c[2] * m[2] as f64];
+        }
+    }
+    Ok(out)
 }
 
 /// Neumaier's compensated sum: the reference keeps its sums exact to about

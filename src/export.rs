@@ -265,7 +265,9 @@ fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entr
                     let components = if input.components() == 1 { "x" } else { "xyz" };
                     (input.describe(), components, content(input), Some(scale_index - 1))
                 }
-                Role::Flags | Role::Reference => unreachable!("exported shaders bind no {:?}", b.role),
+                Role::Flags | Role::Reference | Role::Modulation | Role::VarianceOut | Role::Image => {
+                    unreachable!("exported shaders bind no {:?}", b.role)
+                }
             };
             Binding {
                 group: 0,

@@ -15,6 +15,7 @@ pub mod io;
 pub mod jit;
 pub mod lang;
 pub mod metrics;
+pub mod pipeline;
 pub mod preview;
 pub mod render;
 pub mod report;

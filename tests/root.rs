@@ -7,6 +7,7 @@ mod evolve;
 mod export;
 mod gpu_vs_cpu;
 mod lang;
+mod pipeline;
 mod render;
 mod report;
 mod scenes;

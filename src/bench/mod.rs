@@ -417,8 +417,9 @@ pub fn run(
     let handwritten = jit::validate(KernelSource {
         kind: KernelKind::Filter,
         options: LowerOptions::NONE,
+        shape: jit::Shape::WINDOW,
         canonical: "<hand-written bilateral>".into(),
-        interface: jit::BindingInterface::of(KernelKind::Filter, &layout),
+        interface: jit::BindingInterface::of(KernelKind::Filter, &layout, jit::Shape::WINDOW),
         layout,
         tile_radius: None,
         expr: bilateral.clone(),

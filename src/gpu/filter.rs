@@ -6,7 +6,9 @@ use std::time::{Duration, Instant};
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, PipelineTiming};
-use crate::jit::{Input, Params, Role, ValidatedKernel, WORKGROUP};
+use crate::jit::{AtrousParams, Input, Params, Role, Shape, ValidatedKernel, WORKGROUP};
+use crate::lang::ScalarVar;
+use crate::pipeline::FilterPipeline;
 use crate::scene::Scene;
 
 /// Upper bound on weight evaluations in one dispatch. Large images and radii
@@ -14,12 +16,47 @@ use crate::scene::Scene;
 /// trip a GPU watchdog (Windows resets a GPU after about 2 s).
 pub const MAX_WEIGHTS_PER_DISPATCH: u64 = 1 << 22;
 
-/// A scene's data on the device. Inputs are uploaded when a kernel first needs them.
+/// A scene's data on the device, prepared for one filter pipeline: `color` is
+/// what the pipeline's form filters (after its pre-pass). Inputs are uploaded
+/// when a kernel first needs them.
 pub struct SceneBuffers {
-    width: u32,
-    height: u32,
+    pub(super) width: u32,
+    pub(super) height: u32,
     pub(super) color: wgpu::Buffer,
     pub(super) inputs: HashMap<Input, wgpu::Buffer>,
+    pub(super) pipeline: FilterPipeline,
+    /// What remodulation multiplies by (pipelines that demodulate).
+    pub(super) modulation: Option<wgpu::Buffer>,
+    /// Ping-pong images and carried variances of the à-trous passes.
+    pub(super) scratch: Option<Scratch>,
+}
+
+/// Intermediate images of the à-trous passes; they never leave the device.
+pub(super) struct Scratch {
+    pub(super) images: [wgpu::Buffer; 2],
+    pub(super) variances: [wgpu::Buffer; 2],
+}
+
+impl SceneBuffers {
+    /// The buffers of pass `level`'s dispatch, by role: what it reads (the
+    /// previous pass's image and variance, or the scene's for pass 0) and
+    /// what it writes.
+    pub(super) fn pass_resource(&self, role: Role, level: u32) -> Option<wgpu::BindingResource<'_>> {
+        let scratch = self.scratch.as_ref();
+        let (read, write) = ((level as usize + 1) % 2, level as usize % 2);
+        Some(match role {
+            Role::Color if level > 0 => scratch?.images[read].as_entire_binding(),
+            Role::Color => self.color.as_entire_binding(),
+            Role::Input(Input::Variance(ScalarVar::ColorVariance)) if level > 0 => {
+                scratch?.variances[read].as_entire_binding()
+            }
+            Role::Input(input) => self.inputs.get(&input)?.as_entire_binding(),
+            Role::Modulation => self.modulation.as_ref()?.as_entire_binding(),
+            Role::VarianceOut => scratch?.variances[write].as_entire_binding(),
+            Role::Image => scratch?.images[write].as_entire_binding(),
+            _ => return None,
+        })
+    }
 }
 
 /// Result of a filter dispatch.
@@ -53,15 +90,72 @@ impl Filtered {
 }
 
 impl SceneBuffers {
-    /// Upload the scene's colour.
+    /// Upload the scene's colour, for the thesis's filter (no pre-pass, one window).
     pub fn new(gpu: &Gpu, scene: &Scene) -> Self {
-        let rgba: Vec<[f32; 4]> = scene.color.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
+        Self::for_pipeline(gpu, scene, &FilterPipeline::WINDOW).expect("the window pipeline has no pre-pass to fail")
+    }
+
+    /// Upload the scene's colour and run `pipeline`'s pre-pass on the device.
+    pub fn for_pipeline(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
+        let rgba = |c: &[[f32; 3]]| -> Vec<[f32; 4]> { c.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect() };
         let color = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("color"),
-            contents: bytemuck::cast_slice(&rgba),
+            contents: bytemuck::cast_slice(&rgba(&scene.color)),
             usage: wgpu::BufferUsages::STORAGE,
         });
-        SceneBuffers { width: scene.width as u32, height: scene.height as u32, color, inputs: HashMap::new() }
+        let (width, height) = (scene.width as u32, scene.height as u32);
+        let (color, modulation) = if pipeline.has_prepass() {
+            let albedo = match (&scene.albedo, pipeline.demodulate) {
+                (Some(albedo), true) => Some(rgba(albedo)),
+                (None, true) => {
+                    return Err(GpuError::Runtime {
+                        during: "demodulating",
+                        message: format!("scene `{}` was loaded without its albedo", scene.name),
+                    })
+                }
+                (_, false) => None,
+            };
+            let (prepared, modulation) = gpu.prepass(pipeline, &color, albedo.as_deref(), width, height)?;
+            (prepared, pipeline.demodulate.then_some(modulation))
+        } else {
+            (color, None)
+        };
+        let scratch = pipeline.is_atrous().then(|| {
+            let make = |label, bytes| {
+                gpu.device().create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: (width * height) as u64 * bytes,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                    mapped_at_creation: false,
+                })
+            };
+            Scratch {
+                images: [make("a-trous image", 16), make("a-trous image", 16)],
+                variances: [make("a-trous variance", 4), make("a-trous variance", 4)],
+            }
+        });
+        Ok(SceneBuffers { width, height, color, inputs: HashMap::new(), pipeline: *pipeline, modulation, scratch })
+    }
+
+    /// The pipeline these buffers were prepared for.
+    pub fn pipeline(&self) -> &FilterPipeline {
+        &self.pipeline
+    }
+
+    /// A kernel runs on buffers prepared for a pipeline of its shape.
+    pub(super) fn check_shape(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
+        let (wanted, got) = (Shape::of(&self.pipeline), kernel.source().shape);
+        if kernel.source().kind == crate::jit::KernelKind::Probe || wanted == got {
+            return Ok(());
+        }
+        Err(GpuError::Runtime {
+            during: "binding inputs",
+            message: format!(
+                "the kernel for `{}` has shape {got:?}, but the scene was prepared for pipeline `{}`",
+                kernel.source().canonical,
+                self.pipeline
+            ),
+        })
     }
 
     pub(super) fn ensure(&mut self, gpu: &Gpu, scene: &Scene, input: Input) -> Result<(), GpuError> {
@@ -93,6 +187,22 @@ impl SceneBuffers {
     }
 }
 
+/// The uniform of one dispatch: [`Params`], and for à-trous kernels the pass.
+pub(super) fn uniform_bytes(atrous: bool, base: Params, level: u32, passes: u32) -> Vec<u8> {
+    if atrous {
+        let p = AtrousParams {
+            base,
+            step: FilterPipeline::step(level),
+            level,
+            last: u32::from(level + 1 == passes),
+            _pad: 0,
+        };
+        bytemuck::bytes_of(&p).to_vec()
+    } else {
+        bytemuck::bytes_of(&base).to_vec()
+    }
+}
+
 /// Rows per dispatch for an image `width` wide filtered with `radius`: a
 /// multiple of the workgroup height, at least one workgroup.
 pub fn rows_per_dispatch(width: u32, radius: u32) -> u32 {
@@ -112,11 +222,14 @@ impl Gpu {
         radius: u32,
     ) -> Result<Filtered, GpuError> {
         super::check_radius(kernel, radius)?;
+        buffers.check_shape(kernel)?;
         let (pipeline, timing) = self.pipeline(kernel)?;
         let _turn = self.gl_turn();
         for (_, input) in kernel.source().interface.inputs() {
             buffers.ensure(self, scene, input)?;
         }
+        let atrous = kernel.source().shape.atrous;
+        let passes = if atrous { buffers.pipeline.passes() } else { 1 };
         let device = self.device();
         let pixels = (buffers.width * buffers.height) as u64;
         let out = device.create_buffer(&wgpu::BufferDescriptor {
@@ -139,38 +252,51 @@ impl Gpu {
         });
 
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let band = rows_per_dispatch(buffers.width, radius);
+        // An à-trous pass reads 5x5 taps, whatever their step.
+        let band =
+            rows_per_dispatch(buffers.width, if atrous { crate::pipeline::ATROUS_HALF_WIDTH as u32 } else { radius });
         let start = Instant::now();
         let mut dispatches = 0;
-        let mut row = 0;
-        while row < buffers.height {
-            let rows = band.min(buffers.height - row);
-            let params = Params { width: buffers.width, height: buffers.height, radius, row_offset: row };
-            let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("params"),
-                contents: bytemuck::bytes_of(&params),
-                usage: wgpu::BufferUsages::UNIFORM,
-            });
-            let bind_group = self.bind_group(&pipeline, &kernel.source().interface, |role| match role {
-                Role::Params => params.as_entire_binding(),
-                Role::Color => buffers.color.as_entire_binding(),
-                Role::Output => out.as_entire_binding(),
-                Role::Flags => flags.as_entire_binding(),
-                Role::Input(input) => buffers.inputs[&input].as_entire_binding(),
-                Role::Reference => unreachable!("filter kernels bind no reference"),
-            });
-            let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-            {
-                let mut pass =
-                    encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-                pass.set_pipeline(&pipeline.pipeline);
-                pass.set_bind_group(0, &bind_group, &[]);
-                pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
+        for level in 0..passes {
+            let mut row = 0;
+            while row < buffers.height {
+                let rows = band.min(buffers.height - row);
+                let params = uniform_bytes(
+                    atrous,
+                    Params { width: buffers.width, height: buffers.height, radius, row_offset: row },
+                    level,
+                    passes,
+                );
+                let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("params"),
+                    contents: &params,
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                let buffers = &*buffers;
+                let bind_group = self.bind_group(&pipeline, &kernel.source().interface, |role| match role {
+                    Role::Params => params.as_entire_binding(),
+                    // The filtered image: the last pass's goes to `out`, the others to the ping-pong images.
+                    Role::Output if atrous && level + 1 < passes => {
+                        buffers.pass_resource(Role::Image, level).expect("à-trous buffers")
+                    }
+                    Role::Output => out.as_entire_binding(),
+                    Role::Flags => flags.as_entire_binding(),
+                    Role::Reference | Role::Image => unreachable!("filter kernels bind no {role:?}"),
+                    role => buffers.pass_resource(role, level).expect("inputs are uploaded before binding"),
+                });
+                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+                {
+                    let mut pass = encoder
+                        .begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+                    pass.set_pipeline(&pipeline.pipeline);
+                    pass.set_bind_group(0, &bind_group, &[]);
+                    pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
+                }
+                self.queue().submit([encoder.finish()]);
+                self.wait("filtering")?;
+                dispatches += 1;
+                row += rows;
             }
-            self.queue().submit([encoder.finish()]);
-            self.wait("filtering")?;
-            dispatches += 1;
-            row += rows;
         }
         let dispatch = start.elapsed();
 

@@ -4,9 +4,10 @@
 
 use wgpu::util::DeviceExt;
 
-use super::filter::{rows_per_dispatch, SceneBuffers};
+use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
 use super::{Gpu, GpuError};
 use crate::jit::{KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
+use crate::pipeline::FilterPipeline;
 use crate::scene::Scene;
 
 /// Dispatches per submission: small enough to keep each submission short.
@@ -32,7 +33,13 @@ pub struct SceneError {
 }
 
 impl FitnessScene {
+    /// A scene for the thesis's filter (no pre-pass, one window).
     pub fn new(gpu: &Gpu, scene: &Scene) -> Result<Self, GpuError> {
+        Self::for_pipeline(gpu, scene, &FilterPipeline::WINDOW)
+    }
+
+    /// A scene prepared for `pipeline`: its pre-pass runs here, once.
+    pub fn for_pipeline(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
         let reference = scene.reference.as_ref().ok_or_else(|| GpuError::Runtime {
             during: "preparing fitness",
             message: format!("scene `{}` has no reference image", scene.name),
@@ -44,7 +51,7 @@ impl FitnessScene {
             usage: wgpu::BufferUsages::STORAGE,
         });
         Ok(FitnessScene {
-            buffers: SceneBuffers::new(gpu, scene),
+            buffers: SceneBuffers::for_pipeline(gpu, scene, pipeline)?,
             reference,
             width: scene.width as u32,
             height: scene.height as u32,
@@ -121,6 +128,9 @@ impl Gpu {
         for k in kernels {
             assert_eq!(k.source().kind, KernelKind::Fitness, "evaluate_fitness runs fitness kernels");
             super::check_radius(k, radius)?;
+            for fs in scenes.iter() {
+                fs.buffers.check_shape(k)?;
+            }
         }
         let device = self.device();
         let mut pipelines = Vec::with_capacity(kernels.len());
@@ -158,21 +168,25 @@ impl Gpu {
         let partials = make("partials", wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
         let partial_flags = make("partial flags", wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
 
-        // Parameters per scene and band, shared by every kernel.
-        let bands: Vec<Vec<(wgpu::Buffer, u32)>> = scenes
+        // Parameters per scene, pass and band, shared by every kernel: (uniform, level, rows).
+        let bands: Vec<Vec<(wgpu::Buffer, u32, u32)>> = scenes
             .iter()
             .map(|fs| {
-                let rows = rows_per_dispatch(fs.width, radius);
-                (0..fs.height)
-                    .step_by(rows as usize)
-                    .map(|row| {
-                        let params = Params { width: fs.width, height: fs.height, radius, row_offset: row };
+                let pipeline = fs.buffers.pipeline;
+                let atrous = pipeline.is_atrous();
+                let passes = pipeline.passes();
+                let reach = if atrous { crate::pipeline::ATROUS_HALF_WIDTH as u32 } else { radius };
+                let rows = rows_per_dispatch(fs.width, reach);
+                (0..passes)
+                    .flat_map(|level| (0..fs.height).step_by(rows as usize).map(move |row| (level, row)))
+                    .map(|(level, row)| {
+                        let base = Params { width: fs.width, height: fs.height, radius, row_offset: row };
                         let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                             label: Some("params"),
-                            contents: bytemuck::bytes_of(&params),
+                            contents: &uniform_bytes(atrous, base, level, passes),
                             usage: wgpu::BufferUsages::UNIFORM,
                         });
-                        (buffer, rows.min(fs.height - row))
+                        (buffer, level, rows.min(fs.height - row))
                     })
                     .collect()
             })
@@ -186,14 +200,13 @@ impl Gpu {
                 let offset = offsets[k * scenes.len() + s] * 4;
                 let size = std::num::NonZeroU64::new(fs.groups() * 4);
                 let partial = |buffer| wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size });
-                for (params, rows) in bands[s].iter().take(if run == Pass::Prime { 1 } else { usize::MAX }) {
+                for (params, level, rows) in bands[s].iter().take(if run == Pass::Prime { 1 } else { usize::MAX }) {
                     let bind_group = self.bind_group(pipeline, &kernel.source().interface, |role| match role {
                         Role::Params => params.as_entire_binding(),
-                        Role::Color => fs.buffers.color.as_entire_binding(),
                         Role::Output => partial(&partials),
                         Role::Flags => partial(&partial_flags),
-                        Role::Input(input) => fs.buffers.inputs[&input].as_entire_binding(),
                         Role::Reference => fs.reference.as_entire_binding(),
+                        role => fs.buffers.pass_resource(role, *level).expect("inputs are uploaded before binding"),
                     });
                     {
                         let mut pass = encoder

@@ -4,6 +4,7 @@
 pub mod adapter;
 mod filter;
 mod fitness;
+mod prepass;
 mod raw;
 mod trace;
 
@@ -64,6 +65,7 @@ pub struct Gpu {
     limits: wgpu::Limits,
     pipelines: Mutex<HashMap<KernelKey, Arc<Pipeline>>>,
     tracer: OnceLock<Pipeline>,
+    prepass: OnceLock<Pipeline>,
     /// wgpu's GL backend shares one context per device and panics when a
     /// thread waits more than a second for it (as it does while another
     /// thread waits for a long dispatch or links a large program). On GL,
@@ -111,6 +113,7 @@ impl Gpu {
             limits,
             pipelines: Mutex::new(HashMap::new()),
             tracer: OnceLock::new(),
+            prepass: OnceLock::new(),
             gl_turns,
         })
     }

@@ -8,7 +8,8 @@
 
 use serde::Serialize;
 
-use super::lower::{Input, KernelKind, KernelLayout, OutputFormat};
+use super::lower::{Input, KernelKind, KernelLayout, OutputFormat, Shape};
+use crate::lang::ScalarVar;
 
 /// What a binding is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -25,6 +26,12 @@ pub enum Role {
     Input(Input),
     /// The reference image (fitness).
     Reference,
+    /// The factor remodulation multiplies the result by (pipelines that demodulate).
+    Modulation,
+    /// The colour variance carried to the next à-trous pass (kernels that read `colorVariance`).
+    VarianceOut,
+    /// The image an à-trous fitness pass hands the next pass.
+    Image,
 }
 
 /// Element type of a storage buffer.
@@ -113,6 +120,20 @@ pub struct Params {
     pub row_offset: u32,
 }
 
+/// The uniform of an à-trous kernel: the [`Params`] header, then the pass.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct AtrousParams {
+    pub base: Params,
+    /// Pixel step between stencil taps: 2^level.
+    pub step: u32,
+    /// The pass index, from 0.
+    pub level: u32,
+    /// 1 in the last pass (which remodulates), else 0.
+    pub last: u32,
+    pub _pad: u32,
+}
+
 /// One field of the uniform, as an exported shader's manifest lists it.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize)]
 pub struct UniformField {
@@ -165,8 +186,11 @@ pub struct BindingInterface {
 impl BindingInterface {
     /// The interface of a `kind` kernel reading `layout`'s inputs: slot 0 the
     /// uniform, 1 the colour, 2 the output, then (except exported shaders) 3 the
-    /// flags, then the inputs in `layout` order, then (fitness) the reference.
-    pub fn of(kind: KernelKind, layout: &KernelLayout) -> BindingInterface {
+    /// flags, then the inputs in `layout` order, then (fitness) the reference;
+    /// then what the `shape` needs: the modulation (remodulating kernels), the
+    /// carried variance (à-trous kernels reading `colorVariance`) and the
+    /// pass's image (à-trous fitness kernels).
+    pub fn of(kind: KernelKind, layout: &KernelLayout, shape: Shape) -> BindingInterface {
         let textures = matches!(kind, KernelKind::Export(_));
         // What the kernel reads: textures in exported shaders, storage buffers in filterjit's own.
         let prefix = if textures { "tex_" } else { "buf_" };
@@ -202,6 +226,15 @@ impl BindingInterface {
         if kind == KernelKind::Fitness {
             roles.push((Role::Reference, read(Element::Vec4F32), "buf_reference".into()));
         }
+        if shape.remodulate {
+            roles.push((Role::Modulation, read(Element::Vec4F32), format!("{prefix}modulation")));
+        }
+        if shape.atrous && layout.inputs.contains(&Input::Variance(ScalarVar::ColorVariance)) {
+            roles.push((Role::VarianceOut, written(Element::F32), "buf_variance_out".into()));
+        }
+        if shape.atrous && kind == KernelKind::Fitness {
+            roles.push((Role::Image, written(Element::Vec4F32), "buf_image".into()));
+        }
         let bindings = roles
             .into_iter()
             .enumerate()
@@ -226,8 +259,14 @@ impl BindingInterface {
         } else {
             uniform.push(field("row_offset", "u32", 12, "first image row of this dispatch"));
         }
-        let uniform_bytes =
-            std::mem::size_of::<Params>() as u32 + if textures { 16 * layout.inputs.len() as u32 } else { 0 };
+        if shape.atrous {
+            uniform.push(field("step", "u32", 16, "pixel step between stencil taps: 2^level"));
+            uniform.push(field("level", "u32", 20, "the a-trous pass, from 0"));
+            uniform.push(field("last", "u32", 24, "1 in the last pass, else 0"));
+            uniform.push(field("_pad", "u32", 28, "unused"));
+        }
+        let header = if shape.atrous { std::mem::size_of::<AtrousParams>() } else { std::mem::size_of::<Params>() };
+        let uniform_bytes = header as u32 + if textures { 16 * layout.inputs.len() as u32 } else { 0 };
         BindingInterface { kind, bindings, uniform, uniform_bytes }
     }
 
@@ -315,17 +354,17 @@ mod tests {
         for kind in
             [KernelKind::Filter, KernelKind::Probe, KernelKind::Fitness, KernelKind::Export(OutputFormat::Rgba16float)]
         {
-            let interface = BindingInterface::of(kind, &layout);
+            let interface = BindingInterface::of(kind, &layout, Shape::WINDOW);
             for (k, b) in interface.bindings.iter().enumerate() {
                 assert_eq!(b.slot, k as u32, "{kind:?}");
                 assert_eq!(interface.bindings.iter().filter(|o| o.role == b.role).count(), 1, "{kind:?}");
             }
             assert_eq!(interface.inputs().count(), 2);
         }
-        let fitness = BindingInterface::of(KernelKind::Fitness, &layout);
+        let fitness = BindingInterface::of(KernelKind::Fitness, &layout, Shape::WINDOW);
         assert_eq!(fitness.slot(Role::Reference), 6);
         assert_eq!(fitness.storage_buffers(), 6);
-        let export = BindingInterface::of(KernelKind::Export(OutputFormat::Rgba16float), &layout);
+        let export = BindingInterface::of(KernelKind::Export(OutputFormat::Rgba16float), &layout, Shape::WINDOW);
         assert_eq!(export.binding(Role::Flags), None);
         assert_eq!(export.uniform_bytes, 16 + 32);
         assert_eq!(export.sampled_textures(), 3);

@@ -92,6 +92,31 @@ pub enum KernelKind {
     Export(OutputFormat),
 }
 
+/// What surrounds the weight in a kernel (`crate::pipeline`): whether it is
+/// one à-trous pass (dispatched once per pass with [`super::AtrousParams`])
+/// or the window, and whether the result is multiplied back by the albedo.
+/// The outlier and demodulation pre-pass is a kernel of its own (`jit::prepass`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub struct Shape {
+    pub atrous: bool,
+    pub remodulate: bool,
+}
+
+impl Shape {
+    /// The thesis's kernel: one window pass, nothing multiplied back.
+    pub const WINDOW: Shape = Shape { atrous: false, remodulate: false };
+
+    /// The kernel shape of a pipeline's form.
+    pub fn of(pipeline: &crate::pipeline::FilterPipeline) -> Shape {
+        Shape { atrous: pipeline.is_atrous(), remodulate: pipeline.demodulate }
+    }
+
+    /// A stable name, for cache keys.
+    pub fn encode(self) -> String {
+        format!("atrous={} remodulate={}", self.atrous, self.remodulate)
+    }
+}
+
 /// Texel format of an exported shader's output storage texture.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, clap::ValueEnum, Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -210,6 +235,7 @@ impl Default for LowerOptions {
 pub struct KernelSource {
     pub kind: KernelKind,
     pub options: LowerOptions,
+    pub shape: Shape,
     pub expr: Expr,
     /// The expression's canonical text.
     pub canonical: String,
@@ -228,6 +254,8 @@ pub enum LowerError {
     Literal(f64),
     #[error("kernel template failed to render: {0}")]
     Template(String),
+    #[error("{0:?} kernels have no à-trous or remodulating form")]
+    Shape(KernelKind),
 }
 
 /// Lower an expression to the WGSL source of its filter kernel.
@@ -242,16 +270,30 @@ pub fn lower_kind(expr: &Expr, kind: KernelKind) -> Result<KernelSource, LowerEr
 
 /// Lower with explicit optimisation switches.
 pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Result<KernelSource, LowerError> {
+    lower_shaped(expr, kind, options, Shape::WINDOW)
+}
+
+/// Lower a kernel of the given kind and shape.
+pub fn lower_shaped(
+    expr: &Expr,
+    kind: KernelKind,
+    options: LowerOptions,
+    shape: Shape,
+) -> Result<KernelSource, LowerError> {
     expr.validate().map_err(LowerError::Literal)?;
+    if shape != Shape::WINDOW && !matches!(kind, KernelKind::Filter | KernelKind::Fitness) {
+        return Err(LowerError::Shape(kind));
+    }
     let layout = KernelLayout::of(expr);
     let mut body = Body { options, ..Body::default() };
     let result = body.emit(expr);
     // Folding never turns a non-variance into a variance or back, so the unfolded root tells.
     let root_in_range = in_range(expr);
 
-    let interface = BindingInterface::of(kind, &layout);
+    let interface = BindingInterface::of(kind, &layout, shape);
     let loads = Loads::of(&interface);
-    let tile = options.tile_radius.and_then(|radius| Tile::plan(expr, &interface, radius));
+    // An à-trous pass reads taps 2^level apart: a workgroup's window is no tile.
+    let tile = options.tile_radius.filter(|_| !shape.atrous).and_then(|radius| Tile::plan(expr, &interface, radius));
     let neighbour_side = if tile.is_some() { Loads::Tiled } else { loads };
     let centre_lines: Vec<String> = centre_loads(expr, &loads).into_iter().chain(body.centre).collect();
     let neighbour_lines: Vec<String> = neighbour_side
@@ -307,9 +349,22 @@ pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Resul
         context.insert("output_format", format.wgsl());
     }
     context.insert("tile", &tile);
+    context.insert("atrous", &shape.atrous);
+    context.insert("remodulate", &shape.remodulate);
+    context.insert("shaped", &(shape != Shape::WINDOW));
+    let carried = Input::Variance(ScalarVar::ColorVariance);
+    let carry_variance = shape.atrous && layout.inputs.contains(&carried);
+    context.insert("carry_variance", &carry_variance);
+    if carry_variance {
+        context.insert("variance_ident", interface.ident(Role::Input(carried)));
+        context.insert("centre_variance", &var_ident(ScalarVar::ColorVariance));
+    }
+    context.insert("atrous_half", &crate::pipeline::ATROUS_HALF_WIDTH);
+    let stencil = crate::pipeline::ATROUS_STENCIL.map(wgsl_f32);
+    context.insert("stencil", &stencil);
     let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
     let tile_radius = tile.map(|t| t.radius);
-    Ok(KernelSource { kind, options, expr: expr.clone(), canonical, layout, interface, tile_radius, wgsl })
+    Ok(KernelSource { kind, options, shape, expr: expr.clone(), canonical, layout, interface, tile_radius, wgsl })
 }
 
 /// A workgroup tile: the (8 + 2r)² window of colour and neighbour features
@@ -471,6 +526,7 @@ fn templates() -> &'static tera::Tera {
         // Partials first: the kernel templates include them.
         tera.add_raw_templates([
             ("window.wgsl", include_str!("../../templates/window.wgsl.tera")),
+            ("atrous.wgsl", include_str!("../../templates/atrous.wgsl.tera")),
             ("tile_decl.wgsl", include_str!("../../templates/tile_decl.wgsl.tera")),
             ("tile_load.wgsl", include_str!("../../templates/tile_load.wgsl.tera")),
         ])

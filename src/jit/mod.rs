@@ -3,13 +3,15 @@
 
 pub mod interface;
 pub mod lower;
+pub mod prepass;
 pub mod validate;
 
-pub use interface::{Access, BindingInterface, Params, Role, Slot};
+pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot};
 pub use lower::{
-    lower, lower_kind, lower_with, Input, KernelKind, KernelLayout, KernelSource, LowerError, LowerOptions,
-    OutputFormat, TEMPLATE_VERSION, WORKGROUP,
+    lower, lower_kind, lower_shaped, lower_with, Input, KernelKind, KernelLayout, KernelSource, LowerError,
+    LowerOptions, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP,
 };
+pub use prepass::{prepass_module, prepass_wgsl, PrepassParams};
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 
 /// Lower and validate in one step.
@@ -50,6 +52,16 @@ pub fn compile_all_with(
     compile_each_with(exprs, kind, options, threads).into_iter().collect()
 }
 
+/// Lower and validate a kernel of the given kind and shape.
+pub fn compile_shaped(
+    expr: &crate::lang::Expr,
+    kind: KernelKind,
+    options: LowerOptions,
+    shape: Shape,
+) -> Result<ValidatedKernel, CompileError> {
+    Ok(validate(lower_shaped(expr, kind, options, shape)?)?)
+}
+
 /// Lower and validate many expressions on up to `threads` threads, each on
 /// its own: one that fails does not stop the others. Results in order.
 pub fn compile_each_with(
@@ -58,11 +70,24 @@ pub fn compile_each_with(
     options: LowerOptions,
     threads: usize,
 ) -> Vec<Result<ValidatedKernel, CompileError>> {
+    compile_each_shaped(exprs, kind, options, Shape::WINDOW, threads)
+}
+
+/// [`compile_each_with`] for kernels of a given shape.
+pub fn compile_each_shaped(
+    exprs: &[crate::lang::Expr],
+    kind: KernelKind,
+    options: LowerOptions,
+    shape: Shape,
+    threads: usize,
+) -> Vec<Result<ValidatedKernel, CompileError>> {
     let chunk = exprs.len().div_ceil(threads.max(1)).max(1);
     std::thread::scope(|s| {
         let handles: Vec<_> = exprs
             .chunks(chunk)
-            .map(|part| s.spawn(move || part.iter().map(|e| compile_with(e, kind, options)).collect::<Vec<_>>()))
+            .map(|part| {
+                s.spawn(move || part.iter().map(|e| compile_shaped(e, kind, options, shape)).collect::<Vec<_>>())
+            })
             .collect();
         handles.into_iter().flat_map(|h| h.join().expect("compile thread panicked")).collect()
     })

@@ -39,6 +39,7 @@ impl KernelKey {
             "filterjit-kernel".to_string(),
             TEMPLATE_VERSION.to_string(),
             source.kind.encode(),
+            source.shape.encode(),
             format!(
                 "fold={} cse={} hoist={} strength={} skip={} tile={}",
                 o.fold_constants,

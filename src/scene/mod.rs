@@ -24,6 +24,9 @@ pub enum SceneError {
              the expression needs it. Use an expression without it, or pass --absent zero to read it as 0",
             file.display(), provided.join(", "))]
     MissingFeature { scene: String, feature: String, layout: &'static str, file: PathBuf, provided: Vec<String> },
+    #[error("scene `{scene}` has no albedo ({layout} data from {} has no texture/albedo channels); \
+             demodulation divides by it: use a pipeline without `demodulate`", file.display())]
+    MissingAlbedo { scene: String, layout: &'static str, file: PathBuf },
     #[error("{}: image is {}x{}, but the noisy image {} is {}x{}", file.display(), size.0, size.1, noisy.display(), expected.0, expected.1)]
     SizeMismatch { file: PathBuf, size: (usize, usize), noisy: PathBuf, expected: (usize, usize) },
     #[error("{}: no noisy image here (expected {} or an .exr file)", path.display(), NOISY_FILE)]
@@ -70,6 +73,9 @@ pub struct Request {
     /// Overrides the samples per pixel of the noisy image.
     pub spp: Option<u32>,
     pub absent: Absent,
+    /// Load the raw albedo (the `texture` feature's channels, not normalised),
+    /// which demodulation divides by (`pipeline`).
+    pub albedo: bool,
 }
 
 impl Request {
@@ -93,6 +99,8 @@ pub struct Scene {
     pub reference: Option<Vec<[f32; 3]>>,
     pub features: BTreeMap<Feature, Vec<[f32; 3]>>,
     pub variances: BTreeMap<ScalarVar, Vec<f32>>,
+    /// The raw albedo (sanitised, not normalised), when the request asked for it.
+    pub albedo: Option<Vec<[f32; 3]>>,
     /// What loading did that a user should know: sanitised values, scales, absent features read as zero.
     pub notes: Vec<String>,
 }
@@ -115,6 +123,7 @@ impl Scene {
             reference: None,
             features: BTreeMap::new(),
             variances: BTreeMap::new(),
+            albedo: None,
             notes: Vec::new(),
         }
     }
@@ -251,6 +260,16 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
             feature_ranges.insert(base, range);
         }
     }
+    let albedo_range = if request.albedo {
+        let range = feature_ranges.get(&Feature::Texture).cloned().or_else(|| plan(layout.feature(Feature::Texture)));
+        Some(range.ok_or_else(|| SceneError::MissingAlbedo {
+            scene: files.name.clone(),
+            layout: layout.name(),
+            file: files.noisy.clone(),
+        })?)
+    } else {
+        None
+    };
     let mut variance_ranges = BTreeMap::new();
     let mut separate_variances = BTreeMap::new();
     for &v in &request.variances {
@@ -302,6 +321,15 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
     if bad > 0 {
         notes.push(format!("noisy colour: {bad} non-finite values replaced by 0"));
     }
+
+    let albedo = albedo_range.map(|range| {
+        let mut values = gather(&range);
+        let bad = preprocess::sanitize(values.as_flattened_mut(), f32::MAX);
+        if bad > 0 {
+            notes.push(format!("albedo: {bad} non-finite values replaced by 0"));
+        }
+        values
+    });
 
     let mut stored = BTreeMap::new();
     for &base in &bases {
@@ -409,6 +437,7 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
         reference,
         features,
         variances,
+        albedo,
         notes,
     })
 }

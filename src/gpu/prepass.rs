@@ -1,0 +1,94 @@
+//! The pipeline's pre-pass on the device (`jit::prepass`): one pipeline per
+//! device, run once per scene when its buffers are prepared.
+
+use std::sync::OnceLock;
+
+use wgpu::util::DeviceExt;
+
+use super::{Gpu, GpuError, Pipeline};
+use crate::jit::{PrepassParams, ValidatedModule, WORKGROUP};
+use crate::pipeline::FilterPipeline;
+
+fn module() -> Result<&'static ValidatedModule, GpuError> {
+    static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+    MODULE.get_or_init(|| crate::jit::prepass_module().map_err(|e| e.to_string())).as_ref().map_err(|message| {
+        GpuError::Pipeline { expression: "<pre-pass>".into(), message: message.clone(), wgsl: String::new() }
+    })
+}
+
+impl Gpu {
+    fn prepass_pipeline(&self) -> Result<&Pipeline, GpuError> {
+        if let Some(p) = self.prepass.get() {
+            return Ok(p);
+        }
+        let pipeline = self.create_pipeline(module()?, "filterjit pre-pass").map_err(|message| GpuError::Pipeline {
+            expression: "<pre-pass>".into(),
+            message,
+            wgsl: crate::jit::prepass_wgsl(),
+        })?;
+        Ok(self.prepass.get_or_init(|| pipeline))
+    }
+
+    /// Run `pipeline`'s pre-pass on `color` (RGBA per pixel; `albedo` the raw
+    /// albedo when demodulating): the colour the form filters, and the
+    /// modulation (1 without demodulation). Both stay on the device.
+    pub(super) fn prepass(
+        &self,
+        pipeline: &FilterPipeline,
+        color: &wgpu::Buffer,
+        albedo: Option<&[[f32; 4]]>,
+        width: u32,
+        height: u32,
+    ) -> Result<(wgpu::Buffer, wgpu::Buffer), GpuError> {
+        let kernel = self.prepass_pipeline()?;
+        let _turn = self.gl_turn();
+        let device = self.device();
+        let params = PrepassParams::of(pipeline, width, height);
+        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: Some("pre-pass params"),
+            contents: bytemuck::bytes_of(&params),
+            usage: wgpu::BufferUsages::UNIFORM,
+        });
+        let albedo = albedo.map(|a| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("albedo"),
+                contents: bytemuck::cast_slice(a),
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        });
+        let make = |label| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: (width * height) as u64 * 16,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        let (prepared, modulation) = (make("prepared colour"), make("modulation"));
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        // Without demodulation the albedo is never read: the colour stands in for it.
+        let bind_group = self.bind_in_slot_order(
+            kernel,
+            vec![
+                uniform.as_entire_binding(),
+                color.as_entire_binding(),
+                albedo.as_ref().unwrap_or(color).as_entire_binding(),
+                prepared.as_entire_binding(),
+                modulation.as_entire_binding(),
+            ],
+        );
+        let mut encoder = device.create_command_encoder(&Default::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&kernel.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
+        }
+        self.queue().submit([encoder.finish()]);
+        self.wait("running the pre-pass")?;
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "running the pre-pass", message: error.to_string() });
+        }
+        Ok((prepared, modulation))
+    }
+}

@@ -1,0 +1,51 @@
+//! The pipeline's pre-pass kernel (outliers, then demodulation): one module
+//! for every pipeline, its stages chosen by the uniform, rendered from
+//! `templates/prepass.wgsl.tera` with the constants `crate::pipeline` owns.
+
+use super::lower::{wgsl_f32, TEMPLATE_VERSION, WORKGROUP};
+use super::validate::{validate_module, ValidateError, ValidatedModule};
+use crate::pipeline::{self, FilterPipeline};
+
+/// The pre-pass's uniform (`struct PrepassParams`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct PrepassParams {
+    pub width: u32,
+    pub height: u32,
+    /// The outlier rule's k.
+    pub k: f32,
+    /// Bit 0: outliers; bit 1: demodulation.
+    pub stages: u32,
+}
+
+impl PrepassParams {
+    pub fn of(pipeline: &FilterPipeline, width: u32, height: u32) -> Self {
+        let outliers = pipeline.outliers.map_or(0, |_| 1);
+        let demodulate = if pipeline.demodulate { 2 } else { 0 };
+        PrepassParams { width, height, k: pipeline.outliers.map_or(0.0, |o| o.k), stages: outliers | demodulate }
+    }
+}
+
+/// Binding slots of the pre-pass, in order: uniform, colour, albedo, prepared colour, modulation.
+pub const PREPASS_SLOTS: usize = 5;
+
+/// The pre-pass's WGSL.
+pub fn prepass_wgsl() -> String {
+    let mut tera = tera::Tera::default();
+    tera.add_raw_template("prepass", include_str!("../../templates/prepass.wgsl.tera"))
+        .expect("built-in pre-pass template parses");
+    let mut context = tera::Context::new();
+    context.insert("crate_version", env!("CARGO_PKG_VERSION"));
+    context.insert("template_version", &TEMPLATE_VERSION);
+    context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
+    context.insert("outlier_radius", &pipeline::OUTLIER_RADIUS);
+    context.insert("albedo_floor", &wgsl_f32(pipeline::ALBEDO_FLOOR));
+    context.insert("workgroup_x", &WORKGROUP[0]);
+    context.insert("workgroup_y", &WORKGROUP[1]);
+    tera.render("prepass", &context).expect("built-in pre-pass template renders")
+}
+
+/// The pre-pass, validated by naga.
+pub fn prepass_module() -> Result<ValidatedModule, ValidateError> {
+    validate_module(&prepass_wgsl(), "<pre-pass>")
+}

@@ -1,0 +1,251 @@
+//! The filter pipeline around an evolved weight:
+//! `outliers → demodulate → form → remodulate` (docs/SEMANTICS.md, "The pipeline").
+//!
+//! The thesis filters once over a (2r+1)² window. On real renders three
+//! things around the weight matter as much as the weight: fireflies are
+//! smeared into blotches unless they are tamed first, texture blurs unless the
+//! albedo is divided out before filtering and multiplied back after, and a
+//! small window leaves low-frequency noise that an à-trous cascade (Dammertz
+//! et al. 2010; SVGF 2017) removes cheaply. [`FilterPipeline`] says which of
+//! these a filter uses; it is written as text (`outliers=2,demodulate,atrous=5`)
+//! in run settings and halls of fame, so that a stored filter is reproduced
+//! exactly as it was scored. This module owns the stages' constants; the CPU
+//! reference (`cpu::filter_pipeline`) and the kernels (`jit`) read them here.
+
+use std::fmt;
+use std::str::FromStr;
+
+/// Luminance weights (Rec. 709) of the outlier rule.
+pub const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
+
+/// The outlier rule compares a pixel with its (2R+1)² neighbourhood, itself excluded.
+pub const OUTLIER_RADIUS: u32 = 2;
+
+/// Demodulation divides by the albedo clipped to [0, 1] and raised to at
+/// least this, per channel: continuous, so that emitters and escaped rays
+/// (albedo 0) neither blow up nor lose their colour, and albedo above 1
+/// (Mitsuba's rough metals reach hundreds) does not darken.
+pub const ALBEDO_FLOOR: f64 = 0.1;
+
+/// The à-trous stencil: the 1-D B-spline weights h(0), h(±1), h(±2) of a 5×5
+/// pass (h(dx)·h(dy) multiplies the evolved weight).
+pub const ATROUS_STENCIL: [f64; 3] = [3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];
+
+/// Half-width of an à-trous pass's stencil, in steps.
+pub const ATROUS_HALF_WIDTH: i32 = 2;
+
+/// The largest number of à-trous passes (step 2^(passes-1) ≤ 2^15 pixels).
+pub const MAX_ATROUS_PASSES: u32 = 16;
+
+/// How the evolved weight is applied.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Form {
+    /// One pass over the (2r+1)² window (the thesis's filter); r is the run's radius.
+    Window,
+    /// `passes` passes of a 5×5 stencil with step 2^k in pass k, each filtering
+    /// the previous pass's output with the same kernel.
+    Atrous { passes: u32 },
+}
+
+/// What the outlier pre-pass does to each pixel (before demodulation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Outliers {
+    /// A pixel whose luminance exceeds its neighbours' mean + k·std is scaled down to it.
+    pub k: f32,
+}
+
+/// The whole pipeline of a filter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FilterPipeline {
+    pub outliers: Option<Outliers>,
+    pub demodulate: bool,
+    pub form: Form,
+}
+
+impl Default for FilterPipeline {
+    /// The thesis's filter: one window pass, no pre-pass.
+    fn default() -> Self {
+        FilterPipeline::WINDOW
+    }
+}
+
+impl FilterPipeline {
+    /// The thesis's filter: one window pass, no pre-pass.
+    pub const WINDOW: FilterPipeline = FilterPipeline { outliers: None, demodulate: false, form: Form::Window };
+
+    /// Whether a pre-pass changes the colour before the form runs.
+    pub fn has_prepass(&self) -> bool {
+        self.outliers.is_some() || self.demodulate
+    }
+
+    /// Number of passes of the form.
+    pub fn passes(&self) -> u32 {
+        match self.form {
+            Form::Window => 1,
+            Form::Atrous { passes } => passes,
+        }
+    }
+
+    /// Whether the form is the à-trous cascade.
+    pub fn is_atrous(&self) -> bool {
+        matches!(self.form, Form::Atrous { .. })
+    }
+
+    /// The pixel step of à-trous pass `level`.
+    pub fn step(level: u32) -> u32 {
+        1 << level
+    }
+}
+
+/// Text that is not a pipeline.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("pipeline `{text}`: {message} (write stages separated by commas, e.g. `outliers=2,demodulate,atrous=5` or `window`)")]
+pub struct PipelineError {
+    pub text: String,
+    pub message: String,
+}
+
+impl FromStr for FilterPipeline {
+    type Err = PipelineError;
+
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let error = |message: String| PipelineError { text: text.to_string(), message };
+        let mut pipeline = FilterPipeline::WINDOW;
+        let mut form_seen = false;
+        for stage in text.split(',').map(str::trim) {
+            let (name, value) = match stage.split_once('=') {
+                Some((n, v)) => (n.trim(), Some(v.trim())),
+                None => (stage, None),
+            };
+            if form_seen {
+                return Err(error(format!(
+                    "`{stage}` comes after the form; the form (window or atrous) is the last stage"
+                )));
+            }
+            match (name, value) {
+                ("outliers", Some(v)) => {
+                    let k: f32 = v.parse().map_err(|_| error(format!("outliers={v}: k must be a number")))?;
+                    if !(k.is_finite() && k >= 0.0) {
+                        return Err(error(format!("outliers={v}: k must be finite and at least 0")));
+                    }
+                    if pipeline.outliers.is_some() || pipeline.demodulate {
+                        return Err(error("`outliers` is the first stage, and appears once".into()));
+                    }
+                    pipeline.outliers = Some(Outliers { k });
+                }
+                ("outliers", None) => return Err(error("`outliers` needs its strength: outliers=K".into())),
+                ("demodulate", None) => {
+                    if pipeline.demodulate {
+                        return Err(error("`demodulate` appears twice".into()));
+                    }
+                    pipeline.demodulate = true;
+                }
+                ("window", None) => {
+                    pipeline.form = Form::Window;
+                    form_seen = true;
+                }
+                ("atrous", Some(v)) => {
+                    let passes: u32 =
+                        v.parse().map_err(|_| error(format!("atrous={v}: passes must be a whole number")))?;
+                    if !(1..=MAX_ATROUS_PASSES).contains(&passes) {
+                        return Err(error(format!("atrous={v}: passes must be from 1 to {MAX_ATROUS_PASSES}")));
+                    }
+                    pipeline.form = Form::Atrous { passes };
+                    form_seen = true;
+                }
+                ("atrous", None) => return Err(error("`atrous` needs its number of passes: atrous=N".into())),
+                (other, _) => {
+                    return Err(error(format!(
+                        "unknown stage `{other}`; the stages are outliers=K, demodulate, window, atrous=N"
+                    )))
+                }
+            }
+        }
+        if !form_seen {
+            return Err(error("no form: end with `window` or `atrous=N`".into()));
+        }
+        Ok(pipeline)
+    }
+}
+
+impl fmt::Display for FilterPipeline {
+    /// The canonical text: `parse(print(p)) == p`.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        if let Some(Outliers { k }) = self.outliers {
+            write!(f, "outliers={k},")?;
+        }
+        if self.demodulate {
+            write!(f, "demodulate,")?;
+        }
+        match self.form {
+            Form::Window => write!(f, "window"),
+            Form::Atrous { passes } => write!(f, "atrous={passes}"),
+        }
+    }
+}
+
+impl serde::Serialize for FilterPipeline {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(&self.to_string())
+    }
+}
+
+impl<'de> serde::Deserialize<'de> for FilterPipeline {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        text.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+/// The luminance of a colour's non-negative part.
+pub fn luminance(c: [f64; 3]) -> f64 {
+    (0..3).map(|k| LUMINANCE[k] * c[k].max(0.0)).sum()
+}
+
+/// The factor demodulation divides by and remodulation multiplies by.
+pub fn modulation(albedo: [f64; 3]) -> [f64; 3] {
+    albedo.map(|a| a.clamp(0.0, 1.0).max(ALBEDO_FLOOR))
+}
+
+/// The stencil weight h(|d|) of an à-trous offset d in -2..=2.
+pub fn stencil(d: i32) -> f64 {
+    ATROUS_STENCIL[d.unsigned_abs() as usize]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn text_round_trips() {
+        for text in ["window", "atrous=5", "outliers=2,window", "outliers=1.5,demodulate,atrous=3", "demodulate,window"]
+        {
+            let p: FilterPipeline = text.parse().unwrap();
+            assert_eq!(p.to_string(), text);
+            assert_eq!(p.to_string().parse::<FilterPipeline>().unwrap(), p);
+        }
+    }
+
+    #[test]
+    fn bad_text_says_what_is_wrong() {
+        for (text, needle) in [
+            ("atrous=0", "from 1 to"),
+            ("outliers=-1,window", "at least 0"),
+            ("demodulate", "no form"),
+            ("window,demodulate", "last stage"),
+            ("blur,window", "unknown stage `blur`"),
+            ("demodulate,outliers=2,window", "first stage"),
+        ] {
+            let e = text.parse::<FilterPipeline>().unwrap_err().to_string();
+            assert!(e.contains(needle), "{text}: {e}");
+        }
+    }
+
+    #[test]
+    fn modulation_is_continuous_and_bounded() {
+        assert_eq!(modulation([0.0, 0.05, 0.5]), [ALBEDO_FLOOR, ALBEDO_FLOOR, 0.5]);
+        assert_eq!(modulation([300.0, -1.0, 1.0]), [1.0, ALBEDO_FLOOR, 1.0]);
+        let stencil_sum: f64 = (-2..=2).map(stencil).sum();
+        assert!((stencil_sum - 1.0).abs() < 1e-15);
+    }
+}

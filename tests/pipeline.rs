@@ -1,0 +1,178 @@
+//! The filter pipeline (outliers → demodulate → form → remodulate): every
+//! stage on the device against the f64 CPU reference, alone and end to end,
+//! in filtering and in fitness.
+
+use filterjit::cpu;
+use filterjit::gpu::{FitnessScene, SceneBuffers};
+use filterjit::jit::{self, KernelKind, LowerOptions, Shape};
+use filterjit::lang::parse_expr;
+use filterjit::pipeline::FilterPipeline;
+use filterjit::{metrics, Expr, Scene};
+
+use crate::common::{gpu, synthetic_scene};
+
+/// The synthetic scene with a raw albedo that has what real renders have:
+/// black (emitters, escaped rays), ordinary values, and values far above 1.
+fn scene_with_albedo(width: usize, height: usize, seed: u64) -> Scene {
+    let mut scene = synthetic_scene(width, height, seed);
+    let albedo = (0..scene.pixels())
+        .map(|p| match p % 7 {
+            0 => [0.0, 0.0, 0.0],
+            1 => [250.0, 3.0, 0.5],
+            k => [0.1 * k as f32, 0.9 - 0.1 * k as f32, 0.02 * k as f32],
+        })
+        .collect();
+    scene.albedo = Some(albedo);
+    scene
+}
+
+fn pipeline(text: &str) -> FilterPipeline {
+    text.parse().unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Run `expr` through `pipeline` on the device.
+fn gpu_filter(gpu: &filterjit::gpu::Gpu, expr: &Expr, scene: &Scene, p: &FilterPipeline, radius: u32) -> Vec<[f32; 3]> {
+    let kernel = jit::compile_shaped(expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(p)).unwrap();
+    let mut buffers = SceneBuffers::for_pipeline(gpu, scene, p).unwrap();
+    gpu.filter(&kernel, &mut buffers, scene, radius).unwrap().rgb()
+}
+
+/// Fraction of channels within 1e-3 relative (+0.01 absolute in the
+/// denominator) of the CPU, and the worst difference.
+fn agreement(gpu_rgb: &[[f32; 3]], cpu_rgb: &[[f64; 3]]) -> (f64, f64) {
+    let mut within = 0;
+    let mut worst = 0f64;
+    for (g, c) in gpu_rgb.iter().zip(cpu_rgb) {
+        for q in 0..3 {
+            assert!(g[q].is_finite(), "GPU output is not finite");
+            let err = (g[q] as f64 - c[q]).abs() / (c[q].abs() + 0.01);
+            worst = worst.max(err);
+            within += usize::from(err <= 1e-3);
+        }
+    }
+    (within as f64 / (3 * gpu_rgb.len()) as f64, worst)
+}
+
+#[test]
+fn the_pre_pass_alone_agrees_with_the_cpu() {
+    // A window of radius 0 with weight 1 hands back the pre-pass's colour, remodulated.
+    let gpu = gpu();
+    let scene = scene_with_albedo(23, 17, 4);
+    let expr = parse_expr("1").unwrap();
+    for text in ["outliers=2,window", "outliers=0,window", "demodulate,window", "outliers=1.5,demodulate,window"] {
+        let p = pipeline(text);
+        let on_gpu = gpu_filter(&gpu, &expr, &scene, &p, 0);
+        let on_cpu = cpu::filter_pipeline(&expr, &scene, &p, 0).unwrap();
+        let (fraction, worst) = agreement(&on_gpu, &on_cpu.color);
+        assert_eq!(fraction, 1.0, "{text}: worst relative difference {worst:e}");
+    }
+}
+
+#[test]
+fn the_outlier_rule_tames_a_firefly_and_keeps_a_flat_image() {
+    let mut scene = Scene::from_color("firefly", 9, 9, vec![[0.5, 0.5, 0.5]; 81]);
+    scene.color[40] = [900.0, 800.0, 1000.0];
+    let p = pipeline("outliers=2,window");
+    let prepared = cpu::prepass(&scene, &p).unwrap();
+    // Its neighbours are all 0.5 (no spread): the firefly becomes their luminance.
+    let l = filterjit::pipeline::luminance(prepared.color[40].map(|v| v as f64));
+    assert!((l - 0.5).abs() < 1e-6, "the firefly's luminance is {l}");
+    let ratio = prepared.color[40][0] / prepared.color[40][2];
+    assert!((ratio - 0.9).abs() < 1e-5, "the firefly keeps its hue: {ratio}");
+    // Every other pixel is a neighbour of the firefly yet keeps its value.
+    for (k, c) in prepared.color.iter().enumerate().filter(|(k, _)| *k != 40) {
+        assert_eq!(*c, [0.5, 0.5, 0.5], "pixel {k}");
+    }
+    let gpu = gpu();
+    let on_gpu = gpu_filter(&gpu, &parse_expr("1").unwrap(), &scene, &p, 0);
+    assert!((on_gpu[40][1] - prepared.color[40][1]).abs() < 1e-5, "GPU {:?}", on_gpu[40]);
+}
+
+#[test]
+fn demodulation_is_undone_and_stays_bounded_where_albedo_is_zero_or_above_one() {
+    let scene = scene_with_albedo(14, 9, 8);
+    let p = pipeline("demodulate,window");
+    let prepared = cpu::prepass(&scene, &p).unwrap();
+    let modulation = prepared.modulation.as_ref().unwrap();
+    for (k, m) in modulation.iter().enumerate() {
+        for q in 0..3 {
+            assert!((0.1..=1.0).contains(&m[q]), "pixel {k}: modulation {m:?}");
+            let back = prepared.color[k][q] * m[q];
+            assert!((back - scene.color[k][q]).abs() <= 1e-5 * scene.color[k][q].abs().max(1.0), "pixel {k}");
+        }
+    }
+    let without = cpu::prepass(&scene, &pipeline("window")).unwrap();
+    assert!(without.modulation.is_none());
+    assert_eq!(without.color, scene.color);
+}
+
+#[test]
+fn atrous_and_whole_pipelines_agree_with_the_cpu() {
+    let gpu = gpu();
+    let scene = scene_with_albedo(40, 27, 6);
+    let exprs = [
+        "exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3))",
+        "exp(-(distance2(normal) / 0.3 + distance1(pixel) / 20))",
+        "1",
+    ];
+    for text in [
+        "atrous=1",
+        "atrous=4",
+        "demodulate,atrous=3",
+        "outliers=2,demodulate,atrous=5",
+        "outliers=2,demodulate,window",
+    ] {
+        let p = pipeline(text);
+        for e in exprs {
+            let expr = parse_expr(e).unwrap();
+            let on_gpu = gpu_filter(&gpu, &expr, &scene, &p, 2);
+            let on_cpu = cpu::filter_pipeline(&expr, &scene, &p, 2).unwrap();
+            let (fraction, worst) = agreement(&on_gpu, &on_cpu.color);
+            assert!(fraction >= 0.995, "{text} `{e}`: {:.2}% of channels agree, worst {worst:e}", fraction * 100.0);
+            assert!(worst < 1e-2, "{text} `{e}`: worst relative difference {worst:e}");
+        }
+    }
+}
+
+#[test]
+fn fitness_runs_the_whole_pipeline_on_the_device() {
+    let gpu = gpu();
+    let scene = scene_with_albedo(32, 24, 2);
+    let reference = scene.reference.clone().unwrap();
+    let exprs = [
+        parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3))").unwrap(),
+        parse_expr("exp(-distance2(texture) / 0.1)").unwrap(),
+    ];
+    for text in ["outliers=2,demodulate,atrous=4", "atrous=2", "demodulate,window"] {
+        let p = pipeline(text);
+        let kernels: Vec<_> = exprs
+            .iter()
+            .map(|e| jit::compile_shaped(e, KernelKind::Fitness, LowerOptions::ALL, Shape::of(&p)).unwrap())
+            .collect();
+        let refs: Vec<_> = kernels.iter().collect();
+        let mut scenes = vec![FitnessScene::for_pipeline(&gpu, &scene, &p).unwrap()];
+        let errors = gpu.evaluate_fitness(&refs, &mut scenes, &[&scene], 2).unwrap();
+        for (e, row) in exprs.iter().zip(&errors) {
+            let filtered = cpu::filter_pipeline(e, &scene, &p, 2).unwrap();
+            let rgb: Vec<[f32; 3]> = filtered.color.iter().map(|c| c.map(|v| v as f32)).collect();
+            let expected = metrics::errors(&rgb, &reference, None).relmse;
+            let got = row[0].relmse;
+            assert!((got - expected).abs() <= 1e-3 * expected, "{text} `{e}`: device {got}, CPU {expected}");
+            assert_eq!(row[0].flags, 0);
+        }
+    }
+}
+
+#[test]
+fn a_kernel_runs_only_on_scenes_prepared_for_its_shape() {
+    let gpu = gpu();
+    let scene = scene_with_albedo(8, 8, 1);
+    let window = jit::compile(&parse_expr("1").unwrap()).unwrap();
+    let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &pipeline("atrous=2")).unwrap();
+    let error = gpu.filter(&window, &mut buffers, &scene, 1).unwrap_err().to_string();
+    assert!(error.contains("prepared for pipeline `atrous=2`"), "{error}");
+    let mut plain = scene.clone();
+    plain.albedo = None;
+    let error = SceneBuffers::for_pipeline(&gpu, &plain, &pipeline("demodulate,window")).err().unwrap().to_string();
+    assert!(error.contains("without its albedo"), "{error}");
+}
