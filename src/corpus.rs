@@ -23,12 +23,43 @@ pub fn lookup(name: &str) -> Option<&'static str> {
     named().into_iter().find(|(n, _)| *n == name).map(|(_, e)| e)
 }
 
+/// The line that states the filter pipeline of the entries after it (until the next such line).
+pub const PIPELINE_PREFIX: &str = "# pipeline:";
+
+/// The pipeline stated for entry `name` of a named-expression file: the last
+/// `# pipeline: SPEC` line before it, if any.
+pub fn pipeline_of(text: &str, name: &str) -> Option<anyhow::Result<crate::pipeline::FilterPipeline>> {
+    let mut current: Option<&str> = None;
+    for line in text.lines().map(str::trim) {
+        if let Some(spec) = line.strip_prefix(PIPELINE_PREFIX) {
+            current = Some(spec.trim());
+        } else if !line.starts_with('#') && line.split_once('=').is_some_and(|(n, _)| n.trim() == name) {
+            return current.map(|spec| spec.parse().map_err(anyhow::Error::from));
+        }
+    }
+    None
+}
+
+/// A resolved expression argument.
+pub struct Resolved {
+    pub name: Option<String>,
+    pub expr: crate::Expr,
+    /// The pipeline the expression was stored with (a hall of fame states the run's).
+    pub pipeline: Option<crate::pipeline::FilterPipeline>,
+}
+
 /// An expression argument: `@name` for a shipped expression, `@FILE[:NAME]`
 /// for one in a file of `name = expression` lines (the first without
 /// `:NAME`), or the expression's text. Returns the name, when it has one.
 pub fn resolve(arg: &str) -> anyhow::Result<(Option<String>, crate::Expr)> {
+    let resolved = resolve_with_pipeline(arg)?;
+    Ok((resolved.name, resolved.expr))
+}
+
+/// [`resolve`], with the pipeline the file states for the expression.
+pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
     use anyhow::{bail, Context};
-    let (name, text) = match arg.strip_prefix('@') {
+    let (name, text, pipeline) = match arg.strip_prefix('@') {
         Some(reference) if lookup(reference).is_none() && file_reference(reference).is_some() => {
             let (path, name) = file_reference(reference).expect("checked");
             let content = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
@@ -38,7 +69,12 @@ pub fn resolve(arg: &str) -> anyhow::Result<(Option<String>, crate::Expr)> {
                 None => entries.first(),
             };
             match found {
-                Some((name, text)) => (name.to_string(), text.to_string()),
+                Some((name, text)) => {
+                    let pipeline = pipeline_of(&content, name)
+                        .transpose()
+                        .with_context(|| format!("{}: the pipeline of `{name}`", path.display()))?;
+                    (name.to_string(), text.to_string(), pipeline)
+                }
                 None => bail!(
                     "{} has no expression{}",
                     path.display(),
@@ -47,15 +83,18 @@ pub fn resolve(arg: &str) -> anyhow::Result<(Option<String>, crate::Expr)> {
             }
         }
         Some(name) => match lookup(name) {
-            Some(text) => (name.to_string(), text.to_string()),
+            Some(text) => {
+                let pipeline = pipeline_of(EXPRESSIONS, name).transpose().expect("shipped pipelines parse");
+                (name.to_string(), text.to_string(), pipeline)
+            }
             None => {
                 let names: Vec<String> = named().iter().map(|(n, _)| format!("@{n}")).collect();
                 bail!("no shipped expression `@{name}`; there are: {}", names.join(", "))
             }
         },
-        None => return Ok((None, parse_checked(arg)?)),
+        None => return Ok(Resolved { name: None, expr: parse_checked(arg)?, pipeline: None }),
     };
-    Ok((Some(name), parse_checked(&text)?))
+    Ok(Resolved { name: Some(name), expr: parse_checked(&text)?, pipeline })
 }
 
 fn parse_checked(text: &str) -> anyhow::Result<crate::Expr> {

@@ -13,6 +13,7 @@ use crate::gp::{self, EvalTime, Evaluator, Fitness, Settings, State};
 use crate::gpu::{FitnessScene, Gpu};
 use crate::jit::{self, KernelKind};
 use crate::lang::{Expr, Feature, ScalarVar};
+use crate::pipeline::FilterPipeline;
 use crate::render::{self, RenderSettings};
 use crate::scene::{self, Request, Scene};
 use crate::{metrics, semantics};
@@ -30,6 +31,8 @@ pub struct GpuEvaluator<'g> {
     /// relMSE of each scene's noisy input: fitness divides by it (thesis 3.2.3).
     noisy: Vec<f64>,
     radius: u32,
+    /// The pipeline around every kernel; the scenes' buffers are prepared for it.
+    pipeline: FilterPipeline,
     threads: usize,
     /// How fitness kernels are lowered: every optimisation, and workgroup
     /// tiles for the run's radius on hardware adapters ([`Tiles::Auto`]).
@@ -40,19 +43,42 @@ pub struct GpuEvaluator<'g> {
 impl<'g> GpuEvaluator<'g> {
     /// An evaluator on `gpu`, plus one device per further core when `gpu` is a software adapter.
     pub fn new(gpu: &'g Gpu, scenes: Vec<Scene>, radius: u32, threads: usize) -> Result<Self> {
+        Self::for_pipeline(gpu, scenes, radius, FilterPipeline::WINDOW, threads)
+    }
+
+    /// An evaluator that scores every expression through `pipeline` (`radius` is the window form's).
+    pub fn for_pipeline(
+        gpu: &'g Gpu,
+        scenes: Vec<Scene>,
+        radius: u32,
+        pipeline: FilterPipeline,
+        threads: usize,
+    ) -> Result<Self> {
         let devices = if gpu.is_software() { threads.max(1) } else { 1 };
-        Self::with_devices(gpu, scenes, radius, threads, devices)
+        Self::with_devices(gpu, scenes, radius, pipeline, threads, devices)
     }
 
     /// An evaluator spreading each batch over `devices` devices (at least one, `gpu`).
-    pub fn with_devices(gpu: &'g Gpu, scenes: Vec<Scene>, radius: u32, threads: usize, devices: usize) -> Result<Self> {
+    pub fn with_devices(
+        gpu: &'g Gpu,
+        scenes: Vec<Scene>,
+        radius: u32,
+        pipeline: FilterPipeline,
+        threads: usize,
+        devices: usize,
+    ) -> Result<Self> {
         let mut more = Vec::new();
         for _ in 1..devices.max(1) {
             more.push(Gpu::open_like(gpu)?);
         }
         let mut device_scenes = Vec::new();
         for device in std::iter::once(gpu).chain(more.iter()) {
-            device_scenes.push(scenes.iter().map(|s| FitnessScene::new(device, s)).collect::<Result<Vec<_>, _>>()?);
+            device_scenes.push(
+                scenes
+                    .iter()
+                    .map(|s| FitnessScene::for_pipeline(device, s, &pipeline))
+                    .collect::<Result<Vec<_>, _>>()?,
+            );
         }
         let mut noisy = Vec::new();
         for s in &scenes {
@@ -67,6 +93,7 @@ impl<'g> GpuEvaluator<'g> {
             device_scenes,
             noisy,
             radius,
+            pipeline,
             threads,
             options: jit::LowerOptions::ALL,
             time: EvalTime::default(),
@@ -96,7 +123,8 @@ impl<'g> GpuEvaluator<'g> {
         let threads = self.threads.max(1);
         // A candidate that does not compile, or binds more than this device
         // allows, is an invalid individual with its reason, never a failed batch.
-        let kernels = jit::compile_each_with(exprs, KernelKind::Fitness, self.options, threads);
+        let shape = jit::Shape::of(&self.pipeline);
+        let kernels = jit::compile_each_shaped(exprs, KernelKind::Fitness, self.options, shape, threads);
         let unsupported: Vec<Option<String>> = kernels
             .iter()
             .map(|k| match k {
@@ -246,10 +274,12 @@ pub fn common_terminals(datasets: &[PathBuf]) -> Result<(BTreeSet<Feature>, BTre
     Ok((features.unwrap_or_default(), variances.unwrap_or_default()))
 }
 
+/// Load the datasets with `features` and `variances`, and the raw albedo when `pipeline` demodulates.
 pub fn load_all(
     datasets: &[PathBuf],
     features: &BTreeSet<Feature>,
     variances: &BTreeSet<ScalarVar>,
+    pipeline: &FilterPipeline,
 ) -> Result<Vec<Scene>> {
     datasets
         .iter()
@@ -258,6 +288,7 @@ pub fn load_all(
                 features: features.clone(),
                 variances: variances.clone(),
                 reference: true,
+                albedo: pipeline.demodulate,
                 ..Default::default()
             };
             scene::load(d, &request).with_context(|| format!("loading {}", d.display()))
@@ -282,6 +313,9 @@ pub struct RunConfig {
     pub render: RenderSettings,
     pub radius: u32,
     pub seed_expr: String,
+    /// The pipeline every individual is scored through (runs made before pipelines existed: `window`).
+    #[serde(default)]
+    pub pipeline: FilterPipeline,
 }
 
 pub const CHECKPOINT_FILE: &str = "checkpoint.json";
@@ -332,8 +366,9 @@ pub fn append_log(dir: &Path, report: &gp::Report) -> Result<()> {
 }
 
 /// The hall of fame in the named-expression format `filter --expr @FILE` reads.
-pub fn hall_of_fame_text(state: &State, k: usize) -> String {
-    let mut text = String::from("# filterjit hall of fame: the best expressions of every island, best first.\n# Use one with `filterjit filter --expr @hall_of_fame.txt:NAME` (the first without :NAME).\n");
+pub fn hall_of_fame_text(state: &State, k: usize, pipeline: &FilterPipeline) -> String {
+    let mut text = String::from("# filterjit hall of fame: the best expressions of every island, best first.\n# Use one with `filterjit filter --expr @hall_of_fame.txt:NAME` (the first without :NAME);\n# it is filtered through the pipeline it was scored with:\n");
+    text.push_str(&format!("{} {pipeline}\n", crate::corpus::PIPELINE_PREFIX));
     let mut entries = gp::hall_of_fame(state, k);
     entries.sort_by(|a, b| a.1.fitness.value.total_cmp(&b.1.fitness.value));
     let mut rank_in_island = vec![0usize; state.islands.len()];
@@ -516,8 +551,8 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
             bail!("the seed expression reads `{f}`, which the training scenes do not all provide");
         }
     }
-    let scenes = load_all(&training, &features, &variances)?;
-    let mut evaluator = GpuEvaluator::new(gpu, scenes, config.radius, threads)?;
+    let scenes = load_all(&training, &features, &variances, &config.pipeline)?;
+    let mut evaluator = GpuEvaluator::for_pipeline(gpu, scenes, config.radius, config.pipeline, threads)?;
     evaluator.set_tiles(tiles.enabled(gpu));
     let terminals = gp::operators::Terminals {
         features: features.iter().copied().collect(),
@@ -557,7 +592,7 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     }
     drop(engine);
 
-    let hall = hall_of_fame_text(&state, settings.hall_of_fame);
+    let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline);
     crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes()).map_err(anyhow::Error::msg)?;
     let frequencies = gp::feature_frequencies(&state);
     crate::io::write_bytes_atomically(
@@ -572,9 +607,9 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
         .expect("a non-empty population");
 
     let test_sets = resolve_scenes(gpu, &config.test, &config.render, &mut *on_render)?;
-    let test_scenes = load_all(&test_sets, &features, &variances)?;
+    let test_scenes = load_all(&test_sets, &features, &variances, &config.pipeline)?;
     let names = test_scenes.iter().map(|s| s.name.clone()).collect();
-    let mut tester = GpuEvaluator::new(gpu, test_scenes, config.radius, threads)?;
+    let mut tester = GpuEvaluator::for_pipeline(gpu, test_scenes, config.radius, config.pipeline, threads)?;
     let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut compared = vec![best_expr, seed_expr];
     compared.extend(

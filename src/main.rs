@@ -84,6 +84,10 @@ enum Command {
         /// Also run the f64 CPU reference and report its difference from the GPU result.
         #[arg(long)]
         cpu_check: bool,
+        /// The filter pipeline, e.g. `outliers=2,demodulate,atrous=5` or `window`
+        /// [default: the one the expression was stored with, else `window`].
+        #[arg(long)]
+        pipeline: Option<filterjit::pipeline::FilterPipeline>,
     },
     /// Render a scene (a .toml file or a built-in name) into a dataset: noisy
     /// colour, features, variances and a converged reference.
@@ -172,9 +176,14 @@ struct RenderArgs {
     /// Samples per pixel of rendered references.
     #[arg(long)]
     reference_spp: Option<u32>,
-    /// Filter window radius.
+    /// Filter window radius (the window form's).
     #[arg(long)]
     radius: Option<u32>,
+    /// The filter pipeline around the expression: stages separated by commas,
+    /// `outliers=K` (firefly pre-pass), `demodulate` (filter colour/albedo),
+    /// then the form, `window` or `atrous=PASSES` [window].
+    #[arg(long)]
+    pipeline: Option<filterjit::pipeline::FilterPipeline>,
 }
 
 /// How scenes are made and filtered, for `report` and `tune`; unset values
@@ -407,8 +416,8 @@ fn run(cli: Cli) -> Result<()> {
             );
             Ok(())
         }
-        Command::Filter { expr, radius, scene, output, reference, spp, absent, cpu_check } => {
-            filter(&expr, radius, &scene, &output, reference, spp, absent, cpu_check)
+        Command::Filter { expr, radius, scene, output, reference, spp, absent, cpu_check, pipeline } => {
+            filter(&expr, radius, &scene, &output, reference, spp, absent, cpu_check, pipeline)
         }
         Command::Render { scene, spp, reference_spp, size, seed, output } => {
             render(&scene, spp, reference_spp, size, seed, output.as_deref())
@@ -422,13 +431,15 @@ fn run(cli: Cli) -> Result<()> {
             println!("crossBilateralTuned = {}", tuned.expr);
             if let Some(path) = &args.output {
                 let text = format!(
-                    "# tuned on {} at {}x{}, radius {}: training relMSE/noisy {:.5} (hand-set {:.5})\ncrossBilateralTuned = {}\n",
+                    "# tuned on {} at {}x{}, radius {}: training relMSE/noisy {:.5} (hand-set {:.5})\n{} {}\ncrossBilateralTuned = {}\n",
                     tuned.scenes.join(", "),
                     context.render.width,
                     context.render.height,
                     context.radius,
                     tuned.fitness,
                     tuned.hand_set_fitness,
+                    corpus::PIPELINE_PREFIX,
+                    context.pipeline,
                     tuned.expr
                 );
                 filterjit::io::write_bytes_atomically(path, text.as_bytes()).map_err(anyhow::Error::msg)?;
@@ -498,9 +509,13 @@ fn filter(
     spp: Option<u32>,
     absent: Absent,
     cpu_check: bool,
+    pipeline: Option<filterjit::pipeline::FilterPipeline>,
 ) -> Result<()> {
-    let expr = resolve_expr(expr)?;
-    let request = Request { reference_path: reference, spp, absent, ..Request::for_expr(&expr) };
+    let resolved = corpus::resolve_with_pipeline(expr)?;
+    let expr = resolved.expr;
+    let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
+    let request =
+        Request { reference_path: reference, spp, absent, albedo: pipeline.demodulate, ..Request::for_expr(&expr) };
     let load_start = Instant::now();
     let scene = scene::load(scene_path, &request).with_context(|| format!("loading scene {}", scene_path.display()))?;
     let load_time = load_start.elapsed();
@@ -511,10 +526,13 @@ fn filter(
     }
 
     let compile_start = Instant::now();
-    let kernel = jit::compile(&expr)?;
+    let shape = jit::Shape::of(&pipeline);
+    let kernel = jit::compile_shaped(&expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
     let lower_validate = compile_start.elapsed();
     let gpu = gpu::Gpu::open()?;
-    let mut buffers = gpu::SceneBuffers::new(&gpu, &scene);
+    let prepass_start = Instant::now();
+    let mut buffers = gpu::SceneBuffers::for_pipeline(&gpu, &scene, &pipeline)?;
+    let prepass_time = prepass_start.elapsed();
     let first = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
     // A second, warm run: software drivers compile the pipeline at its first dispatch.
     let warm = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
@@ -542,10 +560,16 @@ fn filter(
         expr.len(),
         kernel.source().layout.inputs.iter().map(|i| format!(", {}", i.describe())).collect::<String>()
     );
+    let form = match pipeline.form {
+        filterjit::pipeline::Form::Window => format!("radius {radius}"),
+        filterjit::pipeline::Form::Atrous { passes } => format!("{passes} a-trous passes"),
+    };
+    println!("pipeline  {pipeline}");
     println!(
-        "time      load {:.1} ms | lower+validate {:.2} ms | pipeline {:.1} ms | first dispatch {:.1} ms | filter {:.1} ms ({:.1} ms/Mpx, radius {radius}, {} dispatch{})",
+        "time      load {:.1} ms | lower+validate {:.2} ms | pre-pass {:.1} ms (first, compile included) | pipeline {:.1} ms | first dispatch {:.1} ms | filter {:.1} ms ({:.1} ms/Mpx, {form}, {} dispatch{})",
         ms(load_time),
         ms(lower_validate),
+        ms(prepass_time),
         ms(first.pipeline.create),
         ms(first.dispatch),
         ms(warm.dispatch),
@@ -572,7 +596,7 @@ fn filter(
         None => println!("error     no reference image: errors not computed"),
     }
     if cpu_check {
-        let reference = cpu::filter(&expr, &scene, radius)?;
+        let reference = cpu::filter_pipeline(&expr, &scene, &pipeline, radius)?;
         let worst = rgb
             .iter()
             .zip(&reference.color)
@@ -682,6 +706,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         },
         radius: args.render.radius.unwrap_or(radius),
         seed_expr: seed_text,
+        pipeline: args.render.pipeline.unwrap_or_default(),
     };
     let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()));
     let output = match &args.output {
@@ -701,12 +726,13 @@ fn evolve(args: EvolveArgs) -> Result<()> {
     };
     let gpu = gpu::Gpu::open()?;
     eprintln!(
-        "evolve    {} islands x {}, {} generations, max length {}, radius {}, scenes {}x{} on {}",
+        "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{} on {}",
         settings.islands,
         settings.island_size,
         settings.generations,
         settings.max_length,
         config.radius,
+        config.pipeline,
         size.0,
         size.1,
         gpu.describe()
@@ -848,6 +874,7 @@ fn manifest_path(shader: &Path) -> PathBuf {
 struct SceneContext {
     render: render::RenderSettings,
     radius: u32,
+    pipeline: filterjit::pipeline::FilterPipeline,
     training: Vec<String>,
     test: Vec<String>,
 }
@@ -879,6 +906,7 @@ fn scene_context(args: &SceneArgs) -> Result<SceneContext> {
             seed: base.seed,
         },
         radius: args.render.radius.or(run.as_ref().map(|r| r.radius)).unwrap_or(5),
+        pipeline: args.render.pipeline.or(run.as_ref().map(|r| r.pipeline)).unwrap_or_default(),
         training: if !args.training_scenes.is_empty() {
             args.training_scenes.clone()
         } else {
@@ -903,15 +931,16 @@ fn tune_baseline(gpu: &gpu::Gpu, args: &SceneArgs, context: &SceneContext) -> Re
     use filterjit::evolve as ev;
     let datasets = ev::resolve_scenes(gpu, &context.training, &context.render, &mut render_progress())?;
     let (features, variances) = ev::common_terminals(&datasets)?;
-    let scenes = ev::load_all(&datasets, &features, &variances)?;
+    let scenes = ev::load_all(&datasets, &features, &variances, &context.pipeline)?;
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let mut evaluator = ev::GpuEvaluator::new(gpu, scenes, context.radius, threads)?;
+    let mut evaluator = ev::GpuEvaluator::for_pipeline(gpu, scenes, context.radius, context.pipeline, threads)?;
     eprintln!(
-        "tune      cross-bilateral sigmas on {} ({}x{}, radius {})",
+        "tune      cross-bilateral sigmas on {} ({}x{}, radius {}, pipeline {})",
         context.training.join(", "),
         context.render.width,
         context.render.height,
-        context.radius
+        context.radius,
+        context.pipeline
     );
     let tuned = filterjit::tune::tune(&mut evaluator, args.sweeps, &mut |sigmas, fitness| {
         eprintln!(
@@ -931,24 +960,38 @@ fn report(args: ReportArgs) -> Result<()> {
     let context = scene_context(&args.scene)?;
     let gpu = gpu::Gpu::open()?;
     let mut methods = Vec::new();
-    let (baseline_name, baseline_expr, tuned) = match &args.baseline {
+    // Every filter runs through the pipeline it was stored with, else the run's (or --pipeline).
+    let (baseline_name, baseline_expr, baseline_pipeline, tuned) = match &args.baseline {
         Some(b) => {
-            let (name, expr) = corpus::resolve(b)?;
-            (name.unwrap_or_else(|| "baseline".into()), expr, None)
+            let resolved = corpus::resolve_with_pipeline(b)?;
+            let pipeline = resolved.pipeline.unwrap_or(context.pipeline);
+            (resolved.name.unwrap_or_else(|| "baseline".into()), resolved.expr, pipeline, None)
         }
         None => {
             let tuned = tune_baseline(&gpu, &args.scene, &context)?;
             let expr = lang::parse_expr(&tuned.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
-            ("crossBilateral (tuned)".to_string(), expr, Some(tuned))
+            ("crossBilateral (tuned)".to_string(), expr, context.pipeline, Some(tuned))
         }
     };
-    methods.push(Method { name: baseline_name, origin: Origin::Baseline, expr: baseline_expr });
+    methods.push(Method {
+        name: baseline_name,
+        origin: Origin::Baseline,
+        expr: baseline_expr,
+        pipeline: baseline_pipeline,
+    });
     for name in ["thesis1", "thesis2", "thesis3"] {
-        methods.push(Method { name: name.into(), origin: Origin::Thesis, expr: resolve_expr(&format!("@{name}"))? });
+        // The thesis's filters as published: one window.
+        let expr = resolve_expr(&format!("@{name}"))?;
+        methods.push(Method { name: name.into(), origin: Origin::Thesis, expr, pipeline: Default::default() });
     }
     for (k, arg) in args.exprs.iter().enumerate() {
-        let (name, expr) = corpus::resolve(arg)?;
-        methods.push(Method { name: name.unwrap_or_else(|| format!("expr{}", k + 1)), origin: Origin::Given, expr });
+        let resolved = corpus::resolve_with_pipeline(arg)?;
+        methods.push(Method {
+            name: resolved.name.unwrap_or_else(|| format!("expr{}", k + 1)),
+            origin: Origin::Given,
+            expr: resolved.expr,
+            pipeline: resolved.pipeline.unwrap_or(context.pipeline),
+        });
     }
     let hall_path = args
         .hall_of_fame
@@ -963,9 +1006,13 @@ fn report(args: ReportArgs) -> Result<()> {
                 lang::parse_expr(text).map_err(|e| anyhow::anyhow!("{}: entry `{name}`:\n{e}", path.display()))?;
             // Reported as people read them: simplified (the same weights).
             let expr = filterjit::simplify::simplify(&expr);
-            if taken < args.top && !methods.iter().any(|m| m.expr == expr) {
+            let pipeline = corpus::pipeline_of(&text, name)
+                .transpose()
+                .with_context(|| format!("{}: the pipeline of `{name}`", path.display()))?
+                .unwrap_or(context.pipeline);
+            if taken < args.top && !methods.iter().any(|m| m.expr == expr && m.pipeline == pipeline) {
                 taken += 1;
-                methods.push(Method { name: name.to_string(), origin: Origin::Given, expr: expr.clone() });
+                methods.push(Method { name: name.to_string(), origin: Origin::Given, expr: expr.clone(), pipeline });
             }
             hall.push(expr);
         }

@@ -52,6 +52,7 @@ pub(crate) fn config(training: &Path, test: &Path) -> RunConfig {
         render: RenderSettings::default(),
         radius: 2,
         seed_expr: parse_expr(corpus::lookup("bilateral").unwrap()).unwrap().to_string(),
+        pipeline: Default::default(),
     }
 }
 
@@ -133,6 +134,32 @@ fn runs_are_deterministic_and_resume_exactly() {
     let err = try_run(&a, Settings { seed: 8, ..small() }, config(training, test), true, None, evolve::Tiles::On)
         .unwrap_err();
     assert!(err.to_string().contains("other settings"), "{err}");
+}
+
+/// A run through the whole pipeline (outliers, demodulation, à-trous) stores
+/// its pipeline with its hall of fame, and what it reports on the test scene is
+/// what the CPU reference gives for the stored filter through that pipeline.
+#[test]
+fn a_run_through_a_pipeline_reproduces_what_it_scored() {
+    let (training, test) = datasets();
+    let dir = temp_dir("pipeline");
+    let pipeline: filterjit::pipeline::FilterPipeline = "outliers=2,demodulate,atrous=3".parse().unwrap();
+    let config = RunConfig { pipeline, ..config(training, test) };
+    let settings = Settings { generations: 2, ..small() };
+    let summary = run(&dir, settings, config, false, None).expect("finished");
+    let hall = dir.join(evolve::HALL_OF_FAME_FILE);
+    assert!(read(hall.clone()).contains("# pipeline: outliers=2,demodulate,atrous=3"));
+
+    let resolved = corpus::resolve_with_pipeline(&format!("@{}", hall.display())).unwrap();
+    assert_eq!(resolved.pipeline, Some(pipeline));
+    assert_eq!(resolved.expr.to_string(), summary.best.expr);
+    let request = scene::Request { albedo: true, ..scene::Request::for_expr(&resolved.expr) };
+    let scene = scene::load(test, &request).unwrap();
+    let filtered = filterjit::cpu::filter_pipeline(&resolved.expr, &scene, &pipeline, 2).unwrap();
+    let rgb: Vec<[f32; 3]> = filtered.color.iter().map(|c| c.map(|v| v as f32)).collect();
+    let expected = filterjit::metrics::errors(&rgb, scene.reference.as_ref().unwrap(), None).relmse;
+    let scored = summary.test_best.relmse[0];
+    assert!((scored - expected).abs() <= 1e-3 * expected, "scored {scored}, CPU reference {expected}");
 }
 
 #[test]

@@ -19,6 +19,7 @@ use serde::Serialize;
 
 use crate::gpu::{Gpu, SceneBuffers};
 use crate::lang::Expr;
+use crate::pipeline::FilterPipeline;
 use crate::scene::{self, Request, Scene};
 use crate::tune::Tuned;
 use crate::{io, jit, metrics, preview};
@@ -43,6 +44,8 @@ pub struct Method {
     pub name: String,
     pub origin: Origin,
     pub expr: Expr,
+    /// The pipeline the expression is filtered through.
+    pub pipeline: FilterPipeline,
 }
 
 #[derive(Clone, Debug)]
@@ -83,6 +86,7 @@ pub struct MethodInfo {
     pub origin: Origin,
     pub expr: Option<String>,
     pub length: Option<usize>,
+    pub pipeline: Option<String>,
     /// Means over the scenes it ran on.
     pub mean_relmse: Option<f64>,
     pub mean_normalised: Option<f64>,
@@ -147,8 +151,14 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         baseline,
         feature_usage: hall_of_fame.map(feature_usage),
     };
-    let kernels: Vec<jit::ValidatedKernel> =
-        methods.iter().map(|m| jit::compile(&m.expr).with_context(|| m.name.clone())).collect::<Result<_>>()?;
+    let kernels: Vec<jit::ValidatedKernel> = methods
+        .iter()
+        .map(|m| {
+            let shape = jit::Shape::of(&m.pipeline);
+            jit::compile_shaped(&m.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)
+                .with_context(|| m.name.clone())
+        })
+        .collect::<Result<_>>()?;
     for path in scenes {
         let (provided, provided_variances) =
             scene::provides(path).with_context(|| format!("reading {}", path.display()))?;
@@ -170,6 +180,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         for m in methods.iter().filter(|m| runnable(&m.expr).is_none()) {
             request.features.extend(m.expr.features());
             request.variances.extend(m.expr.variables());
+            request.albedo |= m.pipeline.demodulate;
         }
         let scene = scene::load(path, &request).with_context(|| format!("loading {}", path.display()))?;
         let reference = scene
@@ -192,10 +203,9 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             normalised: Some(1.0),
             ..Cell::default()
         });
-        let mut buffers = SceneBuffers::new(gpu, &scene);
         let timing_scene = tile(&scene, settings.timing_size);
-        let mut timing_buffers = SceneBuffers::new(gpu, &timing_scene);
-        let mut timing = Timing { scene: &timing_scene, buffers: &mut timing_buffers };
+        // Buffers per pipeline: each pipeline's pre-pass runs once per scene.
+        let mut prepared: BTreeMap<String, (SceneBuffers, SceneBuffers)> = BTreeMap::new();
         for (method, kernel) in methods.iter().zip(&kernels) {
             if let Some(reason) = runnable(&method.expr) {
                 results.cells.push(Cell {
@@ -207,8 +217,17 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                 continue;
             }
             progress(&format!("scene {}: {}", scene.name, method.name));
+            let key = method.pipeline.to_string();
+            if !prepared.contains_key(&key) {
+                let buffers = SceneBuffers::for_pipeline(gpu, &scene, &method.pipeline)?;
+                let timing_buffers = SceneBuffers::for_pipeline(gpu, &timing_scene, &method.pipeline)?;
+                prepared.insert(key.clone(), (buffers, timing_buffers));
+            }
+            let (buffers, timing_buffers) = prepared.get_mut(&key).expect("prepared above");
+            let buffers = &mut *buffers;
+            let mut timing = Timing { scene: &timing_scene, buffers: timing_buffers };
             let (cell, filtered) =
-                measure(gpu, kernel, &mut buffers, &scene, &mut timing, &reference, settings, noisy.relmse)
+                measure(gpu, kernel, buffers, &scene, &mut timing, &reference, settings, noisy.relmse)
                     .with_context(|| format!("filtering {} with {}", scene.name, method.name))?;
             strip.push(write_crop(
                 &crops_dir.join(format!("{}.png", file_name(&method.name))),
@@ -230,14 +249,15 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         });
     }
     results.methods = std::iter::once((NOISY.to_string(), Origin::Noisy, None))
-        .chain(methods.iter().map(|m| (m.name.clone(), m.origin, Some(&m.expr))))
-        .map(|(name, origin, expr)| summarise(&results.cells, name, origin, expr))
+        .chain(methods.iter().map(|m| (m.name.clone(), m.origin, Some(m))))
+        .map(|(name, origin, method)| summarise(&results.cells, name, origin, method))
         .collect();
     write(&results, output)?;
     Ok(results)
 }
 
-fn summarise(cells: &[Cell], name: String, origin: Origin, expr: Option<&Expr>) -> MethodInfo {
+fn summarise(cells: &[Cell], name: String, origin: Origin, method: Option<&Method>) -> MethodInfo {
+    let expr = method.map(|m| &m.expr);
     let ran: Vec<&Cell> = cells.iter().filter(|c| c.method == name && c.relmse.is_some()).collect();
     let mean = |f: &dyn Fn(&Cell) -> Option<f64>| -> Option<f64> {
         let values: Vec<f64> = ran.iter().filter_map(|c| f(c)).collect();
@@ -252,6 +272,7 @@ fn summarise(cells: &[Cell], name: String, origin: Origin, expr: Option<&Expr>) 
         origin,
         expr: expr.map(|e| e.to_string()),
         length: expr.map(Expr::len),
+        pipeline: method.map(|m| m.pipeline.to_string()),
     }
 }
 
@@ -273,6 +294,7 @@ pub fn tile(scene: &Scene, side: usize) -> Scene {
     out.spp = scene.spp;
     out.features = scene.features.iter().map(|(f, v)| (*f, tiled(v, (w, h), (tw, th)))).collect();
     out.variances = scene.variances.iter().map(|(k, v)| (*k, tiled(v, (w, h), (tw, th)))).collect();
+    out.albedo = scene.albedo.as_ref().map(|a| tiled(a, (w, h), (tw, th)));
     out
 }
 
@@ -512,7 +534,14 @@ fn markdown(results: &Results) -> String {
     }
     out.push_str("\n## Expressions\n\n");
     for m in results.methods.iter().filter(|m| m.expr.is_some()) {
-        let _ = writeln!(out, "* **{}** ({:?}): `{}`", m.name, m.origin, m.expr.as_deref().unwrap_or(""));
+        let _ = writeln!(
+            out,
+            "* **{}** ({:?}, pipeline `{}`): `{}`",
+            m.name,
+            m.origin,
+            m.pipeline.as_deref().unwrap_or("window"),
+            m.expr.as_deref().unwrap_or("")
+        );
     }
     out
 }
@@ -666,10 +695,11 @@ fn html(results: &Results) -> String {
     for m in results.methods.iter().filter(|m| m.expr.is_some()) {
         let _ = writeln!(
             out,
-            "<li><b>{}</b> ({:?}, {} nodes): <code>{}</code></li>",
+            "<li><b>{}</b> ({:?}, {} nodes, pipeline <code>{}</code>): <code>{}</code></li>",
             html_escape(&m.name),
             m.origin,
             m.length.unwrap_or(0),
+            html_escape(m.pipeline.as_deref().unwrap_or("window")),
             html_escape(m.expr.as_deref().unwrap_or(""))
         );
     }
