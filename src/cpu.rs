@@ -28,6 +28,8 @@ struct Pixels<'a> {
     i: usize,
     j: usize,
     width: usize,
+    /// The à-trous pass (`level`); 0 in the window form.
+    level: u32,
 }
 
 impl Pixels<'_> {
@@ -47,6 +49,9 @@ impl Pixels<'_> {
     }
 
     fn variance(&self, v: ScalarVar) -> f64 {
+        if v == ScalarVar::Level {
+            return self.level as f64;
+        }
         self.scene.variance(v).expect("checked before filtering")[self.i] as f64
     }
 }
@@ -74,7 +79,7 @@ pub fn check_inputs(expr: &Expr, scene: &Scene) -> Result<(), MissingData> {
             return Err(missing(f.name()));
         }
     }
-    for v in expr.variables() {
+    for v in expr.stored_variables() {
         if scene.variance(v).is_none() {
             return Err(missing(v.name()));
         }
@@ -87,13 +92,19 @@ pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, Mi
     check_inputs(expr, scene)?;
     let r = radius as i64;
     let offsets: Vec<(i64, i64, f64)> = (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (dx, dy, 1.0))).collect();
-    Ok(pass(expr, scene, &offsets, false).0)
+    Ok(pass(expr, scene, &offsets, 0, false).0)
 }
 
 /// One pass over `offsets` (dx, dy, stencil weight): every pixel's weighted
 /// mean of its neighbours inside the image, and with `carry_variance` the
 /// colour variance of that mean, Σ w² v_j / (Σ w)² (SVGF's rule).
-fn pass(expr: &Expr, scene: &Scene, offsets: &[(i64, i64, f64)], carry_variance: bool) -> (CpuFiltered, Vec<f64>) {
+fn pass(
+    expr: &Expr,
+    scene: &Scene,
+    offsets: &[(i64, i64, f64)],
+    level: u32,
+    carry_variance: bool,
+) -> (CpuFiltered, Vec<f64>) {
     let (w, h) = (scene.width as i64, scene.height as i64);
     let variance = carry_variance.then(|| scene.variance(ScalarVar::ColorVariance).expect("checked before filtering"));
     let mut color = Vec::with_capacity(scene.pixels());
@@ -111,7 +122,7 @@ fn pass(expr: &Expr, scene: &Scene, offsets: &[(i64, i64, f64)], carry_variance:
                     continue;
                 }
                 let j = (yj * w + xj) as usize;
-                let px = Pixels { scene, i, j, width: scene.width };
+                let px = Pixels { scene, i, j, width: scene.width, level };
                 let weight = stencil * semantics::weight(eval(expr, &px, &mut pixel_flags));
                 sum_w.add(weight);
                 for (sum, c) in sum_c.iter_mut().zip(scene.color[j]) {
@@ -217,7 +228,7 @@ pub fn filter_pipeline(
                         })
                     })
                     .collect();
-                let (filtered, variance) = pass(expr, &working, &offsets, carry);
+                let (filtered, variance) = pass(expr, &working, &offsets, level, carry);
                 for (a, b) in flags.iter_mut().zip(&filtered.flags) {
                     *a |= b;
                 }
@@ -265,6 +276,6 @@ impl Neumaier {
 /// Evaluate the weight expression once, for tests of single operators.
 pub fn weight_at(expr: &Expr, scene: &Scene, i: usize, j: usize) -> (f64, u32) {
     let mut flags = 0;
-    let w = eval(expr, &Pixels { scene, i, j, width: scene.width }, &mut flags);
+    let w = eval(expr, &Pixels { scene, i, j, width: scene.width, level: 0 }, &mut flags);
     (w, flags)
 }

@@ -554,9 +554,11 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     let scenes = load_all(&training, &features, &variances, &config.pipeline)?;
     let mut evaluator = GpuEvaluator::for_pipeline(gpu, scenes, config.radius, config.pipeline, threads)?;
     evaluator.set_tiles(tiles.enabled(gpu));
+    // `level` (the à-trous pass) is a terminal where there are passes: a filter may change with scale.
+    let level = config.pipeline.is_atrous().then_some(ScalarVar::Level);
     let terminals = gp::operators::Terminals {
         features: features.iter().copied().collect(),
-        variables: variances.iter().copied().collect(),
+        variables: variances.iter().copied().chain(level).collect(),
         constants: crate::lang::ops::THESIS_CONSTANTS.to_vec(),
     };
     let mut engine = gp::Engine::new(settings.clone(), terminals, seed_expr.clone(), &mut evaluator);
@@ -613,7 +615,9 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
     let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut compared = vec![best_expr, seed_expr];
     compared.extend(
-        baselines.into_iter().filter(|b| b.features().is_subset(&features) && b.variables().is_subset(&variances)),
+        baselines
+            .into_iter()
+            .filter(|b| b.features().is_subset(&features) && b.stored_variables().is_subset(&variances)),
     );
     let mut results = test(&mut tester, &compared)?.into_iter();
     let test_best = results.next().expect("best");

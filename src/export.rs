@@ -186,6 +186,7 @@ fn content(input: Input) -> String {
                 ScalarVar::DovVariance => "depth",
                 ScalarVar::DiVariance => "direct-light visibility",
                 ScalarVar::ColorVariance => "colour",
+                ScalarVar::Level => unreachable!("`level` is never a bound input"),
             };
             format!("per-pixel sample variance of the {of}, mean over channels")
         }

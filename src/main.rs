@@ -467,7 +467,10 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::List => {
             for (name, text) in corpus::named() {
-                println!("@{name}\n    {text}");
+                match corpus::pipeline_of(corpus::EXPRESSIONS, name) {
+                    Some(pipeline) => println!("@{name} (pipeline {})\n    {text}", pipeline?),
+                    None => println!("@{name}\n    {text}"),
+                }
             }
             Ok(())
         }
@@ -838,6 +841,7 @@ fn bench(size: (u32, u32), settings: &filterjit::bench::BenchSettings, output: &
             features: lang::Feature::ALL.iter().copied().collect(),
             variances: lang::ScalarVar::ALL.iter().copied().collect(),
             reference: true,
+            albedo: true,
             ..Default::default()
         };
         Ok(scene::load(&dir, &request)?)
@@ -999,14 +1003,14 @@ fn report(args: ReportArgs) -> Result<()> {
         .or_else(|| args.scene.run.as_ref().map(|d| d.join(filterjit::evolve::HALL_OF_FAME_FILE)));
     let mut hall = Vec::new();
     if let Some(path) = &hall_path {
-        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let content = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         let mut taken = 0;
-        for (name, text) in corpus::parse_named(&text) {
+        for (name, text) in corpus::parse_named(&content) {
             let expr =
                 lang::parse_expr(text).map_err(|e| anyhow::anyhow!("{}: entry `{name}`:\n{e}", path.display()))?;
             // Reported as people read them: simplified (the same weights).
             let expr = filterjit::simplify::simplify(&expr);
-            let pipeline = corpus::pipeline_of(&text, name)
+            let pipeline = corpus::pipeline_of(&content, name)
                 .transpose()
                 .with_context(|| format!("{}: the pipeline of `{name}`", path.display()))?
                 .unwrap_or(context.pipeline);

@@ -114,6 +114,9 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3))",
         "exp(-(distance2(normal) / 0.3 + distance1(pixel) / 20))",
         "1",
+        // `level` is the pass: 0 in the window form (the weight is then 0 and the colour kept).
+        "level",
+        "exp(-(distance2(normal) / 0.3 + distance2(pixel) / (1 + 3 * level)))",
     ];
     for text in [
         "atrous=1",
@@ -161,6 +164,22 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
             assert_eq!(row[0].flags, 0);
         }
     }
+}
+
+#[test]
+fn level_is_the_pass_index() {
+    // Weight `level`: pass 0 keeps every colour (all weights 0), pass 1 averages.
+    let gpu = gpu();
+    let scene = scene_with_albedo(12, 10, 3);
+    let expr = parse_expr("level").unwrap();
+    let window = gpu_filter(&gpu, &expr, &scene, &pipeline("window"), 2);
+    assert_eq!(window, scene.color, "the window form's level is 0: the noisy colour is kept");
+    let one = gpu_filter(&gpu, &expr, &scene, &pipeline("atrous=1"), 2);
+    assert_eq!(one, scene.color, "pass 0 alone keeps the noisy colour");
+    let two = gpu_filter(&gpu, &expr, &scene, &pipeline("atrous=2"), 2);
+    assert_ne!(two, scene.color, "pass 1 filters");
+    let on_cpu = cpu::filter_pipeline(&expr, &scene, &pipeline("atrous=2"), 2).unwrap();
+    assert_eq!(agreement(&two, &on_cpu.color).0, 1.0);
 }
 
 #[test]

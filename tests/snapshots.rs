@@ -28,6 +28,27 @@ fn generated_wgsl_matches_snapshots() {
     });
 }
 
+/// The pipeline's kernels: the pre-pass module, and `@crossBilateralAtrous`
+/// as an à-trous pass (carrying the variance of an expression that reads it)
+/// in filter and fitness kernels.
+#[test]
+fn pipeline_kernels_match_snapshots() {
+    use filterjit::jit::{KernelKind, LowerOptions};
+    let pipeline = corpus::resolve_with_pipeline("@crossBilateralAtrous").unwrap();
+    let shape = jit::Shape::of(&pipeline.pipeline.expect("shipped with its pipeline"));
+    assert!(shape.atrous && shape.remodulate);
+    let carrying = parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + level * distance2(normal)))").unwrap();
+    settings().bind(|| {
+        insta::assert_snapshot!("pipeline__prepass", jit::prepass_wgsl());
+        for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying)] {
+            for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
+                let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();
+                insta::assert_snapshot!(format!("pipeline__{name}.atrous.{label}"), kernel.wgsl());
+            }
+        }
+    });
+}
+
 /// The exported shader of the thesis's first expression in every text target,
 /// and its manifest: what an engine developer copies out.
 #[test]

@@ -124,6 +124,21 @@ pub struct GenerationResult {
     pub total_s: f64,
 }
 
+/// One stage or form of the filter pipeline on a frame of [`FRAME_SIDE`]².
+#[derive(Clone, Debug, Serialize)]
+pub struct StageResult {
+    pub stage: String,
+    /// Lower and validate of its kernel (none for the pre-pass: one module for every pipeline).
+    pub lower_validate_ms: Option<f64>,
+    /// Pipeline creation plus the first dispatch, where software drivers compile.
+    pub compile_ms: f64,
+    pub warm_ms: Stat,
+    pub ms_per_mpx: f64,
+}
+
+/// Side of the frame the pipeline's stages are timed on (the size OIDN is compared at).
+pub const FRAME_SIDE: usize = 256;
+
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
     pub device: String,
@@ -141,6 +156,8 @@ pub struct Report {
     pub population: PopulationResult,
     pub handwritten: HandWrittenResult,
     pub simplified: Vec<SimplifiedResult>,
+    /// The pipeline's stages and forms, side by side (`@crossBilateral` in each form).
+    pub stages: Vec<StageResult>,
     pub generations: Vec<GenerationResult>,
 }
 
@@ -473,6 +490,9 @@ pub fn run(
         });
     }
 
+    progress(&format!("pipeline stages and forms on {FRAME_SIDE}x{FRAME_SIDE}"));
+    let stages = pipeline_stages(gpu, scene, settings.repeats)?;
+
     // One GP generation of the thesis's size.
     let mut generations = Vec::new();
     for &size in &settings.generation_sizes {
@@ -526,8 +546,78 @@ pub fn run(
         population: population_result,
         handwritten: handwritten_result,
         simplified,
+        stages,
         generations,
     })
+}
+
+/// Each stage's and each form's time on a frame of [`FRAME_SIDE`]² (the bench
+/// scene tiled), measured in interleaved rounds: the pre-pass (outliers and
+/// demodulation; the difference between preparing the frame's buffers with it
+/// and without, so uploads cancel), and `@crossBilateral` as a window of
+/// radius 3 and 10 and as 5 à-trous passes.
+fn pipeline_stages(gpu: &Gpu, scene: &Scene, repeats: usize) -> anyhow::Result<Vec<StageResult>> {
+    use crate::pipeline::FilterPipeline;
+    let frame = crate::report::tile(scene, FRAME_SIDE);
+    let mpx = frame.pixels() as f64 / 1e6;
+    let expr = parse_expr(crate::corpus::lookup("crossBilateral").expect("shipped"))?;
+    let with_prepass: FilterPipeline = "outliers=2,demodulate,window".parse().expect("valid");
+    let mut results = Vec::new();
+
+    let t = Instant::now();
+    SceneBuffers::for_pipeline(gpu, &frame, &with_prepass)?;
+    let compile_ms = ms(t.elapsed());
+    let (mut plain, mut prepared) = (Vec::new(), Vec::new());
+    for _ in 0..repeats.max(1) * 2 {
+        let t = Instant::now();
+        SceneBuffers::for_pipeline(gpu, &frame, &FilterPipeline::WINDOW)?;
+        plain.push(ms(t.elapsed()));
+        let t = Instant::now();
+        SceneBuffers::for_pipeline(gpu, &frame, &with_prepass)?;
+        prepared.push(ms(t.elapsed()));
+    }
+    let difference: Vec<f64> = prepared.iter().zip(&plain).map(|(p, u)| (p - u).max(0.0)).collect();
+    let warm_ms = stat(difference);
+    results.push(StageResult {
+        stage: "pre-pass outliers=2,demodulate".into(),
+        lower_validate_ms: None,
+        compile_ms,
+        ms_per_mpx: warm_ms.median / mpx,
+        warm_ms,
+    });
+
+    let forms: [(&str, FilterPipeline, u32); 3] = [
+        ("window r=3", FilterPipeline::WINDOW, 3),
+        ("window r=10", FilterPipeline::WINDOW, 10),
+        ("atrous=5", "atrous=5".parse().expect("valid"), 2),
+    ];
+    let mut prepared = Vec::new();
+    for (name, pipeline, radius) in forms {
+        let t = Instant::now();
+        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(&pipeline))?;
+        let lower_validate = ms(t.elapsed());
+        let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, &pipeline)?;
+        let t = Instant::now();
+        gpu.filter(&kernel, &mut buffers, &frame, radius)?;
+        prepared.push((name, kernel, buffers, radius, lower_validate, ms(t.elapsed())));
+    }
+    let mut times = vec![Vec::new(); prepared.len()];
+    for _ in 0..repeats.max(1) * 2 {
+        for (k, (_, kernel, buffers, radius, _, _)) in prepared.iter_mut().enumerate() {
+            times[k].push(ms(gpu.filter(kernel, buffers, &frame, *radius)?.dispatch));
+        }
+    }
+    for ((name, _, _, _, lower_validate, compile_ms), times) in prepared.into_iter().zip(times) {
+        let warm_ms = stat(times);
+        results.push(StageResult {
+            stage: name.into(),
+            lower_validate_ms: Some(lower_validate),
+            compile_ms,
+            ms_per_mpx: warm_ms.median / mpx,
+            warm_ms,
+        });
+    }
+    Ok(results)
 }
 
 /// The thesis's Table 4.1 (GTX 980 Ti, population 200), for the side-by-side view.
@@ -595,6 +685,25 @@ pub fn table(r: &Report) -> String {
             t += &format!(
                 "  length {:>3} -> {:>3}: {:.3} -> {:.3} ({:.2}x)\n",
                 s.raw_length, s.simplified_length, s.raw_ms.median, s.simplified_ms.median, s.ratio
+            );
+        }
+    }
+    if !r.stages.is_empty() {
+        t += &format!(
+            "\npipeline stages and forms, one {FRAME_SIDE}x{FRAME_SIDE} frame (@crossBilateral; warm median, ms):\n"
+        );
+        t += &format!(
+            "  {:<32} {:>12} {:>12} {:>10} {:>10}\n",
+            "stage", "lower+val ms", "compile ms", "warm ms", "ms/Mpx"
+        );
+        for s in &r.stages {
+            t += &format!(
+                "  {:<32} {:>12} {:>12.1} {:>10.2} {:>10.1}\n",
+                s.stage,
+                s.lower_validate_ms.map_or("-".into(), |v| format!("{v:.2}")),
+                s.compile_ms,
+                s.warm_ms.median,
+                s.ms_per_mpx
             );
         }
     }

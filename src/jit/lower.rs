@@ -63,7 +63,7 @@ impl KernelLayout {
                 inputs.insert(Input::Feature(f));
             }
         }
-        for v in expr.variables() {
+        for v in expr.stored_variables() {
             inputs.insert(Input::Variance(v));
         }
         KernelLayout { inputs: inputs.into_iter().collect() }
@@ -614,10 +614,18 @@ impl<'a> Loads<'a> {
         }
     }
 
-    /// Load of variance `v` at the centre pixel.
+    /// Load of variance `v` at the centre pixel; `level` is the à-trous
+    /// pass from the uniform, 0 in kernels without passes.
     fn variance(&self, v: ScalarVar) -> String {
         let input = Input::Variance(v);
         match self {
+            Loads::Buffers(i) | Loads::Textures(i) if v == ScalarVar::Level => {
+                if i.uniform.iter().any(|f| f.name == "level") {
+                    "f32(params.level)".into()
+                } else {
+                    "0.0".into()
+                }
+            }
             Loads::Buffers(i) => format!("{}[i]", i.ident(Role::Input(input))),
             Loads::Tiled => unreachable!("variances are read at the centre pixel, never from a tile"),
             Loads::Textures(i) => {

@@ -63,6 +63,11 @@ impl Expr {
     }
 
     /// Every scalar variable the expression reads.
+    /// The scalar terminals a scene must store (every one but `level`).
+    pub fn stored_variables(&self) -> BTreeSet<ScalarVar> {
+        self.variables().into_iter().filter(|v| v.is_stored()).collect()
+    }
+
     pub fn variables(&self) -> BTreeSet<ScalarVar> {
         let mut out = BTreeSet::new();
         self.visit(&mut |e| {

@@ -112,7 +112,8 @@ name_table! {
 }
 
 name_table! {
-    /// Scalar terminals: per-pixel sample variances, read at the centre pixel i.
+    /// Scalar terminals: per-pixel sample variances, read at the centre pixel i,
+    /// and `level`, the à-trous pass (0 in the window form; never stored).
     pub enum ScalarVar {
         WpVariance => "wpVariance",
         NVariance => "nVariance",
@@ -121,6 +122,7 @@ name_table! {
         DovVariance => "dovVariance",
         DiVariance => "diVariance",
         ColorVariance => "colorVariance",
+        Level => "level",
     }
 }
 
@@ -321,8 +323,13 @@ impl ScalarVar {
             ScalarVar::SecTexVariance => Some(Feature::SecondaryTexture),
             ScalarVar::DovVariance => Some(Feature::Depth),
             ScalarVar::DiVariance => Some(Feature::DirectIllumination),
-            ScalarVar::ColorVariance => None,
+            ScalarVar::ColorVariance | ScalarVar::Level => None,
         }
+    }
+
+    /// Whether a scene stores it (every scalar but `level`, which the pipeline's form supplies).
+    pub fn is_stored(self) -> bool {
+        self != ScalarVar::Level
     }
 }
 

@@ -168,7 +168,9 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                 .into_iter()
                 .filter(|f| !provided.contains(f))
                 .map(|f| f.to_string())
-                .chain(e.variables().into_iter().filter(|v| !provided_variances.contains(v)).map(|v| v.to_string()))
+                .chain(
+                    e.stored_variables().into_iter().filter(|v| !provided_variances.contains(v)).map(|v| v.to_string()),
+                )
                 .collect();
             if missing.is_empty() {
                 None
@@ -179,7 +181,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         let mut request = Request { reference: true, ..Default::default() };
         for m in methods.iter().filter(|m| runnable(&m.expr).is_none()) {
             request.features.extend(m.expr.features());
-            request.variances.extend(m.expr.variables());
+            request.variances.extend(m.expr.stored_variables());
             request.albedo |= m.pipeline.demodulate;
         }
         let scene = scene::load(path, &request).with_context(|| format!("loading {}", path.display()))?;

@@ -81,7 +81,7 @@ pub struct Request {
 impl Request {
     /// Exactly the inputs of `expr`, plus the reference.
     pub fn for_expr(expr: &Expr) -> Self {
-        Request { features: expr.features(), variances: expr.variables(), reference: true, ..Default::default() }
+        Request { features: expr.features(), variances: expr.stored_variables(), reference: true, ..Default::default() }
     }
 }
 
