@@ -272,7 +272,8 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
     };
     let mut variance_ranges = BTreeMap::new();
     let mut separate_variances = BTreeMap::new();
-    for &v in &request.variances {
+    // `level` is no stored channel: the pipeline supplies it.
+    for &v in request.variances.iter().filter(|v| v.is_stored()) {
         let (alternatives, separate) = layout.variance(v);
         if separate {
             separate_variances.insert(v, alternatives);
@@ -370,7 +371,8 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
     }
 
     let mut variances = BTreeMap::new();
-    for &v in &request.variances {
+    // `level` is no stored channel: the pipeline supplies it.
+    for &v in request.variances.iter().filter(|v| v.is_stored()) {
         let values = if let Some(range) = variance_ranges.get(&v) {
             Some(mean_channels(&noisy.data[range.clone()]))
         } else if let (Some(alternatives), Some(file)) = (separate_variances.get(&v), &files.variance) {
