@@ -33,6 +33,43 @@ fn mitsuba_sample_loads_with_the_noisy_error_its_readme_states() {
     assert_eq!(e.relmse_half_spp, Some(e.relmse * 2.0));
 }
 
+/// Mitsuba's `moment` integrator: colour, nested AOVs, and a colour variance
+/// from first and second moments that predicts where the noisy image is wrong.
+#[test]
+fn mitsuba_moment_output_gives_a_colour_variance() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/mitsuba-moment-cornell-64");
+    let (features, variances) = scene::provides(&dir).unwrap();
+    for f in [Feature::Normal, Feature::Texture, Feature::WorldPosition, Feature::Depth] {
+        assert!(features.contains(&f), "{f} from the nested AOVs");
+    }
+    assert!(variances.contains(&ScalarVar::ColorVariance));
+    let wanted = [Feature::Normal, Feature::Texture];
+    let scene = scene::load(&dir, &Request { albedo: true, ..request(&wanted, &[ScalarVar::ColorVariance]) }).unwrap();
+    assert_eq!(scene.layout, Some("Mitsuba 3 (moment + aov + path)"));
+    let reference = scene.reference.as_ref().unwrap();
+    // The README's relMSE of the noisy colour (mean over pixels and channels).
+    let e = metrics::errors(&scene.color, reference, scene.spp);
+    assert!((e.relmse / 3.0 - 0.0684).abs() < 5e-4, "relMSE {}", e.relmse / 3.0);
+    let variance = &scene.variances[&ScalarVar::ColorVariance];
+    assert!(variance.iter().all(|v| v.is_finite() && (0.0..=1.0).contains(v)));
+    // Pixels the variance calls noisy are the ones far from the reference.
+    let squared: Vec<f64> = scene
+        .color
+        .iter()
+        .zip(reference)
+        .map(|(c, g)| (0..3).map(|k| (c[k] as f64 - g[k] as f64).powi(2)).sum::<f64>())
+        .collect();
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let var: Vec<f64> = variance.iter().map(|v| *v as f64).collect();
+    let (mv, ms) = (mean(&var), mean(&squared));
+    let cov = var.iter().zip(&squared).map(|(a, b)| (a - mv) * (b - ms)).sum::<f64>();
+    let norm = (var.iter().map(|a| (a - mv).powi(2)).sum::<f64>()
+        * squared.iter().map(|b| (b - ms).powi(2)).sum::<f64>())
+    .sqrt();
+    assert!(cov / norm > 0.3, "correlation of variance and squared error {}", cov / norm);
+    assert!(scene.albedo.is_some(), "the raw albedo from nested.albedo");
+}
+
 #[test]
 fn mitsuba_features_are_loaded_normalised_and_only_when_asked() {
     let wanted = [Feature::Normal, Feature::Texture, Feature::WpGradient];

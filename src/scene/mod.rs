@@ -374,12 +374,12 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
     // `level` is no stored channel: the pipeline supplies it.
     for &v in request.variances.iter().filter(|v| v.is_stored()) {
         let values = if let Some(range) = variance_ranges.get(&v) {
-            Some(mean_channels(&noisy.data[range.clone()]))
+            Some(layout.variance_values(&noisy.data[range.clone()]))
         } else if let (Some(alternatives), Some(file)) = (separate_variances.get(&v), &files.variance) {
             let (vchannels, vw, vh) = exr_io::channel_names(file)?;
             check_size(file, (vw, vh), &files.noisy, (width, height))?;
             match pick(alternatives, &vchannels) {
-                Some(chosen) => Some(mean_channels(&exr_io::read_channels(file, chosen)?.data)),
+                Some(chosen) => Some(layout.variance_values(&exr_io::read_channels(file, chosen)?.data)),
                 None => None,
             }
         } else {
@@ -449,9 +449,4 @@ fn check_size(file: &Path, size: (usize, usize), noisy: &Path, expected: (usize,
         return Err(SceneError::SizeMismatch { file: file.to_path_buf(), size, noisy: noisy.to_path_buf(), expected });
     }
     Ok(())
-}
-
-fn mean_channels(channels: &[Vec<f32>]) -> Vec<f32> {
-    let n = channels.len().max(1) as f32;
-    (0..channels[0].len()).map(|p| channels.iter().map(|c| c[p]).sum::<f32>() / n).collect()
 }
