@@ -11,6 +11,7 @@ BASELINES.md.
 """
 import sys
 import time
+from importlib.metadata import version
 
 import numpy as np
 import pyoidn
@@ -31,4 +32,4 @@ for _ in range(repeats):
     times.append(time.perf_counter() - start)
 times.sort()
 print(f"oidn {side}x{side} color+albedo+normal: cold {cold * 1e3:.1f} ms, warm median {times[len(times) // 2] * 1e3:.1f} ms "
-      f"[{times[0] * 1e3:.1f}, {times[-1] * 1e3:.1f}] over {repeats}; pyoidn {pyoidn.version if hasattr(pyoidn, 'version') else '?'}")
+      f"[{times[0] * 1e3:.1f}, {times[-1] * 1e3:.1f}] over {repeats}; pyoidn {version('pyoidn')}")
