@@ -32,6 +32,10 @@ enum Command {
         /// Write the WGSL to this file instead of standard output.
         #[arg(short, long)]
         output: Option<PathBuf>,
+        /// Print the form's kernel of this pipeline (an à-trous pass, remodulating)
+        /// [default: the one the expression was stored with, else `window`].
+        #[arg(long)]
+        pipeline: Option<filterjit::pipeline::FilterPipeline>,
     },
     /// Parse and type-check an expression; print its canonical form, length and inputs.
     Check {
@@ -58,6 +62,10 @@ enum Command {
         /// The shader file; its manifest goes to FILE.json.
         #[arg(short, long)]
         output: PathBuf,
+        /// The pipeline to export [default: the one the expression was stored with, else `window`].
+        /// Only `window` can be exported so far: pass it to export the weight of a filter stored with another.
+        #[arg(long)]
+        pipeline: Option<filterjit::pipeline::FilterPipeline>,
     },
     /// Filter a scene with an expression on the GPU; write the result as EXR and a PNG preview.
     Filter {
@@ -346,9 +354,10 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Compile { expr, output } => {
-            let expr = resolve_expr(&expr)?;
-            let kernel = jit::compile(&expr)?;
+        Command::Compile { expr, output, pipeline } => {
+            let resolved = corpus::resolve_with_pipeline(&expr)?;
+            let shape = jit::Shape::of(&pipeline.or(resolved.pipeline).unwrap_or_default());
+            let kernel = jit::compile_shaped(&resolved.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
             match output {
                 Some(path) => filterjit::io::write_bytes_atomically(&path, kernel.wgsl().as_bytes())
                     .map_err(anyhow::Error::msg)
@@ -357,9 +366,17 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Export { expr, target, format, output } => {
+        Command::Export { expr, target, format, output, pipeline } => {
+            let resolved = corpus::resolve_with_pipeline(&expr)?;
+            let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
+            if pipeline != filterjit::pipeline::FilterPipeline::WINDOW {
+                bail!(
+                    "`{expr}` is filtered through the pipeline `{pipeline}`, and export writes the window form only \
+                     (one pass, no pre-pass) so far; pass --pipeline window to export its weight as a single window pass"
+                );
+            }
             // An engine gets the cheapest equivalent form (the same weights).
-            let expr = filterjit::simplify::simplify(&resolve_expr(&expr)?);
+            let expr = filterjit::simplify::simplify(&resolved.expr);
             let exported = filterjit::export::export(&expr, target, format)?;
             let manifest_path = manifest_path(&output);
             let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";

@@ -50,6 +50,50 @@ fn filter_runs_the_first_thesis_expression_on_the_mitsuba_sample() {
     );
 }
 
+/// A shipped filter runs through the pipeline it is stored with, `--pipeline`
+/// overrides it, and the CPU reference agrees with the device through the whole pipeline.
+#[test]
+fn filter_honours_a_stored_pipeline_and_the_flag() {
+    let out_dir = std::env::temp_dir().join(format!("filterjit-cli-pipeline-{}", std::process::id()));
+    let output = out_dir.join("atrous.exr");
+    let sample = mitsuba_sample();
+    let run = |extra: &[&str]| {
+        let mut args = vec!["filter", "--expr", "@crossBilateralAtrous", sample.to_str().unwrap()];
+        args.extend_from_slice(&["-o", output.to_str().unwrap(), "--cpu-check"]);
+        args.extend_from_slice(extra);
+        let run = filterjit(&args);
+        let stdout = text(&run.stdout);
+        assert!(run.status.success(), "stdout:\n{stdout}\nstderr:\n{}", text(&run.stderr));
+        stdout
+    };
+    let stored = run(&[]);
+    assert!(stored.contains("pipeline  outliers=2,demodulate,atrous=5"), "{stored}");
+    let worst: f64 = stored
+        .lines()
+        .find(|l| l.starts_with("cpu"))
+        .and_then(|l| l.split_whitespace().last())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no cpu line:\n{stored}"));
+    assert!(worst < 1e-2, "GPU and CPU differ by {worst} through the pipeline");
+    let plain = run(&["--pipeline", "window", "--radius", "3"]);
+    assert!(plain.contains("pipeline  window"), "{plain}");
+    assert!(relmse(&stored, "filtered") < relmse(&plain, "filtered"), "the pipeline helps on this render");
+
+    // Export writes the window form only: a filter stored with another pipeline is refused, not changed.
+    let shader = out_dir.join("atrous.wgsl");
+    let export = filterjit(&["export", "@crossBilateralAtrous", "-o", shader.to_str().unwrap()]);
+    assert!(!export.status.success() && !shader.exists());
+    assert!(text(&export.stderr).contains("--pipeline window"), "{}", text(&export.stderr));
+    let export =
+        filterjit(&["export", "@crossBilateralAtrous", "--pipeline", "window", "-o", shader.to_str().unwrap()]);
+    assert!(export.status.success(), "{}", text(&export.stderr));
+
+    let bad = filterjit(&["filter", "--expr", "1", "--pipeline", "atrous=0", sample.to_str().unwrap(), "-o", "x.exr"]);
+    assert!(!bad.status.success());
+    let stderr = text(&bad.stderr);
+    assert!(stderr.contains("atrous=0") && stderr.contains("from 1 to"), "{stderr}");
+}
+
 #[test]
 fn a_bad_expression_exits_non_zero_with_the_position() {
     let run = filterjit(&["compile", "exp(-distance2(normal) +)"]);
