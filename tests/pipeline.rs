@@ -195,3 +195,31 @@ fn a_kernel_runs_only_on_scenes_prepared_for_its_shape() {
     let error = SceneBuffers::for_pipeline(&gpu, &plain, &pipeline("demodulate,window")).err().unwrap().to_string();
     assert!(error.contains("without its albedo"), "{error}");
 }
+
+/// Kernels run as trusted modules (wgpu's run-time bounds checks and loop
+/// bounding off, the default) compute exactly what they compute with them.
+#[test]
+fn trusted_kernels_give_the_same_bits_as_checked_ones() {
+    let turn = gpu();
+    // A device of its own: switching the checks empties its pipeline cache.
+    let gpu = filterjit::gpu::Gpu::open_like(&turn).unwrap();
+    let scene = scene_with_albedo(37, 21, 5);
+    let expr = parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3))").unwrap();
+    for (text, options) in [
+        ("window", LowerOptions::ALL),
+        ("window", LowerOptions::ALL.with_tiles(3)),
+        ("outliers=2,demodulate,atrous=4", LowerOptions::ALL),
+    ] {
+        let p = pipeline(text);
+        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, options, Shape::of(&p)).unwrap();
+        let run = |checks: bool| {
+            gpu.set_kernel_runtime_checks(checks);
+            let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &p).unwrap();
+            gpu.filter(&kernel, &mut buffers, &scene, 3).unwrap()
+        };
+        let (trusted, checked) = (run(false), run(true));
+        assert_eq!(trusted.color, checked.color, "{text}");
+        assert_eq!(trusted.flags, checked.flags, "{text}");
+    }
+    gpu.set_kernel_runtime_checks(false);
+}

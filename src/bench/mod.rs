@@ -98,6 +98,8 @@ pub struct PopulationResult {
     /// The first evaluation of all of them: software drivers compile here.
     pub first_evaluation_ms: f64,
     pub per_individual_ms: f64,
+    /// The same with wgpu's run-time bounds checks and loop bounding kept in the kernels.
+    pub checked_per_individual_ms: f64,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -418,7 +420,15 @@ pub fn run(
     gpu.evaluate_fitness(&refs, &mut fitness_scene, &[scene], settings.radius)?;
     let first_evaluation = t.elapsed();
     gpu.prune_pipelines(|_| false);
+    // The same kernels again with wgpu's run-time checks kept (what `create_shader_module` adds).
+    gpu.set_kernel_runtime_checks(true);
+    let t = Instant::now();
+    gpu.prepare_pipelines(&refs, threads)?;
+    gpu.evaluate_fitness(&refs, &mut fitness_scene, &[scene], settings.radius)?;
+    let checked = t.elapsed();
+    gpu.set_kernel_runtime_checks(false);
     let population_result = PopulationResult {
+        checked_per_individual_ms: ms(lower_validate + checked) / population.len() as f64,
         individuals: population.len(),
         distinct: distinct.len(),
         lower_validate_ms: ms(lower_validate),
@@ -667,6 +677,12 @@ pub fn table(r: &Report) -> String {
     t += &format!(
         "\npopulation of {} ({} distinct) compiled together: lower+validate {:.0} ms, pipelines {:.0} ms, first evaluation {:.0} ms => {:.2} ms per individual\n",
         p.individuals, p.distinct, p.lower_validate_ms, p.pipelines_ms, p.first_evaluation_ms, p.per_individual_ms
+    );
+    t += &format!(
+        "  trusted modules (no run-time checks, the default) {:.2} ms per individual; with wgpu's checks {:.2} ms ({:.2}x)\n",
+        p.per_individual_ms,
+        p.checked_per_individual_ms,
+        p.checked_per_individual_ms / p.per_individual_ms
     );
     let h = &r.handwritten;
     t += &format!(

@@ -66,6 +66,8 @@ pub struct Gpu {
     pipelines: Mutex<HashMap<KernelKey, Arc<Pipeline>>>,
     tracer: OnceLock<Pipeline>,
     prepass: OnceLock<Pipeline>,
+    /// Whether kernels keep wgpu's run-time checks ([`Gpu::set_kernel_runtime_checks`]).
+    kernel_checks: std::sync::atomic::AtomicBool,
     /// wgpu's GL backend shares one context per device and panics when a
     /// thread waits more than a second for it (as it does while another
     /// thread waits for a long dispatch or links a large program). On GL,
@@ -114,6 +116,7 @@ impl Gpu {
             pipelines: Mutex::new(HashMap::new()),
             tracer: OnceLock::new(),
             prepass: OnceLock::new(),
+            kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,
         })
     }
@@ -183,11 +186,18 @@ impl Gpu {
         }
         self.check_bindings(kernel)?;
         let start = Instant::now();
+        let checks = if self.kernel_checks.load(std::sync::atomic::Ordering::Relaxed) {
+            RuntimeChecks::Full
+        } else {
+            RuntimeChecks::InBoundsByConstruction
+        };
         let pipeline =
-            self.create_pipeline(kernel.validated(), "filterjit kernel").map_err(|message| GpuError::Pipeline {
-                expression: kernel.source().canonical.clone(),
-                message,
-                wgsl: kernel.wgsl().to_string(),
+            self.create_pipeline_with(kernel.validated(), "filterjit kernel", checks).map_err(|message| {
+                GpuError::Pipeline {
+                    expression: kernel.source().canonical.clone(),
+                    message,
+                    wgsl: kernel.wgsl().to_string(),
+                }
             })?;
         let pipeline = Arc::new(pipeline);
         let create = start.elapsed();
@@ -199,6 +209,24 @@ impl Gpu {
     /// an explicit layout made from the module's slots, inside a validation
     /// error scope; the error's text on failure.
     pub(crate) fn create_pipeline(&self, validated: &ValidatedModule, label: &str) -> Result<Pipeline, String> {
+        self.create_pipeline_with(validated, label, RuntimeChecks::Full)
+    }
+
+    /// Whether kernels keep wgpu's run-time bounds checks and loop bounding
+    /// (on) or are created as trusted modules without them (off, the
+    /// default): see [`RuntimeChecks::InBoundsByConstruction`]. Changing it
+    /// empties the pipeline cache. Results are the same either way.
+    pub fn set_kernel_runtime_checks(&self, on: bool) {
+        self.kernel_checks.store(on, std::sync::atomic::Ordering::Relaxed);
+        self.pipelines.lock().expect("pipeline cache lock").clear();
+    }
+
+    fn create_pipeline_with(
+        &self,
+        validated: &ValidatedModule,
+        label: &str,
+        checks: RuntimeChecks,
+    ) -> Result<Pipeline, String> {
         let _turn = self.gl_turn();
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let entries: Vec<wgpu::BindGroupLayoutEntry> = validated.slots().iter().map(layout_entry).collect();
@@ -210,10 +238,20 @@ impl Gpu {
             bind_group_layouts: &[Some(&layout)],
             immediate_size: 0,
         });
-        let shader = self.device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        let descriptor = wgpu::ShaderModuleDescriptor {
             label: Some(label),
             source: wgpu::ShaderSource::Naga(std::borrow::Cow::Owned(validated.module().clone())),
-        });
+        };
+        let shader = match checks {
+            RuntimeChecks::Full => self.device.create_shader_module(descriptor),
+            // SAFETY: only filterjit's generated kernels come here, and every
+            // access they make is in bounds by construction (see the variant);
+            // every loop they run is bounded by the window, the stencil or the
+            // workgroup size. The module was validated by naga.
+            RuntimeChecks::InBoundsByConstruction => unsafe {
+                self.device.create_shader_module_trusted(descriptor, wgpu::ShaderRuntimeChecks::unchecked())
+            },
+        };
         let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some(label),
             layout: Some(&pipeline_layout),
@@ -268,6 +306,23 @@ impl Gpu {
             entries: &entries,
         })
     }
+}
+
+/// Which of wgpu's run-time shader checks a module keeps.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum RuntimeChecks {
+    /// Bounds checks and loop bounding, as wgpu adds them to any module.
+    Full,
+    /// None: for filterjit's generated kernels, whose every buffer and
+    /// workgroup-array index is in bounds by construction. The pixel index is
+    /// y·width + x behind `x < width && y < height`; a neighbour's is inside
+    /// the window clipped to the image (or an à-trous tap outside it is
+    /// skipped); a tile cell is inside the tile the kernel declares; a
+    /// workgroup's partial sum is at its index among the scene's workgroups,
+    /// inside the region bound for that scene. Loops run over the window, the
+    /// stencil or the reduction's strides. Other modules (path tracer,
+    /// interpreter, pre-pass) keep the checks.
+    InBoundsByConstruction,
 }
 
 /// A compute pipeline and the layout of its bind group 0.
