@@ -63,19 +63,20 @@ pub fn encode(e: &Expr, slot: &dyn Fn(Feature) -> u32, variance: &dyn Fn(ScalarV
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::jit::Helper;
 
     #[test]
     fn the_operator_orders_match_the_interpreter() {
         // templates/interpreter.wgsl switches on these positions.
         let wgsl = include_str!("../../templates/interpreter.wgsl");
         for (k, op) in UnaryOp::ALL.iter().enumerate().take(UnaryOp::ALL.len() - 1) {
-            assert!(wgsl.contains(&format!("case {k}u: {{ return {}(a); }}", op.wgsl_helper())), "{op}");
+            assert!(wgsl.contains(&format!("case {k}u: {{ return {}(a); }}", op.helper())), "{op}");
         }
         for (k, op) in BinaryOp::ALL.iter().enumerate().take(BinaryOp::ALL.len() - 1) {
-            assert!(wgsl.contains(&format!("case {k}u: {{ return {}(a, b); }}", op.wgsl_helper())), "{op}");
+            assert!(wgsl.contains(&format!("case {k}u: {{ return {}(a, b); }}", op.helper())), "{op}");
         }
         for (k, op) in PairOp::ALL.iter().enumerate().take(PairOp::ALL.len() - 1) {
-            assert!(wgsl.contains(&format!("case {k}u: {{ return {}(u, v); }}", op.wgsl_helper())), "{op}");
+            assert!(wgsl.contains(&format!("case {k}u: {{ return {}(u, v); }}", op.helper())), "{op}");
         }
     }
 }

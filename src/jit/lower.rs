@@ -9,6 +9,7 @@ use std::sync::OnceLock;
 
 use serde::Serialize;
 
+use super::helpers::Helper;
 use super::interface::{BindingInterface, Element, Role};
 use crate::lang::{Expr, Feature, FeatureSource, ScalarVar, UnaryOp};
 use crate::semantics;
@@ -757,7 +758,7 @@ impl Body {
                     UnaryOp::Abs if self.options.skip_redundant_checks && in_range(&folded_child) => {
                         format!("abs({a})")
                     }
-                    _ => format!("{}({a})", op.wgsl_helper()),
+                    _ => format!("{}({a})", op.helper()),
                 }
             }
             Expr::Binary(op, a, b) => {
@@ -793,16 +794,16 @@ impl Body {
                         format!("fj_fin({a} * {})", wgsl_f32(1.0 / divisor))
                     } else {
                         let (a, b) = (self.emit(&fa), self.emit(&fb));
-                        format!("{}({a}, {b})", op.wgsl_helper())
+                        format!("{}({a}, {b})", op.helper())
                     }
                 } else {
                     let a = self.emit(&fa);
                     let b = self.emit(&fb);
-                    format!("{}({a}, {b})", op.wgsl_helper())
+                    format!("{}({a}, {b})", op.helper())
                 }
             }
             Expr::Pair(op, i, j) => {
-                format!("{}({}, {})", op.wgsl_helper(), feature_ident('i', *i), feature_ident('j', *j))
+                format!("{}({}, {})", op.helper(), feature_ident('i', *i), feature_ident('j', *j))
             }
         };
         let name = self.temp(value, per_pixel);

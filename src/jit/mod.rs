@@ -1,11 +1,13 @@
 //! The JIT: typed expression → WGSL (lower) → naga-validated kernel (validate).
 //! Nothing here talks to wgpu; [`crate::gpu`] turns a [`ValidatedKernel`] into a pipeline.
 
+pub mod helpers;
 pub mod interface;
 pub mod lower;
 pub mod prepass;
 pub mod validate;
 
+pub use helpers::Helper;
 pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot};
 pub use lower::{
     lower, lower_kind, lower_shaped, lower_with, Input, KernelKind, KernelLayout, KernelSource, LowerError,

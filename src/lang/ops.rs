@@ -148,11 +148,6 @@ impl UnaryOp {
         }
     }
 
-    /// Name of the WGSL helper in `templates/ops.wgsl`.
-    pub fn wgsl_helper(self) -> String {
-        format!("fj_{}", self.name().to_ascii_lowercase())
-    }
-
     /// Whether the operator can raise a domain-error flag on some input.
     pub fn can_flag(self) -> bool {
         matches!(self, UnaryOp::Sqrt | UnaryOp::Asin | UnaryOp::Acos)
@@ -209,10 +204,6 @@ impl BinaryOp {
         }
     }
 
-    pub fn wgsl_helper(self) -> String {
-        format!("fj_{}", self.name())
-    }
-
     /// Whether the operator can raise a domain-error flag on some input.
     pub fn can_flag(self) -> bool {
         self == BinaryOp::Pow
@@ -240,10 +231,6 @@ impl BinaryOp {
 }
 
 impl PairOp {
-    pub fn wgsl_helper(self) -> String {
-        format!("fj_{}", self.name().to_ascii_lowercase())
-    }
-
     /// Relative cost in a kernel, in units of one add, loads of the two
     /// features included (see [`UnaryOp::cost`]).
     pub fn cost(self) -> f64 {
@@ -400,12 +387,5 @@ mod tests {
         names.sort();
         names.dedup();
         assert_eq!(names.len(), count, "a name is declared twice");
-    }
-
-    #[test]
-    fn helper_names_are_valid_wgsl_identifiers() {
-        for op in UnaryOp::ALL {
-            assert!(op.wgsl_helper().chars().all(|c| c.is_ascii_alphanumeric() || c == '_'));
-        }
     }
 }
