@@ -241,6 +241,10 @@ struct ReportArgs {
     /// The report folder.
     #[arg(short, long, default_value = "runs/report")]
     output: PathBuf,
+    /// Leave out Intel Open Image Denoise even where its `oidnDenoise` is found
+    /// (FILTERJIT_OIDN, PATH, or the pyoidn Python package).
+    #[arg(long)]
+    no_oidn: bool,
 }
 
 #[derive(clap::Args)]
@@ -1046,12 +1050,24 @@ fn report(args: ReportArgs) -> Result<()> {
         crop: args.crop,
         timing_size: args.timing_size,
     };
+    let oidn = match (args.no_oidn, report::oidn::Oidn::find()) {
+        (true, _) => None,
+        (false, Ok(oidn)) => {
+            eprintln!("peer      Intel Open Image Denoise: {}", oidn.program.display());
+            Some(oidn)
+        }
+        (false, Err(why)) => {
+            eprintln!("note: the report goes on without Intel Open Image Denoise: {why}");
+            None
+        }
+    };
     let inputs = report::Inputs {
         scenes: &datasets,
         methods: &methods,
         settings,
         baseline: tuned,
         hall_of_fame: hall_path.as_ref().map(|_| hall.as_slice()),
+        oidn: oidn.as_ref(),
     };
     let results = report::run(&gpu, inputs, &args.output, &mut |what| eprintln!("measure   {what}"))?;
     println!("{:<26} {:>14} {:>10} {:>10}", "method", "relMSE/noisy", "relMSE", "ms/Mpx");

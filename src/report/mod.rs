@@ -8,6 +8,7 @@
 //! Pareto front (SVG), tone-mapped crops (PNG), a chart of feature usage, and
 //! `index.html` tying them together.
 
+pub mod oidn;
 pub mod plot;
 
 use std::collections::BTreeMap;
@@ -36,6 +37,8 @@ pub enum Origin {
     Thesis,
     /// Given on the command line or taken from a hall of fame.
     Given,
+    /// What a user would pick instead: Intel Open Image Denoise (CPU wall time).
+    Peer,
 }
 
 /// A filter to compare.
@@ -132,11 +135,13 @@ pub struct Inputs<'a> {
     pub baseline: Option<Tuned>,
     /// Expressions of a hall of fame, for the feature-usage chart.
     pub hall_of_fame: Option<&'a [Expr]>,
+    /// OIDN, when found: two more methods on every scene.
+    pub oidn: Option<&'a oidn::Oidn>,
 }
 
 /// Measure the methods on the scenes and write the report into `output`.
 pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMut(&str)) -> Result<Results> {
-    let Inputs { scenes, methods, settings, baseline, hall_of_fame } = inputs;
+    let Inputs { scenes, methods, settings, baseline, hall_of_fame, oidn } = inputs;
     let settings = &settings;
     std::fs::create_dir_all(output).with_context(|| format!("creating {}", output.display()))?;
     io::remove_stale_temporaries(output);
@@ -183,6 +188,10 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             request.features.extend(m.expr.features());
             request.variances.extend(m.expr.stored_variables());
             request.albedo |= m.pipeline.demodulate;
+        }
+        if oidn.is_some() && provided.contains(&crate::lang::Feature::Texture) {
+            request.albedo = true;
+            request.features.insert(crate::lang::Feature::Normal);
         }
         let scene = scene::load(path, &request).with_context(|| format!("loading {}", path.display()))?;
         let reference = scene
@@ -239,6 +248,50 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             )?);
             results.cells.push(Cell { method: method.name.clone(), ..cell });
         }
+        if let Some(oidn) = oidn {
+            for aux in [oidn::Auxiliary::ColorOnly, oidn::Auxiliary::AlbedoNormal] {
+                let name = aux.method_name().to_string();
+                if aux == oidn::Auxiliary::AlbedoNormal
+                    && (scene.albedo.is_none() || !provided.contains(&crate::lang::Feature::Normal))
+                {
+                    let unavailable = Some("the scene has no albedo and normal".to_string());
+                    results.cells.push(Cell {
+                        scene: scene.name.clone(),
+                        method: name,
+                        unavailable,
+                        ..Cell::default()
+                    });
+                    continue;
+                }
+                progress(&format!("scene {}: {name}", scene.name));
+                let work = output.join("oidn").join(file_name(&scene.name));
+                let denoised = oidn.denoise(&scene, aux, 1, &work)?;
+                // Timed on the same tiled scene as filterjit's filters.
+                let timed = oidn.denoise(&timing_scene, aux, settings.repeats.max(1), &work)?;
+                let _ = std::fs::remove_dir_all(&work);
+                let mut times = timed.warm_ms;
+                times.sort_by(f64::total_cmp);
+                let mpx = timing_scene.pixels() as f64 / 1e6;
+                let e = metrics::errors(&denoised.color, &reference, scene.spp);
+                strip.push(write_crop(
+                    &crops_dir.join(format!("{}.png", file_name(&name))),
+                    &denoised.color,
+                    &scene,
+                    crop,
+                )?);
+                results.cells.push(Cell {
+                    scene: scene.name.clone(),
+                    method: name,
+                    relmse: Some(e.relmse),
+                    relmse_half_spp: e.relmse_half_spp,
+                    mse: Some(e.mse),
+                    normalised: Some(e.relmse / noisy.relmse.max(1e-12)),
+                    ms_per_mpx: Some(times[times.len() / 2] / mpx),
+                    ms_per_mpx_range: Some((times[0] / mpx, times[times.len() - 1] / mpx)),
+                    ..Cell::default()
+                });
+            }
+        }
         strip.push(write_crop(&crops_dir.join("reference.png"), &reference, &scene, crop)?);
         write_strip(&output.join("crops").join(format!("{}.png", file_name(&scene.name))), &strip)?;
         results.scenes.push(SceneInfo {
@@ -250,8 +303,10 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             crop: [crop.0, crop.1, crop.2],
         });
     }
+    let peers = oidn.map_or(&[][..], |_| &[oidn::Auxiliary::ColorOnly, oidn::Auxiliary::AlbedoNormal][..]);
     results.methods = std::iter::once((NOISY.to_string(), Origin::Noisy, None))
         .chain(methods.iter().map(|m| (m.name.clone(), m.origin, Some(m))))
+        .chain(peers.iter().map(|aux| (aux.method_name().to_string(), Origin::Peer, None)))
         .map(|(name, origin, method)| summarise(&results.cells, name, origin, method))
         .collect();
     write(&results, output)?;
