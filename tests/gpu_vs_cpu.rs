@@ -22,7 +22,7 @@ use filterjit::rng::Rng;
 use filterjit::scene::{self, Absent, Request};
 use filterjit::{corpus, metrics, Scene};
 
-use crate::common::{env_usize, gpu, mitsuba_sample, synthetic_scene};
+use crate::common::{agree_fraction, env_usize, gpu, mitsuba_sample, synthetic_scene};
 
 /// Edge values for operator tests (f32, as the GPU sees them).
 fn edges() -> Vec<f32> {
@@ -180,20 +180,6 @@ fn every_operator_agrees_with_the_cpu_at_its_edges() {
     for (name, worst) in table {
         eprintln!("  {name:<14} {worst:.2e}");
     }
-}
-
-fn agree_fraction(gpu_rgb: &[[f32; 3]], cpu_rgb: &[[f64; 3]]) -> (f64, f64) {
-    let mut within = 0usize;
-    let mut worst = 0.0f64;
-    for (g, c) in gpu_rgb.iter().zip(cpu_rgb) {
-        for q in 0..3 {
-            assert!(g[q].is_finite(), "GPU output is not finite");
-            let err = (g[q] as f64 - c[q]).abs() / (c[q].abs() + 0.01);
-            worst = worst.max(err);
-            within += usize::from(err <= 1e-3);
-        }
-    }
-    (within as f64 / (3 * gpu_rgb.len()) as f64, worst)
 }
 
 #[test]

@@ -9,7 +9,7 @@ use filterjit::lang::parse_expr;
 use filterjit::pipeline::FilterPipeline;
 use filterjit::{metrics, Expr, Scene};
 
-use crate::common::{gpu, synthetic_scene};
+use crate::common::{agree_fraction, gpu, synthetic_scene};
 
 /// The synthetic scene with a raw albedo that has what real renders have:
 /// black (emitters, escaped rays), ordinary values, and values far above 1.
@@ -37,22 +37,6 @@ fn gpu_filter(gpu: &filterjit::gpu::Gpu, expr: &Expr, scene: &Scene, p: &FilterP
     gpu.filter(&kernel, &mut buffers, scene, radius).unwrap().rgb()
 }
 
-/// Fraction of channels within 1e-3 relative (+0.01 absolute in the
-/// denominator) of the CPU, and the worst difference.
-fn agreement(gpu_rgb: &[[f32; 3]], cpu_rgb: &[[f64; 3]]) -> (f64, f64) {
-    let mut within = 0;
-    let mut worst = 0f64;
-    for (g, c) in gpu_rgb.iter().zip(cpu_rgb) {
-        for q in 0..3 {
-            assert!(g[q].is_finite(), "GPU output is not finite");
-            let err = (g[q] as f64 - c[q]).abs() / (c[q].abs() + 0.01);
-            worst = worst.max(err);
-            within += usize::from(err <= 1e-3);
-        }
-    }
-    (within as f64 / (3 * gpu_rgb.len()) as f64, worst)
-}
-
 #[test]
 fn the_pre_pass_alone_agrees_with_the_cpu() {
     // A window of radius 0 with weight 1 hands back the pre-pass's colour, remodulated.
@@ -63,7 +47,7 @@ fn the_pre_pass_alone_agrees_with_the_cpu() {
         let p = pipeline(text);
         let on_gpu = gpu_filter(&gpu, &expr, &scene, &p, 0);
         let on_cpu = cpu::filter_pipeline(&expr, &scene, &p, 0).unwrap();
-        let (fraction, worst) = agreement(&on_gpu, &on_cpu.color);
+        let (fraction, worst) = agree_fraction(&on_gpu, &on_cpu.color);
         assert_eq!(fraction, 1.0, "{text}: worst relative difference {worst:e}");
     }
 }
@@ -130,7 +114,7 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
             let expr = parse_expr(e).unwrap();
             let on_gpu = gpu_filter(&gpu, &expr, &scene, &p, 2);
             let on_cpu = cpu::filter_pipeline(&expr, &scene, &p, 2).unwrap();
-            let (fraction, worst) = agreement(&on_gpu, &on_cpu.color);
+            let (fraction, worst) = agree_fraction(&on_gpu, &on_cpu.color);
             assert!(fraction >= 0.995, "{text} `{e}`: {:.2}% of channels agree, worst {worst:e}", fraction * 100.0);
             assert!(worst < 1e-2, "{text} `{e}`: worst relative difference {worst:e}");
         }
@@ -179,7 +163,7 @@ fn level_is_the_pass_index() {
     let two = gpu_filter(&gpu, &expr, &scene, &pipeline("atrous=2"), 2);
     assert_ne!(two, scene.color, "pass 1 filters");
     let on_cpu = cpu::filter_pipeline(&expr, &scene, &pipeline("atrous=2"), 2).unwrap();
-    assert_eq!(agreement(&two, &on_cpu.color).0, 1.0);
+    assert_eq!(agree_fraction(&two, &on_cpu.color).0, 1.0);
 }
 
 #[test]

@@ -130,3 +130,19 @@ pub fn synthetic_scene(width: usize, height: usize, seed: u64) -> Scene {
     }
     scene
 }
+
+/// Fraction of channels of a GPU image within 1e-3 relative (+0.01 absolute in
+/// the denominator) of the CPU reference's, and the worst difference.
+pub fn agree_fraction(gpu_rgb: &[[f32; 3]], cpu_rgb: &[[f64; 3]]) -> (f64, f64) {
+    let mut within = 0usize;
+    let mut worst = 0.0f64;
+    for (g, c) in gpu_rgb.iter().zip(cpu_rgb) {
+        for q in 0..3 {
+            assert!(g[q].is_finite(), "GPU output is not finite");
+            let err = (g[q] as f64 - c[q]).abs() / (c[q].abs() + 0.01);
+            worst = worst.max(err);
+            within += usize::from(err <= 1e-3);
+        }
+    }
+    (within as f64 / (3 * gpu_rgb.len()) as f64, worst)
+}
