@@ -86,6 +86,15 @@ impl FilterPipeline {
         }
     }
 
+    /// The radius r whose (2r+1)² taps one pass of the form reads: the
+    /// window's `radius`, or the à-trous stencil's half-width whatever its step.
+    pub fn pass_radius(&self, radius: u32) -> u32 {
+        match self.form {
+            Form::Window => radius,
+            Form::Atrous { .. } => ATROUS_HALF_WIDTH as u32,
+        }
+    }
+
     /// Whether the form is the à-trous cascade.
     pub fn is_atrous(&self) -> bool {
         matches!(self.form, Form::Atrous { .. })

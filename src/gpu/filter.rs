@@ -252,9 +252,7 @@ impl Gpu {
         });
 
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        // An à-trous pass reads 5x5 taps, whatever their step.
-        let band =
-            rows_per_dispatch(buffers.width, if atrous { crate::pipeline::ATROUS_HALF_WIDTH as u32 } else { radius });
+        let band = rows_per_dispatch(buffers.width, buffers.pipeline.pass_radius(radius));
         let start = Instant::now();
         let mut dispatches = 0;
         for level in 0..passes {

@@ -175,8 +175,7 @@ impl Gpu {
                 let pipeline = fs.buffers.pipeline;
                 let atrous = pipeline.is_atrous();
                 let passes = pipeline.passes();
-                let reach = if atrous { crate::pipeline::ATROUS_HALF_WIDTH as u32 } else { radius };
-                let rows = rows_per_dispatch(fs.width, reach);
+                let rows = rows_per_dispatch(fs.width, pipeline.pass_radius(radius));
                 (0..passes)
                     .flat_map(|level| (0..fs.height).step_by(rows as usize).map(move |row| (level, row)))
                     .map(|(level, row)| {
