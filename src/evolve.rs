@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::gp::transport::{InProcess, Transport};
 use crate::gp::{self, EvalTime, Evaluator, Fitness, Settings, State};
 use crate::gpu::{FitnessScene, Gpu};
 use crate::jit::{self, KernelKind};
@@ -512,26 +513,27 @@ pub fn default_run_dir(base: &Path, resume: bool) -> PathBuf {
     }
 }
 
-/// Run (or resume) a search; returns the summary when the last generation is done.
+/// Run (or resume) a search in this process; returns the summary when the last generation is done.
 pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
-    let start = Instant::now();
-    let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render, baselines, tiles } =
-        options;
-    settings.check().map_err(anyhow::Error::msg)?;
-    std::fs::create_dir_all(&output).with_context(|| format!("creating {}", output.display()))?;
-    crate::io::remove_stale_temporaries(&output);
+    run_with(gpu, options, &mut InProcess)
+}
+
+/// The state to resume from, if any, after checking the run directory: the root's job.
+fn prepare_run_dir(output: &Path, resume: bool, settings: &Settings, config: &RunConfig) -> Result<Option<State>> {
+    std::fs::create_dir_all(output).with_context(|| format!("creating {}", output.display()))?;
+    crate::io::remove_stale_temporaries(output);
     let existing = output.join(CHECKPOINT_FILE).is_file();
-    let resumed = match (existing, resume) {
+    match (existing, resume) {
         (true, true) => {
-            let checkpoint = read_checkpoint(&output)?;
-            if checkpoint.settings != settings || checkpoint.run != config {
+            let checkpoint = read_checkpoint(output)?;
+            if checkpoint.settings != *settings || checkpoint.run != *config {
                 bail!(
                     "{} was made with other settings or scenes; resume with the same flags, or choose another --output",
                     output.join(CHECKPOINT_FILE).display()
                 );
             }
-            log_upto(&output, checkpoint.state.generation)?;
-            Some(checkpoint.state)
+            log_upto(output, checkpoint.state.generation)?;
+            Ok(Some(checkpoint.state))
         }
         (true, false) => {
             bail!("{} holds a run already; pass --resume to continue it, or choose another --output", output.display())
@@ -539,11 +541,36 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
         (false, true) => bail!("nothing to resume: {} has no {CHECKPOINT_FILE}", output.display()),
         (false, false) => {
             let _ = std::fs::remove_file(output.join(LOG_FILE));
-            None
+            Ok(None)
         }
-    };
+    }
+}
 
-    let training = resolve_scenes(gpu, &config.training, &config.render, &mut *on_render)?;
+/// Run (or resume) a search whose islands are shared among the processes
+/// `transport` reaches (docs/DISTRIBUTED.md). Every process calls this with
+/// the same options. Only the root (rank 0) touches the run directory:
+/// it checkpoints the whole population each generation, writes the log, the
+/// hall of fame and the summary, and scores the test scenes; it returns the
+/// summary, the others `None`.
+pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transport) -> Result<Option<Summary>> {
+    let start = Instant::now();
+    let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render, baselines, tiles } =
+        options;
+    settings.check().map_err(anyhow::Error::msg)?;
+    let root = transport.is_root();
+    let resumed = if root { prepare_run_dir(&output, resume, &settings, &config)? } else { None };
+    let resumed: Option<State> = serde_json::from_slice(&transport.broadcast(serde_json::to_vec(&resumed)?)?)?;
+
+    // The root renders missing scenes into the cache first; the others then
+    // find them there (or, on a node that does not share it, render their own).
+    let mut training = Vec::new();
+    if root {
+        training = resolve_scenes(gpu, &config.training, &config.render, &mut *on_render)?;
+    }
+    transport.barrier();
+    if !root {
+        training = resolve_scenes(gpu, &config.training, &config.render, &mut *on_render)?;
+    }
     let (features, variances) = common_terminals(&training)?;
     let seed_expr = crate::lang::parse_expr(&config.seed_expr).map_err(|e| anyhow::anyhow!("seed expression:\n{e}"))?;
     for f in seed_expr.features() {
@@ -561,7 +588,13 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
         variables: variances.iter().copied().chain(level).collect(),
         constants: crate::lang::ops::THESIS_CONSTANTS.to_vec(),
     };
-    let mut engine = gp::Engine::new(settings.clone(), terminals, seed_expr.clone(), &mut evaluator);
+    let mut engine = gp::Engine::with_transport(
+        settings.clone(),
+        terminals,
+        seed_expr.clone(),
+        &mut evaluator,
+        Box::new(transport),
+    )?;
 
     // A generation is done once it is logged and checkpointed, in that order: a
     // resumed run drops log lines past its checkpoint.
@@ -574,25 +607,28 @@ pub fn run(gpu: &Gpu, options: RunOptions<'_>) -> Result<Option<Summary>> {
         on_report(report);
         Ok(())
     };
+    // Only the root holds the whole population.
     let mut state = match resumed {
-        Some(state) => state,
-        None => {
-            let (state, report) = engine.initial()?;
-            record(&state, &report)?;
-            state
+        Some(state) => {
+            engine.resume(&state)?;
+            Some(state)
         }
+        None => engine.initial()?.map(|(state, report)| record(&state, &report).map(|()| state)).transpose()?,
     };
     let mut done_here = 0;
-    while state.generation < settings.generations {
+    while engine.generation().expect("a generation is done") < settings.generations {
         if stop_after.is_some_and(|n| done_here >= n) {
             return Ok(None);
         }
-        let (next, report) = engine.step(&state)?;
-        record(&next, &report)?;
-        state = next;
+        if let Some((next, report)) = engine.step()? {
+            record(&next, &report)?;
+            state = Some(next);
+        }
         done_here += 1;
     }
     drop(engine);
+    // The others end here: the run directory, the hall of fame and the test scenes are the root's.
+    let Some(state) = state.filter(|_| root) else { return Ok(None) };
 
     let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline);
     crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes()).map_err(anyhow::Error::msg)?;

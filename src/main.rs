@@ -332,6 +332,11 @@ struct EvolveArgs {
     /// Stage fitness kernels' windows in workgroup memory: auto = on hardware GPUs, off on software adapters (same results either way).
     #[arg(long, value_enum, default_value_t = filterjit::evolve::Tiles::Auto)]
     tiles: filterjit::evolve::Tiles,
+    /// Share the islands among the ranks of the MPI job this process was
+    /// started in (`mpirun -n 4 filterjit evolve --mpi …`; a filterjit built
+    /// with `--features mpi`; docs/DISTRIBUTED.md). Same seed, same result as one process.
+    #[arg(long)]
+    mpi: bool,
 }
 
 fn main() -> ExitCode {
@@ -690,8 +695,58 @@ fn render(scene: &str, spp: u32, reference_spp: u32, size: (u32, u32), seed: u32
     Ok(())
 }
 
+/// Ranks of the MPI job this process was started in, as its launcher says
+/// (Open MPI's mpirun and srun, MPICH's hydra); 1 without one.
+fn launched_ranks() -> usize {
+    ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"].iter().find_map(|v| std::env::var(v).ok()?.parse().ok()).unwrap_or(1)
+}
+
 fn evolve(args: EvolveArgs) -> Result<()> {
+    let launched = launched_ranks();
+    if !args.mpi {
+        if launched > 1 {
+            bail!(
+                "this process is one of {launched} MPI ranks, but --mpi is not given: every rank would run the \
+                 whole search into the same run directory; pass --mpi"
+            );
+        }
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        return evolve_on(args, &mut filterjit::gp::transport::InProcess, 0, cores);
+    }
+    #[cfg(feature = "mpi")]
+    {
+        use filterjit::gp::transport::Transport;
+        let mut mpi = filterjit::gp::mpi::Mpi::init()?;
+        // Ranks on one node share its cores (software adapters compile on them) and its GPUs.
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        let (node_rank, threads) = (mpi.node_rank(), (cores / mpi.node_ranks()).max(1));
+        let result = evolve_on(args, &mut mpi, node_rank, threads);
+        if let Err(e) = &result {
+            if mpi.ranks() > 1 {
+                // The other ranks would wait for this one forever.
+                eprintln!("error (rank {} of {}): {e:#}", mpi.rank(), mpi.ranks());
+                mpi.abort(1);
+            }
+        }
+        result
+    }
+    #[cfg(not(feature = "mpi"))]
+    bail!(
+        "this filterjit was built without MPI: build it with `cargo build --release --features mpi` \
+         (Debian: apt-get install openmpi-bin libopenmpi-dev libclang-dev); docs/DISTRIBUTED.md"
+    )
+}
+
+/// `evolve` as one of the processes `transport` reaches: the `node_rank`-th
+/// on its machine, with `cores` cores to itself. Only the root prints.
+fn evolve_on(
+    args: EvolveArgs,
+    transport: &mut dyn filterjit::gp::transport::Transport,
+    node_rank: usize,
+    cores: usize,
+) -> Result<()> {
     use filterjit::evolve as ev;
+    let root = transport.is_root();
     let base = filterjit::gp::Settings::default();
     let (preset, size, spp, reference_spp, radius) = match args.preset {
         Preset::Quick => {
@@ -732,13 +787,13 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         seed_expr: seed_text,
         pipeline: args.render.pipeline.unwrap_or_default(),
     };
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(2, |n| n.get()));
+    let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {
         Some(dir) => dir.clone(),
         None => {
             let base = Path::new(ev::DEFAULT_RUN_DIR);
             let dir = ev::default_run_dir(base, args.resume);
-            if dir != base {
+            if dir != base && root {
                 eprintln!(
                     "run dir   {} ({} holds an earlier run; -o DIR names another)",
                     dir.display(),
@@ -748,20 +803,38 @@ fn evolve(args: EvolveArgs) -> Result<()> {
             dir
         }
     };
-    let gpu = gpu::Gpu::open()?;
-    eprintln!(
-        "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{} on {}",
-        settings.islands,
-        settings.island_size,
-        settings.generations,
-        settings.max_length,
-        config.radius,
-        config.pipeline,
-        size.0,
-        size.1,
-        gpu.describe()
-    );
-    let render_bar = sample_bar("rendering");
+    let gpu = gpu::Gpu::open_for(node_rank)?;
+    let islands = filterjit::gp::transport::share(settings.islands, transport.rank(), transport.ranks());
+    if transport.ranks() > 1 {
+        // One line per rank: where its islands run.
+        eprintln!(
+            "rank {}/{} islands {}..{} on {}, {threads} threads",
+            transport.rank(),
+            transport.ranks(),
+            islands.start,
+            islands.end,
+            gpu.describe()
+        );
+    }
+    if root {
+        eprintln!(
+            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{} on {}{}",
+            settings.islands,
+            settings.island_size,
+            settings.generations,
+            settings.max_length,
+            config.radius,
+            config.pipeline,
+            size.0,
+            size.1,
+            gpu.describe(),
+            match transport.ranks() {
+                1 => String::new(),
+                n => format!(" (rank 0 of {n} MPI ranks)"),
+            }
+        );
+    }
+    let render_bar = if root { sample_bar("rendering") } else { indicatif::ProgressBar::hidden() };
     let mut on_render = |done: u64, total: u64| {
         render_bar.set_length(total);
         render_bar.set_position(done);
@@ -769,7 +842,8 @@ fn evolve(args: EvolveArgs) -> Result<()> {
             render_bar.finish_and_clear();
         }
     };
-    let bar = indicatif::ProgressBar::new(settings.generations as u64);
+    let bar =
+        if root { indicatif::ProgressBar::new(settings.generations as u64) } else { indicatif::ProgressBar::hidden() };
     bar.set_style(
         indicatif::ProgressStyle::with_template("generation {pos:>4}/{len} {bar:20} {msg}").expect("valid template"),
     );
@@ -780,7 +854,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
             r.best, r.median, r.invalid, r.compile_s, r.evaluate_s, r.gp_s
         ));
     };
-    let summary = ev::run(
+    let summary = ev::run_with(
         &gpu,
         ev::RunOptions {
             settings,
@@ -794,8 +868,10 @@ fn evolve(args: EvolveArgs) -> Result<()> {
             baselines: args.baseline.iter().map(|b| resolve_expr(b)).collect::<Result<_>>()?,
             tiles: args.tiles,
         },
-    )?
-    .expect("runs to the end");
+        transport,
+    )?;
+    // Ranks other than the root end with the last generation.
+    let Some(summary) = summary else { return Ok(()) };
     bar.finish();
     println!("best      {}", summary.best.expr);
     if summary.best_simplified != summary.best.expr {

@@ -3,6 +3,7 @@
 mod common;
 
 mod cli;
+mod distributed;
 mod evolve;
 mod export;
 mod gpu_vs_cpu;

@@ -524,9 +524,9 @@ pub fn run(
             constants: crate::lang::ops::THESIS_CONSTANTS.to_vec(),
         };
         let mut engine = gp::Engine::new(gp_settings, terminals, seed_expr, &mut evaluator);
-        let (state, _) = engine.initial()?;
+        engine.initial()?;
         let t = Instant::now();
-        let (_, report) = engine.step(&state)?;
+        let (_, report) = engine.step()?.expect("one process holds every island");
         let total = t.elapsed().as_secs_f64();
         drop(engine);
         let _ = evaluator.take_time();

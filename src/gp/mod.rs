@@ -4,14 +4,20 @@
 //!
 //! The engine never sees WGSL or the GPU: it asks an [`Evaluator`] for the
 //! fitness of expressions, and reports each generation to its caller, which
-//! keeps checkpoints and logs. Every random choice of generation g comes from
-//! a stream seeded by (seed, g), so a run resumed from the checkpoint of
-//! generation g continues exactly as the uninterrupted run would.
+//! keeps checkpoints and logs. Every random choice of island i in generation
+//! g comes from a stream seeded by (seed, g, i), so a run resumed from the
+//! checkpoint of generation g continues exactly as the uninterrupted run
+//! would, and islands spread over processes ([`transport`]) evolve exactly as
+//! they do in one.
 
+#[cfg(feature = "mpi")]
+pub mod mpi;
 pub mod operators;
+pub mod transport;
 pub mod tree;
 
 use std::collections::{BTreeMap, HashMap};
+use std::ops::Range;
 use std::time::{Duration, Instant};
 
 use serde::{Deserialize, Serialize};
@@ -19,6 +25,7 @@ use serde::{Deserialize, Serialize};
 use crate::lang::{parse_expr, Expr, Feature, ScalarVar};
 use crate::rng::Rng;
 use operators::{crossover, mutate, Codebook, Mutation, Terminals};
+use transport::{InProcess, Transport};
 
 /// Fitness of an invalid expression (the thesis used the largest float).
 pub const WORST: f64 = 1e30;
@@ -170,9 +177,31 @@ pub struct Report {
     pub invalid: usize,
     /// Distinct expressions newly evaluated this generation.
     pub evaluated: usize,
+    /// Compile, evaluate and GP times are the slowest process's (they work in parallel).
     pub compile_s: f64,
     pub evaluate_s: f64,
     pub gp_s: f64,
+    /// Time the root spent on migration and on gathering the islands
+    /// (waiting for the slowest process included).
+    #[serde(default)]
+    pub transfer_s: f64,
+    /// The whole generation at the root, from breeding to the gathered population.
+    #[serde(default)]
+    pub seconds: f64,
+    /// Processes holding the islands.
+    #[serde(default)]
+    pub ranks: usize,
+}
+
+/// What one process sends the root after each generation: its islands and its work.
+#[derive(Serialize, Deserialize)]
+struct Part {
+    first: usize,
+    islands: Vec<Vec<StoredMember>>,
+    evaluated: usize,
+    compile_s: f64,
+    evaluate_s: f64,
+    gp_s: f64,
 }
 
 /// The search.
@@ -183,15 +212,24 @@ pub struct Engine<'e> {
     seed_expr: Expr,
     memo: HashMap<String, Fitness>,
     evaluator: &'e mut dyn Evaluator,
+    transport: Box<dyn Transport + 'e>,
+    /// The islands this process holds, of `settings.islands`.
+    held: Range<usize>,
+    /// Their members after generation `generation`, once there is one.
+    current: Option<(u32, Vec<Vec<Member>>)>,
 }
 
-/// A stream for generation `g`, independent of every other generation's.
-fn generation_rng(seed: u64, generation: u32) -> Rng {
-    // SplitMix64 finaliser of (seed, generation).
-    let mut z = seed ^ (generation as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+/// SplitMix64's finaliser: a well-mixed 64-bit value from any.
+fn mix(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    Rng::seeded(z ^ (z >> 31))
+    z ^ (z >> 31)
+}
+
+/// The stream of island `island` in generation `generation`, independent of every other's.
+fn island_rng(seed: u64, generation: u32, island: usize) -> Rng {
+    let z = mix(seed ^ (generation as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+    Rng::seeded(mix(z ^ (island as u64 + 1).wrapping_mul(0xd1b5_4a32_d192_ed03)))
 }
 
 fn median(values: &mut [f64]) -> f64 {
@@ -200,9 +238,51 @@ fn median(values: &mut [f64]) -> f64 {
 }
 
 impl<'e> Engine<'e> {
+    /// A search whose islands all live in this process.
     pub fn new(settings: Settings, terminals: Terminals, seed_expr: Expr, evaluator: &'e mut dyn Evaluator) -> Self {
+        Self::with_transport(settings, terminals, seed_expr, evaluator, Box::new(InProcess))
+            .expect("one process holds any number of islands")
+    }
+
+    /// A search whose islands are shared among the processes `transport`
+    /// reaches; this one evolves its share ([`transport::share`]).
+    pub fn with_transport(
+        settings: Settings,
+        terminals: Terminals,
+        seed_expr: Expr,
+        evaluator: &'e mut dyn Evaluator,
+        transport: Box<dyn Transport + 'e>,
+    ) -> anyhow::Result<Self> {
+        let ranks = transport.ranks();
+        if settings.islands < ranks {
+            anyhow::bail!(
+                "{} islands cannot be shared among {ranks} processes: give each at least one",
+                settings.islands
+            );
+        }
+        let held = transport::share(settings.islands, transport.rank(), ranks);
         let codebook = Codebook::new(&terminals);
-        Engine { settings, terminals, codebook, seed_expr, memo: HashMap::new(), evaluator }
+        Ok(Engine {
+            settings,
+            terminals,
+            codebook,
+            seed_expr,
+            memo: HashMap::new(),
+            evaluator,
+            transport,
+            held,
+            current: None,
+        })
+    }
+
+    /// The islands this process evolves.
+    pub fn held(&self) -> Range<usize> {
+        self.held.clone()
+    }
+
+    /// The last generation this process completed, if any.
+    pub fn generation(&self) -> Option<u32> {
+        self.current.as_ref().map(|(g, _)| *g)
     }
 
     pub fn codebook(&self) -> &Codebook {
@@ -272,14 +352,16 @@ impl<'e> Engine<'e> {
         best
     }
 
-    /// Generation 0: per island, `seed_share` copies of the seed, the rest mutations of it.
-    pub fn initial(&mut self) -> anyhow::Result<(State, Report)> {
+    /// Generation 0: per island, `seed_share` copies of the seed, the rest
+    /// mutations of it. The whole population and its report come back at the
+    /// root process (always, in one process); `None` at the others.
+    pub fn initial(&mut self) -> anyhow::Result<Option<(State, Report)>> {
         let start = Instant::now();
-        let mut rng = generation_rng(self.settings.seed, 0);
         let n = self.settings.island_size;
         let copies = ((n as f64 * self.settings.seed_share).round() as usize).clamp(1, n);
         let mut islands = Vec::new();
-        for _ in 0..self.settings.islands {
+        for i in self.held() {
+            let mut rng = island_rng(self.settings.seed, 0, i);
             let mut island = Vec::with_capacity(n);
             for k in 0..n {
                 let e = if k < copies { self.seed_expr.clone() } else { self.mutated(&self.seed_expr, &mut rng) };
@@ -289,7 +371,21 @@ impl<'e> Engine<'e> {
         }
         let gp = start.elapsed();
         let evaluated = self.evaluate(&mut islands)?;
-        Ok(self.finish(0, islands, evaluated, gp))
+        self.finish(0, islands, evaluated, gp, Duration::ZERO, start)
+    }
+
+    /// Continue from `state` (a checkpoint of the whole population): this process takes its islands.
+    pub fn resume(&mut self, state: &State) -> anyhow::Result<()> {
+        if state.islands.len() != self.settings.islands {
+            anyhow::bail!(
+                "the state holds {} islands; the settings ask for {}",
+                state.islands.len(),
+                self.settings.islands
+            );
+        }
+        let islands = self.restore(&state.islands[self.held()])?;
+        self.current = Some((state.generation, islands));
+        Ok(())
     }
 
     /// One generation after `state`.
@@ -302,16 +398,18 @@ impl<'e> Engine<'e> {
         }
     }
 
-    pub fn step(&mut self, state: &State) -> anyhow::Result<(State, Report)> {
+    /// The generation after the last one (`initial` or `resume` first);
+    /// returns like [`Engine::initial`].
+    pub fn step(&mut self) -> anyhow::Result<Option<(State, Report)>> {
         let start = Instant::now();
-        let generation = state.generation + 1;
-        let mut rng = generation_rng(self.settings.seed, generation);
-        let islands = self.restore(state)?;
+        let (done, islands) = self.current.take().ok_or_else(|| anyhow::anyhow!("no generation to step from"))?;
+        let generation = done + 1;
         let n = self.settings.island_size;
         let replicated = (n as f64 * self.settings.replication).round() as usize;
         let crossed = ((n as f64 * self.settings.crossover).round() as usize).min(n - replicated);
         let mut next = Vec::with_capacity(islands.len());
-        for island in &islands {
+        for (i, island) in self.held().zip(&islands) {
+            let mut rng = island_rng(self.settings.seed, generation, i);
             let mut new: Vec<Member> = Vec::with_capacity(n);
             for _ in 0..replicated {
                 new.push(self.tournament(island, &mut rng).clone());
@@ -345,57 +443,98 @@ impl<'e> Engine<'e> {
         let migrate_start = Instant::now();
         if self.settings.migration_interval > 0
             && generation.is_multiple_of(self.settings.migration_interval)
-            && next.len() > 1
+            && self.settings.islands > 1
         {
-            let best: Vec<Member> = next.iter().map(|island| best_of(island).clone()).collect();
-            let count = next.len();
-            for (i, migrant) in best.into_iter().enumerate() {
-                let target = &mut next[(i + 1) % count];
-                let worst = (0..target.len())
-                    .max_by(|&a, &b| target[a].fitness.value.total_cmp(&target[b].fitness.value))
-                    .expect("non-empty");
-                target[worst] = migrant;
-            }
+            self.migrate(&mut next)?;
         }
-        Ok(self.finish(generation, next, evaluated, gp + migrate_start.elapsed()))
+        self.finish(generation, next, evaluated, gp, migrate_start.elapsed(), start)
     }
 
+    /// The thesis's ring: the best of island i replaces the worst of island
+    /// i + 1 (mod n), every best chosen before any is replaced. The last held
+    /// island's best goes to the next process; the first receives the previous one's.
+    fn migrate(&mut self, islands: &mut [Vec<Member>]) -> anyhow::Result<()> {
+        let mut arriving: Vec<Member> = islands.iter().map(|island| best_of(island).clone()).collect();
+        let outgoing = arriving.pop().expect("a process holds at least one island");
+        let sent = StoredMember { expr: outgoing.text, fitness: outgoing.fitness };
+        let received: StoredMember = serde_json::from_slice(&self.transport.pass_on(serde_json::to_vec(&sent)?)?)?;
+        let expr = parse_expr(&received.expr).map_err(|e| anyhow::anyhow!("migrant `{}`:\n{e}", received.expr))?;
+        arriving.insert(0, Member { expr, text: received.expr, fitness: received.fitness });
+        for (target, migrant) in islands.iter_mut().zip(arriving) {
+            let worst = (0..target.len())
+                .max_by(|&a, &b| target[a].fitness.value.total_cmp(&target[b].fitness.value))
+                .expect("non-empty");
+            target[worst] = migrant;
+        }
+        Ok(())
+    }
+
+    /// Keep this process's islands for the next step and send them to the
+    /// root, which assembles the whole population and its report.
     fn finish(
         &mut self,
         generation: u32,
         islands: Vec<Vec<Member>>,
         evaluated: usize,
         gp: Duration,
-    ) -> (State, Report) {
+        migration: Duration,
+        start: Instant,
+    ) -> anyhow::Result<Option<(State, Report)>> {
         let time = self.evaluator.take_time();
-        let all: Vec<&Member> = islands.iter().flatten().collect();
+        let gather_start = Instant::now();
+        let part = Part {
+            first: self.held.start,
+            islands: islands
+                .iter()
+                .map(|island| {
+                    island.iter().map(|m| StoredMember { expr: m.text.clone(), fitness: m.fitness.clone() }).collect()
+                })
+                .collect(),
+            evaluated,
+            compile_s: time.compile.as_secs_f64(),
+            evaluate_s: time.evaluate.as_secs_f64(),
+            gp_s: gp.as_secs_f64(),
+        };
+        self.current = Some((generation, islands));
+        let Some(messages) = self.transport.gather(serde_json::to_vec(&part)?)? else { return Ok(None) };
+        let parts: Vec<Part> = messages.iter().map(|m| serde_json::from_slice(m)).collect::<Result<_, _>>()?;
+        let ranks = parts.len();
+        let mut islands = Vec::with_capacity(self.settings.islands);
+        let (mut evaluated, mut compile_s, mut evaluate_s, mut gp_s) = (0, 0f64, 0f64, 0f64);
+        for part in parts {
+            if part.first != islands.len() {
+                anyhow::bail!("a process sent islands from {}, expected {}", part.first, islands.len());
+            }
+            islands.extend(part.islands);
+            evaluated += part.evaluated;
+            compile_s = compile_s.max(part.compile_s);
+            evaluate_s = evaluate_s.max(part.evaluate_s);
+            gp_s = gp_s.max(part.gp_s);
+        }
+        let state = State { generation, islands };
+        let all: Vec<&StoredMember> = state.islands.iter().flatten().collect();
         let best = all.iter().min_by(|a, b| a.fitness.value.total_cmp(&b.fitness.value)).expect("non-empty");
         let mut values: Vec<f64> = all.iter().map(|m| m.fitness.value).collect();
         let report = Report {
             generation,
             best: best.fitness.value,
             median: median(&mut values),
-            best_expr: best.text.clone(),
+            best_expr: best.expr.clone(),
             invalid: all.iter().filter(|m| m.fitness.invalid.is_some()).count(),
             evaluated,
-            compile_s: time.compile.as_secs_f64(),
-            evaluate_s: time.evaluate.as_secs_f64(),
-            gp_s: gp.as_secs_f64(),
+            compile_s,
+            evaluate_s,
+            gp_s,
+            transfer_s: (migration + gather_start.elapsed()).as_secs_f64(),
+            seconds: start.elapsed().as_secs_f64(),
+            ranks,
         };
-        let state = State {
-            generation,
-            islands: islands
-                .into_iter()
-                .map(|island| island.into_iter().map(|m| StoredMember { expr: m.text, fitness: m.fitness }).collect())
-                .collect(),
-        };
-        (state, report)
+        Ok(Some((state, report)))
     }
 
-    /// Members from a stored state; fitness values are taken as stored.
-    pub fn restore(&mut self, state: &State) -> anyhow::Result<Vec<Vec<Member>>> {
-        state
-            .islands
+    /// Members from stored islands; fitness values are taken as stored.
+    fn restore(&mut self, islands: &[Vec<StoredMember>]) -> anyhow::Result<Vec<Vec<Member>>> {
+        islands
             .iter()
             .map(|island| {
                 island
@@ -447,4 +586,138 @@ pub fn feature_frequencies(state: &State) -> BTreeMap<String, usize> {
         .collect();
     counts.extend(crate::lang::terminal_usage(&exprs));
     counts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::transport::threads;
+    use super::*;
+
+    /// Fitness from the text alone: deterministic, cheap, different for different expressions.
+    struct TextFitness;
+
+    impl Evaluator for TextFitness {
+        fn evaluate(&mut self, exprs: &[Expr]) -> anyhow::Result<Vec<Fitness>> {
+            Ok(exprs
+                .iter()
+                .map(|e| {
+                    let text = e.to_string();
+                    let hash =
+                        text.bytes().fold(1469598103934665603u64, |h, b| (h ^ b as u64).wrapping_mul(1099511628211));
+                    Fitness::valid((hash % 10_000) as f64 / 10_000.0 + text.len() as f64 * 1e-4)
+                })
+                .collect())
+        }
+        fn take_time(&mut self) -> EvalTime {
+            EvalTime::default()
+        }
+    }
+
+    fn settings(islands: usize) -> Settings {
+        Settings { islands, island_size: 8, generations: 6, migration_interval: 2, seed: 11, ..Settings::default() }
+    }
+
+    fn terminals() -> Terminals {
+        Terminals {
+            features: vec![Feature::Pixel, Feature::Color, Feature::Normal],
+            variables: Vec::new(),
+            constants: crate::lang::ops::THESIS_CONSTANTS.to_vec(),
+        }
+    }
+
+    fn seed() -> Expr {
+        parse_expr(crate::corpus::lookup("bilateral").unwrap()).unwrap()
+    }
+
+    /// Every generation's whole population, from one process.
+    fn in_process(islands: usize) -> Vec<State> {
+        let mut evaluator = TextFitness;
+        let mut engine = Engine::new(settings(islands), terminals(), seed(), &mut evaluator);
+        let mut states = vec![engine.initial().unwrap().unwrap().0];
+        for _ in 0..settings(islands).generations {
+            states.push(engine.step().unwrap().unwrap().0);
+        }
+        states
+    }
+
+    /// The same, with the islands shared among `ranks` threads acting as processes.
+    fn shared(islands: usize, ranks: usize) -> Vec<State> {
+        let results: Vec<Vec<State>> = std::thread::scope(|s| {
+            let handles: Vec<_> = threads::job(ranks)
+                .into_iter()
+                .map(|transport| {
+                    s.spawn(move || {
+                        let mut evaluator = TextFitness;
+                        let mut engine = Engine::with_transport(
+                            settings(islands),
+                            terminals(),
+                            seed(),
+                            &mut evaluator,
+                            Box::new(transport),
+                        )
+                        .unwrap();
+                        let mut states: Vec<State> = engine.initial().unwrap().into_iter().map(|(s, _)| s).collect();
+                        for _ in 0..settings(islands).generations {
+                            states.extend(engine.step().unwrap().map(|(s, _)| s));
+                        }
+                        states
+                    })
+                })
+                .collect();
+            handles.into_iter().map(|h| h.join().unwrap()).collect()
+        });
+        assert!(results[1..].iter().all(|r| r.is_empty()), "only the root sees the population");
+        results.into_iter().next().unwrap()
+    }
+
+    fn texts(states: &[State]) -> Vec<Vec<Vec<String>>> {
+        states.iter().map(|s| s.islands.iter().map(|i| i.iter().map(|m| m.expr.clone()).collect()).collect()).collect()
+    }
+
+    #[test]
+    fn islands_shared_among_processes_evolve_as_in_one() {
+        for islands in [4, 5] {
+            let expected = in_process(islands);
+            assert_eq!(expected.len(), 7);
+            for ranks in 1..=islands {
+                assert_eq!(texts(&shared(islands, ranks)), texts(&expected), "{islands} islands on {ranks} ranks");
+            }
+        }
+    }
+
+    #[test]
+    fn migration_crosses_processes() {
+        // Migration moves members between islands: without it, shared runs would agree trivially.
+        let with = in_process(4);
+        let mut evaluator = TextFitness;
+        let mut engine =
+            Engine::new(Settings { migration_interval: 0, ..settings(4) }, terminals(), seed(), &mut evaluator);
+        engine.initial().unwrap();
+        let mut without = Vec::new();
+        for _ in 0..6 {
+            without.push(engine.step().unwrap().unwrap().0);
+        }
+        assert_ne!(texts(&with[1..]), texts(&without), "migration changed nothing");
+    }
+
+    #[test]
+    fn a_resumed_process_continues_exactly() {
+        let expected = in_process(4);
+        let mut evaluator = TextFitness;
+        let mut engine = Engine::new(settings(4), terminals(), seed(), &mut evaluator);
+        engine.resume(&expected[3]).unwrap();
+        let next = engine.step().unwrap().unwrap().0;
+        assert_eq!(texts(&[next]), texts(&expected[4..5]));
+        assert!(engine.resume(&State { generation: 3, islands: expected[3].islands[..2].to_vec() }).is_err());
+    }
+
+    #[test]
+    fn more_processes_than_islands_is_an_error() {
+        let mut evaluator = TextFitness;
+        let transport = threads::job(3).into_iter().next().unwrap();
+        let error = Engine::with_transport(settings(2), terminals(), seed(), &mut evaluator, Box::new(transport))
+            .err()
+            .expect("an error");
+        assert!(error.to_string().contains("2 islands cannot be shared among 3 processes"), "{error}");
+    }
 }

@@ -4,6 +4,7 @@
 //! software: lavapipe (Vulkan), then llvmpipe (GL through EGL).
 //! `FILTERJIT_BACKEND=vulkan|gl|metal|dx12` restricts the search to one backend;
 //! `FILTERJIT_ADAPTER=text` picks the first adapter whose name contains `text`.
+//! MPI ranks on one node take the node's best adapters in turn ([`choose_for`]).
 
 use super::GpuError;
 
@@ -74,6 +75,14 @@ pub fn available(backends: wgpu::Backends, all: bool) -> Vec<wgpu::Adapter> {
 
 /// Choose the adapter, honouring the environment.
 pub fn choose() -> Result<wgpu::Adapter, GpuError> {
+    choose_for(0)
+}
+
+/// Choose the adapter for the `index`-th process on a machine (an MPI rank's
+/// place on its node): the `index mod n`-th of the n best adapters of the
+/// same kind, so that ranks spread over a node's GPUs. `FILTERJIT_ADAPTER`,
+/// when set, wins for every process.
+pub fn choose_for(index: usize) -> Result<wgpu::Adapter, GpuError> {
     let backends = requested_backends()?;
     match std::env::var(ADAPTER_ENV) {
         Ok(text) if !text.is_empty() => {
@@ -84,9 +93,14 @@ pub fn choose() -> Result<wgpu::Adapter, GpuError> {
                 .find(|a| a.get_info().name.to_lowercase().contains(&text.to_lowercase()))
                 .ok_or(GpuError::NoMatchingAdapter { wanted: text, found: names })
         }
-        _ => available(backends, false)
-            .into_iter()
-            .next()
-            .ok_or(GpuError::NoAdapter { backends: format!("{backends:?}") }),
+        _ => {
+            let mut adapters = available(backends, false);
+            let best = adapters.first().map(|a| rank(&a.get_info()));
+            adapters.retain(|a| Some(rank(&a.get_info())) == best);
+            match adapters.len() {
+                0 => Err(GpuError::NoAdapter { backends: format!("{backends:?}") }),
+                n => Ok(adapters.swap_remove(index % n)),
+            }
+        }
     }
 }

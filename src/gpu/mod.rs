@@ -96,6 +96,11 @@ impl Gpu {
         Self::from_adapter(adapter::choose()?)
     }
 
+    /// Open the adapter for the `index`-th process on this machine ([`adapter::choose_for`]).
+    pub fn open_for(index: usize) -> Result<Gpu, GpuError> {
+        Self::from_adapter(adapter::choose_for(index)?)
+    }
+
     fn from_adapter(adapter: wgpu::Adapter) -> Result<Gpu, GpuError> {
         let info = adapter.get_info();
         let limits = adapter.limits();
