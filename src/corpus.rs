@@ -26,6 +26,24 @@ pub fn lookup(name: &str) -> Option<&'static str> {
 /// The line that states the filter pipeline of the entries after it (until the next such line).
 pub const PIPELINE_PREFIX: &str = "# pipeline:";
 
+/// A named-expression file's line stating the window radius of the entries after it.
+pub const RADIUS_PREFIX: &str = "# radius:";
+
+/// The radius stated for entry `name`: the last `# radius: R` line before it, if any.
+pub fn radius_of(text: &str, name: &str) -> Option<anyhow::Result<u32>> {
+    let mut current: Option<&str> = None;
+    for line in text.lines().map(str::trim) {
+        if let Some(spec) = line.strip_prefix(RADIUS_PREFIX) {
+            current = Some(spec.trim());
+        } else if !line.starts_with('#') && line.split_once('=').is_some_and(|(n, _)| n.trim() == name) {
+            return current.map(|spec| {
+                spec.parse().map_err(|_| anyhow::anyhow!("`{RADIUS_PREFIX} {spec}` before `{name}` is not a radius"))
+            });
+        }
+    }
+    None
+}
+
 /// The pipeline stated for entry `name` of a named-expression file: the last
 /// `# pipeline: SPEC` line before it, if any.
 pub fn pipeline_of(text: &str, name: &str) -> Option<anyhow::Result<crate::pipeline::FilterPipeline>> {
@@ -46,6 +64,8 @@ pub struct Resolved {
     pub expr: crate::Expr,
     /// The pipeline the expression was stored with (a hall of fame states the run's).
     pub pipeline: Option<crate::pipeline::FilterPipeline>,
+    /// The window radius it was stored with (a multi-objective run's front states each member's).
+    pub radius: Option<u32>,
 }
 
 /// An expression argument: `@name` for a shipped expression, `@FILE[:NAME]`
@@ -59,6 +79,7 @@ pub fn resolve(arg: &str) -> anyhow::Result<(Option<String>, crate::Expr)> {
 /// [`resolve`], with the pipeline the file states for the expression.
 pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
     use anyhow::{bail, Context};
+    let mut radius = None;
     let (name, text, pipeline) = match arg.strip_prefix('@') {
         Some(reference) if lookup(reference).is_none() && file_reference(reference).is_some() => {
             let (path, name) = file_reference(reference).expect("checked");
@@ -73,6 +94,9 @@ pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
                     let pipeline = pipeline_of(&content, name)
                         .transpose()
                         .with_context(|| format!("{}: the pipeline of `{name}`", path.display()))?;
+                    radius = radius_of(&content, name)
+                        .transpose()
+                        .with_context(|| format!("{}: the radius of `{name}`", path.display()))?;
                     (name.to_string(), text.to_string(), pipeline)
                 }
                 None => bail!(
@@ -92,9 +116,9 @@ pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
                 bail!("no shipped expression `@{name}`; there are: {}", names.join(", "))
             }
         },
-        None => return Ok(Resolved { name: None, expr: parse_checked(arg)?, pipeline: None }),
+        None => return Ok(Resolved { name: None, expr: parse_checked(arg)?, pipeline: None, radius: None }),
     };
-    Ok(Resolved { name: Some(name), expr: parse_checked(&text)?, pipeline })
+    Ok(Resolved { name: Some(name), expr: parse_checked(&text)?, pipeline, radius })
 }
 
 fn parse_checked(text: &str) -> anyhow::Result<crate::Expr> {

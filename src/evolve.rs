@@ -108,6 +108,11 @@ impl<'g> GpuEvaluator<'g> {
         self.options.tile_radius = on.then_some(self.radius);
     }
 
+    /// The radius expressions are scored at when they carry none.
+    pub fn radius(&self) -> u32 {
+        self.radius
+    }
+
     pub fn scenes(&self) -> &[Scene] {
         &self.scenes
     }
@@ -116,16 +121,34 @@ impl<'g> GpuEvaluator<'g> {
     /// domain-error bits; `Err(reason)` for an expression that does not
     /// compile or that this device cannot run (more inputs than it allows
     /// storage buffers).
-    pub fn errors(
-        &mut self,
-        exprs: &[Expr],
-    ) -> Result<Vec<std::result::Result<Vec<crate::gpu::FitnessError>, String>>> {
+    pub fn errors(&mut self, exprs: &[Expr]) -> Result<Vec<ScoredErrors>> {
+        self.errors_at(exprs, self.radius)
+    }
+
+    /// [`GpuEvaluator::errors`] of each expression at its own radius.
+    pub fn errors_each(&mut self, exprs: &[(Expr, u32)]) -> Result<Vec<ScoredErrors>> {
+        let radii: BTreeSet<u32> = exprs.iter().map(|(_, r)| *r).collect();
+        let mut out: Vec<Option<ScoredErrors>> = vec![None; exprs.len()];
+        for radius in radii {
+            let (at, group): (Vec<usize>, Vec<Expr>) =
+                exprs.iter().enumerate().filter(|(_, (_, r))| *r == radius).map(|(k, (e, _))| (k, e.clone())).unzip();
+            for (k, result) in at.into_iter().zip(self.errors_at(&group, radius)?) {
+                out[k] = Some(result);
+            }
+        }
+        Ok(out.into_iter().map(|r| r.expect("every expression scored")).collect())
+    }
+
+    /// [`GpuEvaluator::errors`] with a `radius` window (tiles, where on, made for it).
+    fn errors_at(&mut self, exprs: &[Expr], radius: u32) -> Result<Vec<ScoredErrors>> {
+        let mut options = self.options;
+        options.tile_radius = options.tile_radius.map(|_| radius);
         let start = Instant::now();
         let threads = self.threads.max(1);
         // A candidate that does not compile, or binds more than this device
         // allows, is an invalid individual with its reason, never a failed batch.
         let shape = jit::Shape::of(&self.pipeline);
-        let kernels = jit::compile_each_shaped(exprs, KernelKind::Fitness, self.options, shape, threads);
+        let kernels = jit::compile_each_shaped(exprs, KernelKind::Fitness, options, shape, threads);
         let unsupported: Vec<Option<String>> = kernels
             .iter()
             .map(|k| match k {
@@ -148,7 +171,6 @@ impl<'g> GpuEvaluator<'g> {
         let compiled = start.elapsed();
         let start = Instant::now();
         let data: Vec<&Scene> = self.scenes.iter().collect();
-        let radius = self.radius;
         type DeviceResult = Result<(Duration, Vec<Vec<crate::gpu::FitnessError>>), crate::gpu::GpuError>;
         let results: Vec<DeviceResult> = std::thread::scope(|s| {
             let handles: Vec<_> = devices
@@ -209,30 +231,43 @@ pub fn domain_flags(per_scene: &[crate::gpu::FitnessError]) -> u32 {
     per_scene.iter().fold(0, |a, e| a | e.flags)
 }
 
+/// One expression's relMSE per scene with its domain flags, or why it could not be scored.
+pub type ScoredErrors = std::result::Result<Vec<crate::gpu::FitnessError>, String>;
+
 impl Evaluator for GpuEvaluator<'_> {
-    fn evaluate(&mut self, exprs: &[Expr]) -> Result<Vec<Fitness>> {
-        let errors = self.errors(exprs)?;
+    fn evaluate(&mut self, candidates: &[gp::Candidate]) -> Result<Vec<Fitness>> {
+        let at: Vec<(Expr, u32)> =
+            candidates.iter().map(|c| (c.expr.clone(), c.radius.unwrap_or(self.radius))).collect();
+        let errors = self.errors_each(&at)?;
         Ok(errors
             .iter()
-            .map(|result| {
-                let per_scene = match result {
-                    Ok(per_scene) => per_scene,
-                    Err(reason) => return Fitness::invalid(reason.clone()),
-                };
-                let flags = domain_flags(per_scene);
-                if flags != 0 {
-                    return Fitness::invalid(format!("domain error: {}", semantics::flag::describe(flags).join("; ")));
-                }
-                if per_scene.iter().any(|e| !e.finite || !e.relmse.is_finite()) {
-                    return Fitness::invalid("non-finite error");
-                }
-                Fitness::valid(normalised_error(per_scene, &self.noisy))
+            .zip(&at)
+            .map(|(result, (expr, radius))| {
+                self.fitness(result).with_cost(crate::cost::model(expr, &self.pipeline, *radius))
             })
             .collect())
     }
 
     fn take_time(&mut self) -> EvalTime {
         std::mem::take(&mut self.time)
+    }
+}
+
+impl GpuEvaluator<'_> {
+    /// The fitness of one expression's per-scene errors (or of the reason it has none).
+    fn fitness(&self, result: &ScoredErrors) -> Fitness {
+        let per_scene = match result {
+            Ok(per_scene) => per_scene,
+            Err(reason) => return Fitness::invalid(reason.clone()),
+        };
+        let flags = domain_flags(per_scene);
+        if flags != 0 {
+            return Fitness::invalid(format!("domain error: {}", semantics::flag::describe(flags).join("; ")));
+        }
+        if per_scene.iter().any(|e| !e.finite || !e.relmse.is_finite()) {
+            return Fitness::invalid("non-finite error");
+        }
+        Fitness::valid(normalised_error(per_scene, &self.noisy))
     }
 }
 
@@ -366,8 +401,9 @@ pub fn append_log(dir: &Path, report: &gp::Report) -> Result<()> {
     Ok(())
 }
 
-/// The hall of fame in the named-expression format `filter --expr @FILE` reads.
-pub fn hall_of_fame_text(state: &State, k: usize, pipeline: &FilterPipeline) -> String {
+/// The hall of fame in the named-expression format `filter --expr @FILE` reads;
+/// a multi-objective run's front follows as `front1` (cheapest) … `frontN`.
+pub fn hall_of_fame_text(state: &State, k: usize, pipeline: &FilterPipeline, front: &[gp::StoredMember]) -> String {
     let mut text = String::from("# filterjit hall of fame: the best expressions of every island, best first.\n# Use one with `filterjit filter --expr @hall_of_fame.txt:NAME` (the first without :NAME);\n# it is filtered through the pipeline it was scored with:\n");
     text.push_str(&format!("{} {pipeline}\n", crate::corpus::PIPELINE_PREFIX));
     let mut entries = gp::hall_of_fame(state, k);
@@ -386,9 +422,133 @@ pub fn hall_of_fame_text(state: &State, k: usize, pipeline: &FilterPipeline) -> 
             // Beside the raw form that was scored: the same weights, for people.
             text.push_str(&format!("# simplified (length {}): {simplified}\n", simplified.len()));
         }
+        if let Some(r) = m.radius {
+            text.push_str(&format!("{} {r}\n", crate::corpus::RADIUS_PREFIX));
+        }
         text.push_str(&format!("island{island}_rank{} = {}\n", rank_in_island[island], m.expr));
     }
+    if !front.is_empty() {
+        text.push_str("#\n# The front of (error, modelled cost per pixel), cheapest first: no member is both\n# more accurate and cheaper than another (pareto.json has their measured times).\n");
+        for (n, m) in front.iter().enumerate() {
+            let cost = m.fitness.cost.unwrap_or(0.0);
+            text.push_str(&format!("# fitness {:.6}, cost {cost:.0}\n", m.fitness.value));
+            if let Some(r) = m.radius {
+                text.push_str(&format!("{} {r}\n", crate::corpus::RADIUS_PREFIX));
+            }
+            text.push_str(&format!("front{} = {}\n", n + 1, m.expr));
+        }
+    }
     text
+}
+
+/// One member of a run's front, as `pareto.json` lists it.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct FrontMember {
+    pub name: String,
+    pub expr: String,
+    pub simplified: String,
+    /// The window radius it was scored and timed with.
+    pub radius: u32,
+    /// Training fitness (mean relMSE / noisy relMSE).
+    pub fitness: f64,
+    /// The modelled cost per pixel ([`crate::cost::model`]).
+    pub cost: f64,
+    /// Mean over the test scenes of relMSE / noisy relMSE.
+    pub test_normalised: f64,
+    /// Median time of the whole pipeline per megapixel on the timing scene, in ms.
+    pub ms_per_mpx: f64,
+}
+
+/// `pareto.json`: a multi-objective run's front, measured.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Front {
+    pub pipeline: FilterPipeline,
+    pub radius: u32,
+    pub device: String,
+    /// The scene timed (the first test scene, tiled to the timing side), and its size.
+    pub timing_scene: String,
+    pub timing_pixels: usize,
+    /// Spearman's rank correlation of the modelled cost and the measured time over the members.
+    pub rank_correlation: f64,
+    /// Cheapest first.
+    pub members: Vec<FrontMember>,
+}
+
+pub const FRONT_FILE: &str = "pareto.json";
+
+/// Side of the scene the front is timed on: large enough for stable times.
+pub const FRONT_TIMING_SIDE: usize = 256;
+
+/// Time each filter through `pipeline` on `scene`: one warm-up, then the median of `repeats`, in ms per megapixel.
+pub fn time_filters(
+    gpu: &Gpu,
+    exprs: &[(Expr, u32)],
+    scene: &Scene,
+    pipeline: &FilterPipeline,
+    repeats: usize,
+) -> Result<Vec<f64>> {
+    let mut buffers = crate::gpu::SceneBuffers::for_pipeline(gpu, scene, pipeline)?;
+    let shape = jit::Shape::of(pipeline);
+    let mpx = scene.pixels() as f64 / 1e6;
+    exprs
+        .iter()
+        .map(|(e, radius)| {
+            let radius = *radius;
+            let kernel = jit::compile_shaped(e, KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
+            gpu.filter(&kernel, &mut buffers, scene, radius)?;
+            let mut times: Vec<f64> = (0..repeats.max(1))
+                .map(|_| Ok(gpu.filter(&kernel, &mut buffers, scene, radius)?.dispatch.as_secs_f64()))
+                .collect::<Result<_>>()?;
+            times.sort_by(f64::total_cmp);
+            Ok(times[times.len() / 2] * 1e3 / mpx)
+        })
+        .collect()
+}
+
+/// The front scored on the test scenes and timed on the first of them, tiled.
+fn measure_front(
+    gpu: &Gpu,
+    tester: &mut GpuEvaluator<'_>,
+    front: &[gp::StoredMember],
+    config: &RunConfig,
+) -> Result<Front> {
+    let exprs: Vec<(Expr, u32)> = front
+        .iter()
+        .map(|m| {
+            let e = crate::lang::parse_expr(&m.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
+            Ok((e, m.radius.unwrap_or(config.radius)))
+        })
+        .collect::<Result<_>>()?;
+    let tested = test_each(tester, &exprs)?;
+    let timing_scene = crate::report::tile(&tester.scenes()[0], FRONT_TIMING_SIDE);
+    let ms = time_filters(gpu, &exprs, &timing_scene, &config.pipeline, 5)?;
+    let costs: Vec<f64> = front.iter().map(|m| m.fitness.cost.unwrap_or(0.0)).collect();
+    let members = front
+        .iter()
+        .zip(&exprs)
+        .zip(tested)
+        .zip(&ms)
+        .enumerate()
+        .map(|(k, (((m, (e, radius)), t), ms))| FrontMember {
+            name: format!("front{}", k + 1),
+            expr: m.expr.clone(),
+            simplified: crate::simplify::simplify(e).to_string(),
+            radius: *radius,
+            fitness: m.fitness.value,
+            cost: m.fitness.cost.unwrap_or(0.0),
+            test_normalised: t.normalised,
+            ms_per_mpx: *ms,
+        })
+        .collect();
+    Ok(Front {
+        pipeline: config.pipeline,
+        radius: config.radius,
+        device: gpu.describe(),
+        timing_scene: timing_scene.name.clone(),
+        timing_pixels: timing_scene.pixels(),
+        rank_correlation: crate::cost::rank_correlation(&costs, &ms),
+        members,
+    })
 }
 
 /// Test-set results of one expression.
@@ -421,10 +581,17 @@ pub struct Summary {
 
 /// Evaluate expressions on test scenes.
 pub fn test(evaluator: &mut GpuEvaluator<'_>, exprs: &[Expr]) -> Result<Vec<TestResult>> {
-    let errors = evaluator.errors(exprs)?;
+    let radius = evaluator.radius();
+    test_each(evaluator, &exprs.iter().map(|e| (e.clone(), radius)).collect::<Vec<_>>())
+}
+
+/// Evaluate expressions on test scenes, each at its own radius.
+pub fn test_each(evaluator: &mut GpuEvaluator<'_>, exprs: &[(Expr, u32)]) -> Result<Vec<TestResult>> {
+    let errors = evaluator.errors_each(exprs)?;
     let noisy = evaluator.noisy_relmse().to_vec();
     Ok(exprs
         .iter()
+        .map(|(e, _)| e)
         .zip(errors)
         .map(|(e, result)| {
             let per_scene = match result {
@@ -595,6 +762,10 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         &mut evaluator,
         Box::new(transport),
     )?;
+    // Trading error for cost, a window's radius is the largest lever: it evolves too (up to the run's).
+    if settings.objectives == gp::Objectives::ErrorCost && config.pipeline.form == crate::pipeline::Form::Window {
+        engine.set_radii(1..=config.radius);
+    }
 
     // A generation is done once it is logged and checkpointed, in that order: a
     // resumed run drops log lines past its checkpoint.
@@ -630,7 +801,11 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     // The others end here: the run directory, the hall of fame and the test scenes are the root's.
     let Some(state) = state.filter(|_| root) else { return Ok(None) };
 
-    let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline);
+    let front = match settings.objectives {
+        gp::Objectives::Error => Vec::new(),
+        gp::Objectives::ErrorCost => gp::pareto_front(&state),
+    };
+    let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline, &front);
     crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes()).map_err(anyhow::Error::msg)?;
     let frequencies = gp::feature_frequencies(&state);
     crate::io::write_bytes_atomically(
@@ -659,6 +834,11 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let test_best = results.next().expect("best");
     let test_seed = results.next().expect("seed");
     let test_baselines = results.collect();
+    if !front.is_empty() {
+        let front = measure_front(gpu, &mut tester, &front, &config)?;
+        crate::io::write_bytes_atomically(&output.join(FRONT_FILE), serde_json::to_string_pretty(&front)?.as_bytes())
+            .map_err(anyhow::Error::msg)?;
+    }
     let summary = Summary {
         generations: state.generation,
         best_simplified: crate::simplify::simplify(&compared[0]).to_string(),

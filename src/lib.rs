@@ -6,6 +6,7 @@
 
 pub mod bench;
 pub mod corpus;
+pub mod cost;
 pub mod cpu;
 pub mod evolve;
 pub mod export;

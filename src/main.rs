@@ -72,9 +72,10 @@ enum Command {
         /// The expression, or @name for a shipped one.
         #[arg(long)]
         expr: String,
-        /// Window radius r: the window is (2r+1)² pixels.
-        #[arg(long, default_value_t = 5)]
-        radius: u32,
+        /// Window radius r: the window is (2r+1)² pixels [default: the one
+        /// stored with the expression (a front member's `# radius:`), else 5].
+        #[arg(long)]
+        radius: Option<u32>,
         /// A scene directory (noisy.exr, reference.exr, ...) or a noisy EXR file.
         scene: PathBuf,
         /// Output EXR; a PNG preview is written beside it.
@@ -316,6 +317,11 @@ struct EvolveArgs {
     /// weights, shorter trees; docs/BENCHMARKS.md measures the effect).
     #[arg(long)]
     simplify_offspring: bool,
+    /// What the search minimises: `error` (the thesis) or `error,cost`:
+    /// NSGA-II over error and the modelled cost per pixel (src/cost.rs); the
+    /// run's result is a front of filters, fast to accurate (pareto.json).
+    #[arg(long, default_value_t = filterjit::gp::Objectives::Error)]
+    objectives: filterjit::gp::Objectives,
     /// Run directory: checkpoint, log, hall of fame, summary [default: runs/evolve, or
     /// runs/evolve-2, -3, … when it holds a run already; with --resume the newest of them].
     #[arg(short, long)]
@@ -531,7 +537,7 @@ fn resolve_expr(arg: &str) -> Result<lang::Expr> {
 #[allow(clippy::too_many_arguments)]
 fn filter(
     expr: &str,
-    radius: u32,
+    radius: Option<u32>,
     scene_path: &Path,
     output: &Path,
     reference: Option<PathBuf>,
@@ -543,6 +549,7 @@ fn filter(
     let resolved = corpus::resolve_with_pipeline(expr)?;
     let expr = resolved.expr;
     let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
+    let radius = radius.or(resolved.radius).unwrap_or(5);
     let request =
         Request { reference_path: reference, spp, absent, albedo: pipeline.demodulate, ..Request::for_expr(&expr) };
     let load_start = Instant::now();
@@ -769,6 +776,7 @@ fn evolve_on(
         hall_of_fame: args.hall_of_fame.unwrap_or(preset.hall_of_fame),
         seed: args.seed.unwrap_or(preset.seed),
         simplify_offspring: args.simplify_offspring,
+        objectives: args.objectives,
     };
     let size = args.render.size.unwrap_or(size);
     let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();

@@ -218,7 +218,7 @@ fn invalid_individuals_get_the_worst_fitness_and_a_reason() {
         .iter()
         .map(|t| parse_expr(t).unwrap())
         .collect();
-    let fitness = evaluator.evaluate(&exprs).unwrap();
+    let fitness = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&exprs)).unwrap();
     // A literal out of range does not lower: that candidate alone is invalid.
     let mut batch = exprs.clone();
     batch.push(filterjit::Expr::binary(
@@ -226,7 +226,7 @@ fn invalid_individuals_get_the_worst_fitness_and_a_reason() {
         parse_expr("distance2(color)").unwrap(),
         filterjit::Expr::Const(1e20),
     ));
-    let with_bad = evaluator.evaluate(&batch).unwrap();
+    let with_bad = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&batch)).unwrap();
     assert_eq!(with_bad[..exprs.len()], fitness[..], "the others are scored as before");
     let bad = &with_bad[exprs.len()];
     assert_eq!(bad.value, filterjit::gp::WORST);
@@ -339,4 +339,38 @@ fn a_second_run_without_a_directory_gets_a_fresh_one() {
     mark(&root.join("evolve-2"));
     assert_eq!(evolve::default_run_dir(&base, false), root.join("evolve-3"));
     assert_eq!(evolve::default_run_dir(&base, true), root.join("evolve-2"), "--resume takes the newest");
+}
+
+#[test]
+fn a_multi_objective_run_writes_a_measured_front_and_resumes_exactly() {
+    let (training, test) = datasets();
+    let settings = Settings { objectives: filterjit::gp::Objectives::ErrorCost, generations: 4, ..small() };
+    let dir = temp_dir("pareto");
+    run(&dir, settings.clone(), config(training, test), false, None).expect("finished");
+    let front: evolve::Front = serde_json::from_str(&read(dir.join(evolve::FRONT_FILE))).unwrap();
+    assert!(!front.members.is_empty());
+    for a in &front.members {
+        assert!((1..=2).contains(&a.radius), "the radius evolves up to the run's: {}", a.radius);
+        assert!(a.fitness < filterjit::gp::NO_CHOICE && a.ms_per_mpx > 0.0 && a.test_normalised.is_finite());
+        for b in &front.members {
+            assert!(!filterjit::gp::pareto::dominates(&[a.fitness, a.cost], &[b.fitness, b.cost]), "{a:?} {b:?}");
+        }
+    }
+    assert!(front.members.windows(2).all(|w| w[0].cost <= w[1].cost && w[0].fitness >= w[1].fitness));
+    // Each member reads back from the hall of fame with the radius it was scored at.
+    let hall = dir.join(evolve::HALL_OF_FAME_FILE);
+    for m in &front.members {
+        let resolved = corpus::resolve_with_pipeline(&format!("@{}:{}", hall.display(), m.name)).unwrap();
+        assert_eq!(resolved.expr.to_string(), m.expr);
+        assert_eq!(resolved.radius, Some(m.radius), "{}", m.name);
+    }
+
+    let resumed = temp_dir("pareto-resumed");
+    assert!(run(&resumed, settings.clone(), config(training, test), false, Some(2)).is_none());
+    run(&resumed, settings, config(training, test), true, None).expect("finished");
+    assert_eq!(read(resumed.join(evolve::HALL_OF_FAME_FILE)), read(hall));
+    let again: evolve::Front = serde_json::from_str(&read(resumed.join(evolve::FRONT_FILE))).unwrap();
+    let points =
+        |f: &evolve::Front| f.members.iter().map(|m| (m.expr.clone(), m.radius, m.fitness)).collect::<Vec<_>>();
+    assert_eq!(points(&again), points(&front));
 }

@@ -144,8 +144,8 @@ fn simplified_expressions_score_the_same_fitness_on_built_in_scenes() {
     }
     let scenes = [training, test].iter().map(|d| filterjit::scene::load(d, &request).unwrap()).collect::<Vec<_>>();
     let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
-    let before = evaluator.evaluate(&raw).unwrap();
-    let after = evaluator.evaluate(&simplified).unwrap();
+    let before = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&raw)).unwrap();
+    let after = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&simplified)).unwrap();
     for ((r, b), a) in raw.iter().zip(&before).zip(&after) {
         assert_eq!(b.invalid, a.invalid, "`{r}`");
         assert!(
@@ -178,8 +178,8 @@ fn a_run_that_simplifies_offspring_has_a_hall_of_fame_whose_simplified_forms_sco
     let gpu = crate::common::gpu();
     let scenes = vec![filterjit::scene::load(training, &request).unwrap()];
     let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
-    let before = evaluator.evaluate(&raw).unwrap();
-    let after = evaluator.evaluate(&simplified).unwrap();
+    let before = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&raw)).unwrap();
+    let after = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&simplified)).unwrap();
     for ((r, b), a) in raw.iter().zip(&before).zip(&after) {
         assert_eq!(b.invalid, a.invalid, "`{r}`");
         assert!((b.value - a.value).abs() <= 1e-5 * b.value.abs().max(1e-3), "`{r}`: {} then {}", b.value, a.value);

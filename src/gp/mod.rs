@@ -13,6 +13,7 @@
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod operators;
+pub mod pareto;
 pub mod transport;
 pub mod tree;
 
@@ -37,14 +38,62 @@ pub struct Fitness {
     /// Why the expression is invalid, if it is (it then has the worst fitness).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub invalid: Option<String>,
+    /// The filter's modelled cost per pixel ([`crate::cost::model`]), where the evaluator gives one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cost: Option<f64>,
 }
 
 impl Fitness {
     pub fn valid(value: f64) -> Self {
-        Fitness { value, invalid: None }
+        Fitness { value, invalid: None, cost: None }
     }
     pub fn invalid(reason: impl Into<String>) -> Self {
-        Fitness { value: WORST, invalid: Some(reason.into()) }
+        Fitness { value: WORST, invalid: Some(reason.into()), cost: None }
+    }
+    pub fn with_cost(self, cost: f64) -> Self {
+        Fitness { cost: Some(cost), ..self }
+    }
+
+    /// The point the multi-objective search compares: (error, cost), both
+    /// to minimise; an invalid expression is worse than every valid one in both.
+    pub fn objectives(&self) -> Vec<f64> {
+        match self.invalid {
+            Some(_) => vec![WORST, WORST],
+            None => vec![self.value, self.cost.unwrap_or(0.0)],
+        }
+    }
+}
+
+/// What the search minimises.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Objectives {
+    /// The thesis's single objective: fitness (error) alone.
+    #[default]
+    #[serde(rename = "error")]
+    Error,
+    /// Error and modelled cost: NSGA-II's non-dominated sorting and crowding
+    /// distance choose parents and survivors; the result is a front.
+    #[serde(rename = "error,cost")]
+    ErrorCost,
+}
+
+impl std::str::FromStr for Objectives {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.replace(' ', "").as_str() {
+            "error" => Ok(Objectives::Error),
+            "error,cost" | "cost,error" => Ok(Objectives::ErrorCost),
+            other => Err(format!("`{other}`: the objectives are `error` or `error,cost`")),
+        }
+    }
+}
+
+impl std::fmt::Display for Objectives {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Objectives::Error => "error",
+            Objectives::ErrorCost => "error,cost",
+        })
     }
 }
 
@@ -55,10 +104,25 @@ pub struct EvalTime {
     pub evaluate: Duration,
 }
 
+/// An individual to score: its weight expression and, where the search
+/// evolves it too, its window radius (`None`: the run's radius).
+#[derive(Clone, Debug)]
+pub struct Candidate {
+    pub expr: Expr,
+    pub radius: Option<u32>,
+}
+
+impl Candidate {
+    /// Candidates of `exprs`, each at the run's radius.
+    pub fn at_run_radius(exprs: &[Expr]) -> Vec<Candidate> {
+        exprs.iter().map(|e| Candidate { expr: e.clone(), radius: None }).collect()
+    }
+}
+
 /// Computes fitness. Implementations compile and run kernels; the engine only sees numbers.
 pub trait Evaluator {
-    /// Fitness of each expression, in order.
-    fn evaluate(&mut self, exprs: &[Expr]) -> anyhow::Result<Vec<Fitness>>;
+    /// Fitness of each candidate, in order.
+    fn evaluate(&mut self, candidates: &[Candidate]) -> anyhow::Result<Vec<Fitness>>;
     /// Time spent since the last call.
     fn take_time(&mut self) -> EvalTime;
 }
@@ -96,6 +160,9 @@ pub struct Settings {
     /// the same weights) before it is evaluated.
     #[serde(default)]
     pub simplify_offspring: bool,
+    /// What the search minimises (runs made before there was a choice: error).
+    #[serde(default)]
+    pub objectives: Objectives,
 }
 
 impl Default for Settings {
@@ -115,6 +182,7 @@ impl Default for Settings {
             hall_of_fame: 10,
             seed: 0,
             simplify_offspring: false,
+            objectives: Objectives::Error,
         }
     }
 }
@@ -149,7 +217,27 @@ impl Settings {
 pub struct Member {
     pub expr: Expr,
     pub text: String,
+    /// The window radius, where the search evolves it ([`Engine::set_radii`]).
+    pub radius: Option<u32>,
     pub fitness: Fitness,
+}
+
+impl Member {
+    /// What tells two individuals apart: the expression, and the radius where there is one.
+    fn key(&self) -> String {
+        member_key(&self.text, self.radius)
+    }
+
+    fn stored(&self) -> StoredMember {
+        StoredMember { expr: self.text.clone(), fitness: self.fitness.clone(), radius: self.radius }
+    }
+}
+
+fn member_key(text: &str, radius: Option<u32>) -> String {
+    match radius {
+        None => text.to_string(),
+        Some(r) => format!("r{r}:{text}"),
+    }
 }
 
 /// Serialised form of a member (canonical text, read back through the grammar).
@@ -157,7 +245,19 @@ pub struct Member {
 pub struct StoredMember {
     pub expr: String,
     pub fitness: Fitness,
+    /// Its own window radius (runs that evolve the radius); absent: the run's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radius: Option<u32>,
 }
+
+impl StoredMember {
+    pub fn key(&self) -> String {
+        member_key(&self.expr, self.radius)
+    }
+}
+
+/// Probability that a new individual's radius moves one step (runs that evolve it).
+pub const RADIUS_MUTATION: f64 = 0.2;
 
 /// Everything needed to continue a run after generation `generation`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -191,6 +291,9 @@ pub struct Report {
     /// Processes holding the islands.
     #[serde(default)]
     pub ranks: usize,
+    /// Distinct members on the whole population's non-dominated front (multi-objective runs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub front: Option<usize>,
 }
 
 /// What one process sends the root after each generation: its islands and its work.
@@ -217,6 +320,8 @@ pub struct Engine<'e> {
     held: Range<usize>,
     /// Their members after generation `generation`, once there is one.
     current: Option<(u32, Vec<Vec<Member>>)>,
+    /// The radii individuals may have, when the radius is a gene.
+    radii: Option<std::ops::RangeInclusive<u32>>,
 }
 
 /// SplitMix64's finaliser: a well-mixed 64-bit value from any.
@@ -272,7 +377,24 @@ impl<'e> Engine<'e> {
             transport,
             held,
             current: None,
+            radii: None,
         })
+    }
+
+    /// Evolve each individual's window radius too, within `radii` (the seed
+    /// copies start at its end). Set before the first generation.
+    pub fn set_radii(&mut self, radii: std::ops::RangeInclusive<u32>) {
+        self.radii = Some(radii);
+    }
+
+    /// A radius one step from `radius` with probability [`RADIUS_MUTATION`], within the range.
+    fn mutated_radius(&self, radius: Option<u32>, rng: &mut Rng) -> Option<u32> {
+        let (Some(radii), Some(r)) = (&self.radii, radius) else { return radius };
+        if !rng.chance(RADIUS_MUTATION) {
+            return radius;
+        }
+        let step = if rng.chance(0.5) { r.saturating_sub(1) } else { r + 1 };
+        Some(step.clamp(*radii.start(), *radii.end()))
     }
 
     /// The islands this process evolves.
@@ -291,28 +413,31 @@ impl<'e> Engine<'e> {
 
     /// Evaluate what the memo does not know yet; returns how many were evaluated.
     fn evaluate(&mut self, islands: &mut [Vec<Member>]) -> anyhow::Result<usize> {
-        let mut fresh: Vec<Expr> = Vec::new();
-        let mut fresh_texts = std::collections::HashSet::new();
+        let mut fresh: Vec<Candidate> = Vec::new();
+        let mut fresh_keys = Vec::new();
+        let mut seen = std::collections::HashSet::new();
         for m in islands.iter().flatten() {
-            if !self.memo.contains_key(&m.text) && fresh_texts.insert(m.text.clone()) {
-                fresh.push(m.expr.clone());
+            let key = m.key();
+            if !self.memo.contains_key(&key) && seen.insert(key.clone()) {
+                fresh.push(Candidate { expr: m.expr.clone(), radius: m.radius });
+                fresh_keys.push(key);
             }
         }
         if !fresh.is_empty() {
             let results = self.evaluator.evaluate(&fresh)?;
-            for (e, f) in fresh.iter().zip(results) {
-                self.memo.insert(e.to_string(), f);
+            for (key, f) in fresh_keys.into_iter().zip(results) {
+                self.memo.insert(key, f);
             }
         }
         for m in islands.iter_mut().flatten() {
-            m.fitness = self.memo[&m.text].clone();
+            m.fitness = self.memo[&m.key()].clone();
         }
         Ok(fresh.len())
     }
 
-    fn member(expr: Expr) -> Member {
+    fn member(expr: Expr, radius: Option<u32>) -> Member {
         let text = expr.to_string();
-        Member { expr, text, fitness: Fitness::invalid("not evaluated") }
+        Member { expr, text, radius, fitness: Fitness::invalid("not evaluated") }
     }
 
     fn pick_mutation(&self, rng: &mut Rng) -> Mutation {
@@ -341,15 +466,43 @@ impl<'e> Engine<'e> {
         e.clone()
     }
 
-    fn tournament<'m>(&self, island: &'m [Member], rng: &mut Rng) -> &'m Member {
-        let mut best = &island[rng.below(island.len())];
-        for _ in 1..self.settings.tournament {
-            let m = &island[rng.below(island.len())];
-            if m.fitness.value < best.fitness.value {
-                best = m;
+    /// Each member's standing in its island, lower is better: its fitness,
+    /// or with two objectives its place by front and crowding.
+    fn standing(&self, island: &[Member]) -> Vec<f64> {
+        match self.settings.objectives {
+            Objectives::Error => island.iter().map(|m| m.fitness.value).collect(),
+            Objectives::ErrorCost => {
+                let points: Vec<Vec<f64>> = island.iter().map(|m| m.fitness.objectives()).collect();
+                pareto::places(&points).into_iter().map(|p| p as f64).collect()
             }
         }
-        best
+    }
+
+    fn tournament<'m>(&self, island: &'m [Member], standing: &[f64], rng: &mut Rng) -> &'m Member {
+        let mut best = rng.below(island.len());
+        for _ in 1..self.settings.tournament {
+            let k = rng.below(island.len());
+            if standing[k] < standing[best] {
+                best = k;
+            }
+        }
+        &island[best]
+    }
+
+    /// NSGA-II's survivors: the best `island_size` of parents and offspring
+    /// together, by front and crowding, each expression once where there are enough.
+    fn survivors(&self, parents: &[Member], offspring: Vec<Member>) -> Vec<Member> {
+        let pool: Vec<Member> = parents.iter().cloned().chain(offspring).collect();
+        let mut seen = std::collections::HashSet::new();
+        // One individual per point: clones and equally good twins (say, many
+        // weights that filter nothing) would otherwise crowd out the front.
+        let (distinct, repeats): (Vec<usize>, Vec<usize>) = (0..pool.len()).partition(|&k| {
+            let point: Vec<u64> = pool[k].fitness.objectives().iter().map(|v| v.to_bits()).collect();
+            seen.insert(point)
+        });
+        let points: Vec<Vec<f64>> = distinct.iter().map(|&k| pool[k].fitness.objectives()).collect();
+        let chosen = pareto::order(&points).into_iter().map(|k| distinct[k]).chain(repeats);
+        chosen.take(self.settings.island_size).map(|k| pool[k].clone()).collect()
     }
 
     /// Generation 0: per island, `seed_share` copies of the seed, the rest
@@ -365,7 +518,12 @@ impl<'e> Engine<'e> {
             let mut island = Vec::with_capacity(n);
             for k in 0..n {
                 let e = if k < copies { self.seed_expr.clone() } else { self.mutated(&self.seed_expr, &mut rng) };
-                island.push(Self::member(e));
+                // Where the radius is a gene, the seed keeps the largest and mutants draw theirs.
+                let radius = self.radii.as_ref().map(|radii| match k < copies {
+                    true => *radii.end(),
+                    false => radii.start() + rng.below((radii.end() - radii.start() + 1) as usize) as u32,
+                });
+                island.push(Self::member(e, radius));
             }
             islands.push(island);
         }
@@ -390,11 +548,12 @@ impl<'e> Engine<'e> {
 
     /// One generation after `state`.
     /// A new individual, simplified first when the settings ask for it.
-    fn offspring(&self, child: Expr) -> Member {
+    fn offspring(&self, child: Expr, radius: Option<u32>, rng: &mut Rng) -> Member {
+        let radius = self.mutated_radius(radius, rng);
         if self.settings.simplify_offspring {
-            Self::member(crate::simplify::simplify(&child))
+            Self::member(crate::simplify::simplify(&child), radius)
         } else {
-            Self::member(child)
+            Self::member(child, radius)
         }
     }
 
@@ -410,15 +569,18 @@ impl<'e> Engine<'e> {
         let mut next = Vec::with_capacity(islands.len());
         for (i, island) in self.held().zip(&islands) {
             let mut rng = island_rng(self.settings.seed, generation, i);
+            let standing = self.standing(island);
+            let standing = &standing;
             let mut new: Vec<Member> = Vec::with_capacity(n);
             for _ in 0..replicated {
-                new.push(self.tournament(island, &mut rng).clone());
+                new.push(self.tournament(island, standing, &mut rng).clone());
             }
             while new.len() < replicated + crossed {
-                let a = self.tournament(island, &mut rng).expr.clone();
-                let b = self.tournament(island, &mut rng).expr.clone();
+                let pa = self.tournament(island, standing, &mut rng);
+                let pb = self.tournament(island, standing, &mut rng);
+                let (a, b, ra, rb) = (pa.expr.clone(), pb.expr.clone(), pa.radius, pb.radius);
                 let (x, y) = crossover(&a, &b, &mut rng).unwrap_or((a.clone(), b.clone()));
-                for (child, parent) in [(x, a), (y, b)] {
+                for (child, parent, radius) in [(x, a, ra), (y, b, rb)] {
                     if new.len() == replicated + crossed {
                         break;
                     }
@@ -428,18 +590,22 @@ impl<'e> Engine<'e> {
                     } else {
                         child
                     };
-                    new.push(self.offspring(child));
+                    new.push(self.offspring(child, radius, &mut rng));
                 }
             }
             while new.len() < n {
-                let parent = self.tournament(island, &mut rng).expr.clone();
+                let parent = self.tournament(island, standing, &mut rng);
+                let (parent, radius) = (parent.expr.clone(), parent.radius);
                 let child = self.mutated(&parent, &mut rng);
-                new.push(self.offspring(child));
+                new.push(self.offspring(child, radius, &mut rng));
             }
             next.push(new);
         }
         let gp = start.elapsed();
         let evaluated = self.evaluate(&mut next)?;
+        if self.settings.objectives == Objectives::ErrorCost {
+            next = islands.iter().zip(next).map(|(parents, offspring)| self.survivors(parents, offspring)).collect();
+        }
         let migrate_start = Instant::now();
         if self.settings.migration_interval > 0
             && generation.is_multiple_of(self.settings.migration_interval)
@@ -456,14 +622,13 @@ impl<'e> Engine<'e> {
     fn migrate(&mut self, islands: &mut [Vec<Member>]) -> anyhow::Result<()> {
         let mut arriving: Vec<Member> = islands.iter().map(|island| best_of(island).clone()).collect();
         let outgoing = arriving.pop().expect("a process holds at least one island");
-        let sent = StoredMember { expr: outgoing.text, fitness: outgoing.fitness };
+        let sent = outgoing.stored();
         let received: StoredMember = serde_json::from_slice(&self.transport.pass_on(serde_json::to_vec(&sent)?)?)?;
         let expr = parse_expr(&received.expr).map_err(|e| anyhow::anyhow!("migrant `{}`:\n{e}", received.expr))?;
-        arriving.insert(0, Member { expr, text: received.expr, fitness: received.fitness });
+        arriving.insert(0, Member { expr, text: received.expr, radius: received.radius, fitness: received.fitness });
         for (target, migrant) in islands.iter_mut().zip(arriving) {
-            let worst = (0..target.len())
-                .max_by(|&a, &b| target[a].fitness.value.total_cmp(&target[b].fitness.value))
-                .expect("non-empty");
+            let standing = self.standing(target);
+            let worst = (0..target.len()).max_by(|&a, &b| standing[a].total_cmp(&standing[b])).expect("non-empty");
             target[worst] = migrant;
         }
         Ok(())
@@ -484,12 +649,7 @@ impl<'e> Engine<'e> {
         let gather_start = Instant::now();
         let part = Part {
             first: self.held.start,
-            islands: islands
-                .iter()
-                .map(|island| {
-                    island.iter().map(|m| StoredMember { expr: m.text.clone(), fitness: m.fitness.clone() }).collect()
-                })
-                .collect(),
+            islands: islands.iter().map(|island| island.iter().map(Member::stored).collect()).collect(),
             evaluated,
             compile_s: time.compile.as_secs_f64(),
             evaluate_s: time.evaluate.as_secs_f64(),
@@ -528,6 +688,7 @@ impl<'e> Engine<'e> {
             transfer_s: (migration + gather_start.elapsed()).as_secs_f64(),
             seconds: start.elapsed().as_secs_f64(),
             ranks,
+            front: (self.settings.objectives == Objectives::ErrorCost).then(|| pareto_front(&state).len()),
         };
         Ok(Some((state, report)))
     }
@@ -542,8 +703,8 @@ impl<'e> Engine<'e> {
                     .map(|s| {
                         let expr =
                             parse_expr(&s.expr).map_err(|e| anyhow::anyhow!("stored expression `{}`:\n{e}", s.expr))?;
-                        self.memo.entry(s.expr.clone()).or_insert_with(|| s.fitness.clone());
-                        Ok(Member { expr, text: s.expr.clone(), fitness: s.fitness.clone() })
+                        self.memo.entry(s.key()).or_insert_with(|| s.fitness.clone());
+                        Ok(Member { expr, text: s.expr.clone(), radius: s.radius, fitness: s.fitness.clone() })
                     })
                     .collect()
             })
@@ -553,6 +714,33 @@ impl<'e> Engine<'e> {
 
 fn best_of(island: &[Member]) -> &Member {
     island.iter().min_by(|a, b| a.fitness.value.total_cmp(&b.fitness.value)).expect("non-empty island")
+}
+
+/// Fitness from which a filter is no choice: within 0.1 % of the noisy
+/// input's error (a weight that is zero everywhere scores 1 up to rounding).
+pub const NO_CHOICE: f64 = 0.999;
+
+/// The valid members better than the noisy input that no other member
+/// dominates in (error, cost), one per point, cheapest first (the most
+/// accurate last).
+pub fn pareto_front(state: &State) -> Vec<StoredMember> {
+    let mut seen = std::collections::HashSet::new();
+    let members: Vec<&StoredMember> = state
+        .islands
+        .iter()
+        .flatten()
+        .filter(|m| m.fitness.invalid.is_none() && m.fitness.value < NO_CHOICE)
+        .filter(|m| seen.insert(m.fitness.objectives().iter().map(|v| v.to_bits()).collect::<Vec<u64>>()))
+        .collect();
+    let points: Vec<Vec<f64>> = members.iter().map(|m| m.fitness.objectives()).collect();
+    let rank = pareto::fronts(&points);
+    let mut front: Vec<StoredMember> =
+        members.iter().zip(&rank).filter(|(_, &r)| r == 0).map(|(m, _)| (*m).clone()).collect();
+    front.sort_by(|a, b| {
+        let (pa, pb) = (a.fitness.objectives(), b.fitness.objectives());
+        pa[1].total_cmp(&pb[1]).then(pa[0].total_cmp(&pb[0])).then(a.expr.cmp(&b.expr))
+    });
+    front
 }
 
 /// The best `k` distinct expressions of every island, best first.
@@ -566,7 +754,7 @@ pub fn hall_of_fame(state: &State, k: usize) -> Vec<(usize, StoredMember)> {
             if seen.len() == k {
                 break;
             }
-            if seen.insert(m.expr.clone()) {
+            if seen.insert(m.key()) {
                 out.push((i, m.clone()));
             }
         }
@@ -597,14 +785,16 @@ mod tests {
     struct TextFitness;
 
     impl Evaluator for TextFitness {
-        fn evaluate(&mut self, exprs: &[Expr]) -> anyhow::Result<Vec<Fitness>> {
-            Ok(exprs
+        fn evaluate(&mut self, candidates: &[Candidate]) -> anyhow::Result<Vec<Fitness>> {
+            Ok(candidates
                 .iter()
-                .map(|e| {
-                    let text = e.to_string();
+                .map(|c| {
+                    let text = c.expr.to_string();
                     let hash =
                         text.bytes().fold(1469598103934665603u64, |h, b| (h ^ b as u64).wrapping_mul(1099511628211));
-                    Fitness::valid((hash % 10_000) as f64 / 10_000.0 + text.len() as f64 * 1e-4)
+                    let r = c.radius.unwrap_or(3) as f64;
+                    Fitness::valid((hash % 10_000) as f64 / 10_000.0 / r + text.len() as f64 * 1e-4)
+                        .with_cost(text.len() as f64 * (2.0 * r + 1.0).powi(2))
                 })
                 .collect())
         }
@@ -629,12 +819,24 @@ mod tests {
         parse_expr(crate::corpus::lookup("bilateral").unwrap()).unwrap()
     }
 
+    fn multi(islands: usize) -> Settings {
+        Settings { objectives: Objectives::ErrorCost, ..settings(islands) }
+    }
+
     /// Every generation's whole population, from one process.
     fn in_process(islands: usize) -> Vec<State> {
+        run_in_process(settings(islands))
+    }
+
+    fn run_in_process(settings: Settings) -> Vec<State> {
         let mut evaluator = TextFitness;
-        let mut engine = Engine::new(settings(islands), terminals(), seed(), &mut evaluator);
+        let multi = settings.objectives == Objectives::ErrorCost;
+        let mut engine = Engine::new(settings, terminals(), seed(), &mut evaluator);
+        if multi {
+            engine.set_radii(1..=3);
+        }
         let mut states = vec![engine.initial().unwrap().unwrap().0];
-        for _ in 0..settings(islands).generations {
+        for _ in 0..engine.settings.generations {
             states.push(engine.step().unwrap().unwrap().0);
         }
         states
@@ -642,22 +844,27 @@ mod tests {
 
     /// The same, with the islands shared among `ranks` threads acting as processes.
     fn shared(islands: usize, ranks: usize) -> Vec<State> {
+        run_shared(settings(islands), ranks)
+    }
+
+    fn run_shared(settings: Settings, ranks: usize) -> Vec<State> {
+        let multi = settings.objectives == Objectives::ErrorCost;
         let results: Vec<Vec<State>> = std::thread::scope(|s| {
             let handles: Vec<_> = threads::job(ranks)
                 .into_iter()
                 .map(|transport| {
+                    let settings = settings.clone();
                     s.spawn(move || {
                         let mut evaluator = TextFitness;
-                        let mut engine = Engine::with_transport(
-                            settings(islands),
-                            terminals(),
-                            seed(),
-                            &mut evaluator,
-                            Box::new(transport),
-                        )
-                        .unwrap();
+                        let generations = settings.generations;
+                        let mut engine =
+                            Engine::with_transport(settings, terminals(), seed(), &mut evaluator, Box::new(transport))
+                                .unwrap();
+                        if multi {
+                            engine.set_radii(1..=3);
+                        }
                         let mut states: Vec<State> = engine.initial().unwrap().into_iter().map(|(s, _)| s).collect();
-                        for _ in 0..settings(islands).generations {
+                        for _ in 0..generations {
                             states.extend(engine.step().unwrap().map(|(s, _)| s));
                         }
                         states
@@ -671,7 +878,35 @@ mod tests {
     }
 
     fn texts(states: &[State]) -> Vec<Vec<Vec<String>>> {
-        states.iter().map(|s| s.islands.iter().map(|i| i.iter().map(|m| m.expr.clone()).collect()).collect()).collect()
+        states.iter().map(|s| s.islands.iter().map(|i| i.iter().map(|m| m.key()).collect()).collect()).collect()
+    }
+
+    #[test]
+    fn a_multi_objective_search_keeps_a_front_of_radii_and_shares_like_one_process() {
+        let states = run_in_process(multi(4));
+        let last = states.last().unwrap();
+        let radii: std::collections::BTreeSet<u32> =
+            last.islands.iter().flatten().map(|m| m.radius.expect("the radius is a gene")).collect();
+        assert!(radii.iter().all(|r| (1..=3).contains(r)) && radii.len() > 1, "{radii:?}");
+        let front = pareto_front(last);
+        assert!(front.len() >= 2, "{front:?}");
+        for a in &front {
+            for b in &front {
+                assert!(!pareto::dominates(&a.fitness.objectives(), &b.fitness.objectives()));
+            }
+        }
+        let costs: Vec<f64> = front.iter().map(|m| m.fitness.cost.unwrap()).collect();
+        assert!(costs.windows(2).all(|w| w[0] <= w[1]), "cheapest first: {costs:?}");
+        // NSGA-II is elitist: the front's most accurate member never gets worse.
+        let best = |s: &State| pareto_front(s).iter().map(|m| m.fitness.value).fold(f64::INFINITY, f64::min);
+        assert!(states.windows(2).all(|w| best(&w[1]) <= best(&w[0])));
+        assert_eq!(texts(&run_shared(multi(4), 3)), texts(&states));
+    }
+
+    #[test]
+    fn the_single_objective_search_has_no_radius_gene() {
+        let states = in_process(2);
+        assert!(states.iter().flat_map(|s| s.islands.iter().flatten()).all(|m| m.radius.is_none()));
     }
 
     #[test]
