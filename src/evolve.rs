@@ -476,6 +476,33 @@ pub struct Front {
 
 pub const FRONT_FILE: &str = "pareto.json";
 
+impl Front {
+    pub fn read(path: &Path) -> Result<Front> {
+        let path = if path.is_dir() { path.join(FRONT_FILE) } else { path.to_path_buf() };
+        let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+        serde_json::from_str(&text)
+            .with_context(|| format!("{} is not a filterjit front (pareto.json)", path.display()))
+    }
+
+    /// The most accurate member whose measured time for `pixels` pixels fits
+    /// `budget_ms` (times scale with the pixel count: one dispatch over the image).
+    pub fn within_budget(&self, budget_ms: f64, pixels: f64) -> Result<&FrontMember> {
+        let time = |m: &FrontMember| m.ms_per_mpx * pixels / 1e6;
+        self.members
+            .iter()
+            .filter(|m| time(m) <= budget_ms)
+            .min_by(|a, b| a.fitness.total_cmp(&b.fitness))
+            .ok_or_else(|| {
+                let fastest = self.members.iter().map(time).fold(f64::INFINITY, f64::min);
+                anyhow::anyhow!(
+                    "no member of the front fits {budget_ms} ms at {:.2} megapixels: the fastest takes {fastest:.2} ms on {}",
+                    pixels / 1e6,
+                    self.device
+                )
+            })
+    }
+}
+
 /// Side of the scene the front is timed on: large enough for stable times.
 pub const FRONT_TIMING_SIDE: usize = 256;
 

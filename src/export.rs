@@ -94,6 +94,10 @@ pub struct Manifest {
     /// Sampled textures the shader binds; more than WebGPU's guaranteed 16
     /// per stage ([`PORTABLE_SAMPLED_TEXTURES`]) needs a device that allows them.
     pub sampled_textures: usize,
+    /// The window radius the filter was scored with (set `params.radius` to
+    /// it), where the expression came with one (a front member).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius: Option<u32>,
 }
 
 /// Sampled textures per shader stage every WebGPU device allows.
@@ -301,6 +305,7 @@ fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entr
         bindings,
         normalisation: NORMALISATION,
         semantics: SEMANTICS,
+        radius: None,
     }
 }
 

@@ -51,8 +51,17 @@ enum Command {
     /// engine): inputs from textures, output to a storage texture; writes a
     /// manifest of the binding interface beside it (FILE.json).
     Export {
-        /// The expression, @name for a shipped one, or @FILE[:NAME] (a hall of fame).
+        /// The expression, @name for a shipped one, or @FILE[:NAME] (a hall of fame);
+        /// with --budget-ms, a multi-objective run's pareto.json (or its run directory).
         expr: String,
+        /// Export the most accurate member of the front whose measured time
+        /// fits this many milliseconds per frame at --size (on the device the
+        /// front was timed on: pareto.json says which).
+        #[arg(long, requires = "size")]
+        budget_ms: Option<f64>,
+        /// The frame size the budget is for, WIDTHxHEIGHT.
+        #[arg(long, value_parser = parse_size)]
+        size: Option<(u32, u32)>,
         /// Shading language: WGSL from filterjit's templates, the others through naga's back ends.
         #[arg(long, value_enum, default_value_t = filterjit::export::Target::Wgsl)]
         target: filterjit::export::Target,
@@ -322,6 +331,10 @@ struct EvolveArgs {
     /// run's result is a front of filters, fast to accurate (pareto.json).
     #[arg(long, default_value_t = filterjit::gp::Objectives::Error)]
     objectives: filterjit::gp::Objectives,
+    /// With `--objectives error,cost`: how many islands (the first) keep
+    /// minimising error alone at the run's radius, feeding the front's accurate end [0].
+    #[arg(long, default_value_t = 0)]
+    error_islands: usize,
     /// Run directory: checkpoint, log, hall of fame, summary [default: runs/evolve, or
     /// runs/evolve-2, -3, … when it holds a run already; with --resume the newest of them].
     #[arg(short, long)]
@@ -381,8 +394,30 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Export { expr, target, format, output, pipeline } => {
-            let resolved = corpus::resolve_with_pipeline(&expr)?;
+        Command::Export { expr, target, format, output, pipeline, budget_ms, size } => {
+            let resolved = match budget_ms {
+                None => corpus::resolve_with_pipeline(&expr)?,
+                Some(budget) => {
+                    let front = filterjit::evolve::Front::read(Path::new(&expr))?;
+                    let (w, h) = size.expect("clap requires --size with --budget-ms");
+                    let member = front.within_budget(budget, w as f64 * h as f64)?;
+                    eprintln!(
+                        "chose     {} (radius {}, fitness {:.5}, {:.2} ms at {w}x{h} on {}) of {} members",
+                        member.name,
+                        member.radius,
+                        member.fitness,
+                        member.ms_per_mpx * (w * h) as f64 / 1e6,
+                        front.device,
+                        front.members.len()
+                    );
+                    corpus::Resolved {
+                        name: Some(member.name.clone()),
+                        expr: filterjit::parse_expr(&member.expr).map_err(|e| anyhow::anyhow!("{e}"))?,
+                        pipeline: Some(front.pipeline),
+                        radius: Some(member.radius),
+                    }
+                }
+            };
             let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
             if pipeline != filterjit::pipeline::FilterPipeline::WINDOW {
                 bail!(
@@ -392,7 +427,8 @@ fn run(cli: Cli) -> Result<()> {
             }
             // An engine gets the cheapest equivalent form (the same weights).
             let expr = filterjit::simplify::simplify(&resolved.expr);
-            let exported = filterjit::export::export(&expr, target, format)?;
+            let mut exported = filterjit::export::export(&expr, target, format)?;
+            exported.manifest.radius = resolved.radius;
             let manifest_path = manifest_path(&output);
             let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
             for (path, bytes) in [(&output, exported.code.to_bytes()), (&manifest_path, manifest.into_bytes())] {
@@ -777,6 +813,7 @@ fn evolve_on(
         seed: args.seed.unwrap_or(preset.seed),
         simplify_offspring: args.simplify_offspring,
         objectives: args.objectives,
+        error_islands: args.error_islands,
     };
     let size = args.render.size.unwrap_or(size);
     let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();

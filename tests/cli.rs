@@ -239,3 +239,64 @@ fn export_writes_a_shader_and_its_manifest_and_names_bad_input() {
     assert!(text(&bad.stderr).contains("1:23"), "names the position: {}", text(&bad.stderr));
     assert!(!dir.join("bad.wgsl").exists(), "nothing is written for bad input");
 }
+
+#[test]
+fn export_picks_the_most_accurate_front_member_within_a_budget() {
+    let dir = crate::common::temp_dir("cli", "budget");
+    let member = |name: &str, expr: &str, radius: u32, fitness: f64, ms: f64| filterjit::evolve::FrontMember {
+        name: name.into(),
+        expr: expr.into(),
+        simplified: expr.into(),
+        radius,
+        fitness,
+        cost: ms,
+        test_normalised: fitness,
+        ms_per_mpx: ms,
+    };
+    let front = filterjit::evolve::Front {
+        pipeline: Default::default(),
+        radius: 3,
+        device: "a test device".into(),
+        timing_scene: "tiled".into(),
+        timing_pixels: 65536,
+        rank_correlation: 1.0,
+        members: vec![
+            member("front1", "exp(-distance2(color))", 1, 0.4, 100.0),
+            member("front2", "exp(-(distance2(color) + distance2(normal)))", 2, 0.3, 400.0),
+            member("front3", "exp(-(distance2(color) + distance2(normal) + distance2(texture)))", 3, 0.2, 1600.0),
+        ],
+    };
+    let path = dir.join("pareto.json");
+    std::fs::write(&path, serde_json::to_string(&front).unwrap()).unwrap();
+    let shader = dir.join("filter.wgsl");
+    // 1 Mpx: front2 takes 400 ms, front3 1600 ms; a 500 ms budget gets front2.
+    let run = filterjit(&[
+        "export",
+        dir.to_str().unwrap(),
+        "--budget-ms",
+        "500",
+        "--size",
+        "1000x1000",
+        "-o",
+        shader.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(text(&run.stderr).contains("chose     front2 (radius 2"), "{}", text(&run.stderr));
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("filter.wgsl.json")).unwrap()).unwrap();
+    assert_eq!(manifest["radius"], 2);
+    assert!(manifest["expression"].as_str().unwrap().contains("normal"));
+
+    let tight = filterjit(&[
+        "export",
+        path.to_str().unwrap(),
+        "--budget-ms",
+        "50",
+        "--size",
+        "1000x1000",
+        "-o",
+        shader.to_str().unwrap(),
+    ]);
+    assert!(!tight.status.success());
+    assert!(text(&tight.stderr).contains("no member of the front fits 50 ms"), "{}", text(&tight.stderr));
+}

@@ -55,11 +55,14 @@ impl Fitness {
     }
 
     /// The point the multi-objective search compares: (error, cost), both
-    /// to minimise; an invalid expression is worse than every valid one in both.
+    /// to minimise. An invalid expression, and one that filters nothing
+    /// (fitness [`NO_CHOICE`] or worse: say, a weight that is zero
+    /// everywhere, the cheapest of all), is worse than every other in both:
+    /// it is no trade-off.
     pub fn objectives(&self) -> Vec<f64> {
         match self.invalid {
-            Some(_) => vec![WORST, WORST],
-            None => vec![self.value, self.cost.unwrap_or(0.0)],
+            None if self.value < NO_CHOICE => vec![self.value, self.cost.unwrap_or(0.0)],
+            _ => vec![WORST.max(self.value), WORST],
         }
     }
 }
@@ -163,6 +166,11 @@ pub struct Settings {
     /// What the search minimises (runs made before there was a choice: error).
     #[serde(default)]
     pub objectives: Objectives,
+    /// With two objectives: how many islands (the first) still minimise
+    /// error alone at the largest radius, as the thesis's search does, so
+    /// that the front's accurate end evolves as fast as a single-objective run's.
+    #[serde(default)]
+    pub error_islands: usize,
 }
 
 impl Default for Settings {
@@ -183,6 +191,7 @@ impl Default for Settings {
             seed: 0,
             simplify_offspring: false,
             objectives: Objectives::Error,
+            error_islands: 0,
         }
     }
 }
@@ -204,6 +213,9 @@ impl Settings {
         let shares = [self.replication, self.crossover, self.crossover_mutation, self.seed_share];
         if shares.iter().any(|s| !(0.0..=1.0).contains(s)) || self.replication + self.crossover > 1.0 {
             return Err("shares and probabilities lie in [0, 1], and replication + crossover ≤ 1".into());
+        }
+        if self.error_islands > self.islands {
+            return Err(format!("--error-islands {} is more than the {} islands", self.error_islands, self.islands));
         }
         if self.max_length < 3 {
             return Err("--max-length must be at least 3".into());
@@ -388,8 +400,11 @@ impl<'e> Engine<'e> {
     }
 
     /// A radius one step from `radius` with probability [`RADIUS_MUTATION`], within the range.
-    fn mutated_radius(&self, radius: Option<u32>, rng: &mut Rng) -> Option<u32> {
+    fn mutated_radius(&self, island: usize, radius: Option<u32>, rng: &mut Rng) -> Option<u32> {
         let (Some(radii), Some(r)) = (&self.radii, radius) else { return radius };
+        if self.objectives_of(island) == Objectives::Error {
+            return radius;
+        }
         if !rng.chance(RADIUS_MUTATION) {
             return radius;
         }
@@ -466,10 +481,18 @@ impl<'e> Engine<'e> {
         e.clone()
     }
 
-    /// Each member's standing in its island, lower is better: its fitness,
-    /// or with two objectives its place by front and crowding.
-    fn standing(&self, island: &[Member]) -> Vec<f64> {
+    /// What island `island` minimises.
+    fn objectives_of(&self, island: usize) -> Objectives {
         match self.settings.objectives {
+            Objectives::ErrorCost if island < self.settings.error_islands => Objectives::Error,
+            objectives => objectives,
+        }
+    }
+
+    /// Each member's standing in island `index`, lower is better: its fitness,
+    /// or with two objectives its place by front and crowding.
+    fn standing(&self, index: usize, island: &[Member]) -> Vec<f64> {
+        match self.objectives_of(index) {
             Objectives::Error => island.iter().map(|m| m.fitness.value).collect(),
             Objectives::ErrorCost => {
                 let points: Vec<Vec<f64>> = island.iter().map(|m| m.fitness.objectives()).collect();
@@ -519,7 +542,8 @@ impl<'e> Engine<'e> {
             for k in 0..n {
                 let e = if k < copies { self.seed_expr.clone() } else { self.mutated(&self.seed_expr, &mut rng) };
                 // Where the radius is a gene, the seed keeps the largest and mutants draw theirs.
-                let radius = self.radii.as_ref().map(|radii| match k < copies {
+                let keep = k < copies || self.objectives_of(i) == Objectives::Error;
+                let radius = self.radii.as_ref().map(|radii| match keep {
                     true => *radii.end(),
                     false => radii.start() + rng.below((radii.end() - radii.start() + 1) as usize) as u32,
                 });
@@ -548,8 +572,8 @@ impl<'e> Engine<'e> {
 
     /// One generation after `state`.
     /// A new individual, simplified first when the settings ask for it.
-    fn offspring(&self, child: Expr, radius: Option<u32>, rng: &mut Rng) -> Member {
-        let radius = self.mutated_radius(radius, rng);
+    fn offspring(&self, island: usize, child: Expr, radius: Option<u32>, rng: &mut Rng) -> Member {
+        let radius = self.mutated_radius(island, radius, rng);
         if self.settings.simplify_offspring {
             Self::member(crate::simplify::simplify(&child), radius)
         } else {
@@ -569,7 +593,7 @@ impl<'e> Engine<'e> {
         let mut next = Vec::with_capacity(islands.len());
         for (i, island) in self.held().zip(&islands) {
             let mut rng = island_rng(self.settings.seed, generation, i);
-            let standing = self.standing(island);
+            let standing = self.standing(i, island);
             let standing = &standing;
             let mut new: Vec<Member> = Vec::with_capacity(n);
             for _ in 0..replicated {
@@ -590,22 +614,28 @@ impl<'e> Engine<'e> {
                     } else {
                         child
                     };
-                    new.push(self.offspring(child, radius, &mut rng));
+                    new.push(self.offspring(i, child, radius, &mut rng));
                 }
             }
             while new.len() < n {
                 let parent = self.tournament(island, standing, &mut rng);
                 let (parent, radius) = (parent.expr.clone(), parent.radius);
                 let child = self.mutated(&parent, &mut rng);
-                new.push(self.offspring(child, radius, &mut rng));
+                new.push(self.offspring(i, child, radius, &mut rng));
             }
             next.push(new);
         }
         let gp = start.elapsed();
         let evaluated = self.evaluate(&mut next)?;
-        if self.settings.objectives == Objectives::ErrorCost {
-            next = islands.iter().zip(next).map(|(parents, offspring)| self.survivors(parents, offspring)).collect();
-        }
+        next = self
+            .held()
+            .zip(&islands)
+            .zip(next)
+            .map(|((i, parents), offspring)| match self.objectives_of(i) {
+                Objectives::ErrorCost => self.survivors(parents, offspring),
+                Objectives::Error => offspring,
+            })
+            .collect();
         let migrate_start = Instant::now();
         if self.settings.migration_interval > 0
             && generation.is_multiple_of(self.settings.migration_interval)
@@ -626,8 +656,8 @@ impl<'e> Engine<'e> {
         let received: StoredMember = serde_json::from_slice(&self.transport.pass_on(serde_json::to_vec(&sent)?)?)?;
         let expr = parse_expr(&received.expr).map_err(|e| anyhow::anyhow!("migrant `{}`:\n{e}", received.expr))?;
         arriving.insert(0, Member { expr, text: received.expr, radius: received.radius, fitness: received.fitness });
-        for (target, migrant) in islands.iter_mut().zip(arriving) {
-            let standing = self.standing(target);
+        for ((i, target), migrant) in self.held().zip(islands.iter_mut()).zip(arriving) {
+            let standing = self.standing(i, target);
             let worst = (0..target.len()).max_by(|&a, &b| standing[a].total_cmp(&standing[b])).expect("non-empty");
             target[worst] = migrant;
         }
@@ -901,6 +931,21 @@ mod tests {
         let best = |s: &State| pareto_front(s).iter().map(|m| m.fitness.value).fold(f64::INFINITY, f64::min);
         assert!(states.windows(2).all(|w| best(&w[1]) <= best(&w[0])));
         assert_eq!(texts(&run_shared(multi(4), 3)), texts(&states));
+    }
+
+    #[test]
+    fn error_islands_keep_the_full_radius_and_share_like_one_process() {
+        let settings = Settings { error_islands: 1, ..multi(4) };
+        let states = run_in_process(settings.clone());
+        // Until the first migration brings other radii in, island 0 has the full radius only.
+        for state in &states[..2] {
+            assert!(state.islands[0].iter().all(|m| m.radius == Some(3)), "island 0 minimises error alone");
+        }
+        let later: std::collections::BTreeSet<u32> =
+            states.last().unwrap().islands[1..].iter().flatten().filter_map(|m| m.radius).collect();
+        assert!(later.len() > 1, "{later:?}");
+        assert_eq!(texts(&run_shared(settings, 2)), texts(&states));
+        assert!(Settings { error_islands: 5, ..multi(4) }.check().is_err());
     }
 
     #[test]
