@@ -1124,11 +1124,18 @@ fn report(args: ReportArgs) -> Result<()> {
         origin: Origin::Baseline,
         expr: baseline_expr,
         pipeline: baseline_pipeline,
+        radius: None,
     });
     for name in ["thesis1", "thesis2", "thesis3"] {
         // The thesis's filters as published: one window.
         let expr = resolve_expr(&format!("@{name}"))?;
-        methods.push(Method { name: name.into(), origin: Origin::Thesis, expr, pipeline: Default::default() });
+        methods.push(Method {
+            name: name.into(),
+            origin: Origin::Thesis,
+            expr,
+            pipeline: Default::default(),
+            radius: None,
+        });
     }
     for (k, arg) in args.exprs.iter().enumerate() {
         let resolved = corpus::resolve_with_pipeline(arg)?;
@@ -1137,6 +1144,7 @@ fn report(args: ReportArgs) -> Result<()> {
             origin: Origin::Given,
             expr: resolved.expr,
             pipeline: resolved.pipeline.unwrap_or(context.pipeline),
+            radius: resolved.radius,
         });
     }
     let hall_path = args
@@ -1156,9 +1164,21 @@ fn report(args: ReportArgs) -> Result<()> {
                 .transpose()
                 .with_context(|| format!("{}: the pipeline of `{name}`", path.display()))?
                 .unwrap_or(context.pipeline);
-            if taken < args.top && !methods.iter().any(|m| m.expr == expr && m.pipeline == pipeline) {
-                taken += 1;
-                methods.push(Method { name: name.to_string(), origin: Origin::Given, expr: expr.clone(), pipeline });
+            let radius = corpus::radius_of(&content, name)
+                .transpose()
+                .with_context(|| format!("{}: the radius of `{name}`", path.display()))?;
+            // A multi-objective run's front is drawn whole: it is the run's answer.
+            let on_front = name.starts_with("front");
+            let known = methods.iter().any(|m| m.expr == expr && m.pipeline == pipeline && m.radius == radius);
+            if (on_front || taken < args.top) && !known {
+                taken += usize::from(!on_front);
+                methods.push(Method {
+                    name: name.to_string(),
+                    origin: Origin::Given,
+                    expr: expr.clone(),
+                    pipeline,
+                    radius,
+                });
             }
             hall.push(expr);
         }

@@ -49,6 +49,8 @@ pub struct Method {
     pub expr: Expr,
     /// The pipeline the expression is filtered through.
     pub pipeline: FilterPipeline,
+    /// Its own window radius (a front member's); `None`: the report's.
+    pub radius: Option<u32>,
 }
 
 #[derive(Clone, Debug)]
@@ -238,7 +240,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             let buffers = &mut *buffers;
             let mut timing = Timing { scene: &timing_scene, buffers: timing_buffers };
             let (cell, filtered) =
-                measure(gpu, kernel, buffers, &scene, &mut timing, &reference, settings, noisy.relmse)
+                measure(gpu, kernel, buffers, &scene, &mut timing, &reference, settings, method.radius, noisy.relmse)
                     .with_context(|| format!("filtering {} with {}", scene.name, method.name))?;
             strip.push(write_crop(
                 &crops_dir.join(format!("{}.png", file_name(&method.name))),
@@ -370,13 +372,15 @@ fn measure(
     timing: &mut Timing<'_>,
     reference: &[[f32; 3]],
     settings: &Settings,
+    radius: Option<u32>,
     noisy_relmse: f64,
 ) -> Result<(Cell, Vec<[f32; 3]>)> {
-    let first = gpu.filter(kernel, buffers, scene, settings.radius)?;
-    gpu.filter(kernel, timing.buffers, timing.scene, settings.radius)?;
+    let radius = radius.unwrap_or(settings.radius);
+    let first = gpu.filter(kernel, buffers, scene, radius)?;
+    gpu.filter(kernel, timing.buffers, timing.scene, radius)?;
     let mut times = Vec::new();
     for _ in 0..settings.repeats.max(1) {
-        times.push(gpu.filter(kernel, timing.buffers, timing.scene, settings.radius)?.dispatch.as_secs_f64());
+        times.push(gpu.filter(kernel, timing.buffers, timing.scene, radius)?.dispatch.as_secs_f64());
     }
     times.sort_by(f64::total_cmp);
     let mpx = timing.scene.pixels() as f64 / 1e6;
