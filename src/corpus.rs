@@ -29,33 +29,31 @@ pub const PIPELINE_PREFIX: &str = "# pipeline:";
 /// A named-expression file's line stating the window radius of the entries after it.
 pub const RADIUS_PREFIX: &str = "# radius:";
 
-/// The radius stated for entry `name`: the last `# radius: R` line before it, if any.
-pub fn radius_of(text: &str, name: &str) -> Option<anyhow::Result<u32>> {
-    let mut current: Option<&str> = None;
+/// What the last `PREFIX value` line before entry `name` says, if any: how
+/// a named-expression file states what applies to the entries after it.
+fn stated_for<'t>(text: &'t str, prefix: &str, name: &str) -> Option<&'t str> {
+    let mut current = None;
     for line in text.lines().map(str::trim) {
-        if let Some(spec) = line.strip_prefix(RADIUS_PREFIX) {
+        if let Some(spec) = line.strip_prefix(prefix) {
             current = Some(spec.trim());
         } else if !line.starts_with('#') && line.split_once('=').is_some_and(|(n, _)| n.trim() == name) {
-            return current.map(|spec| {
-                spec.parse().map_err(|_| anyhow::anyhow!("`{RADIUS_PREFIX} {spec}` before `{name}` is not a radius"))
-            });
+            return current;
         }
     }
     None
 }
 
+/// The radius stated for entry `name`: the last `# radius: R` line before it, if any.
+pub fn radius_of(text: &str, name: &str) -> Option<anyhow::Result<u32>> {
+    stated_for(text, RADIUS_PREFIX, name).map(|spec| {
+        spec.parse().map_err(|_| anyhow::anyhow!("`{RADIUS_PREFIX} {spec}` before `{name}` is not a radius"))
+    })
+}
+
 /// The pipeline stated for entry `name` of a named-expression file: the last
 /// `# pipeline: SPEC` line before it, if any.
 pub fn pipeline_of(text: &str, name: &str) -> Option<anyhow::Result<crate::pipeline::FilterPipeline>> {
-    let mut current: Option<&str> = None;
-    for line in text.lines().map(str::trim) {
-        if let Some(spec) = line.strip_prefix(PIPELINE_PREFIX) {
-            current = Some(spec.trim());
-        } else if !line.starts_with('#') && line.split_once('=').is_some_and(|(n, _)| n.trim() == name) {
-            return current.map(|spec| spec.parse().map_err(anyhow::Error::from));
-        }
-    }
-    None
+    stated_for(text, PIPELINE_PREFIX, name).map(|spec| spec.parse().map_err(anyhow::Error::from))
 }
 
 /// A resolved expression argument.
@@ -134,4 +132,21 @@ fn file_reference(reference: &str) -> Option<(std::path::PathBuf, Option<String>
     let (path, name) = reference.rsplit_once(':')?;
     let path = std::path::PathBuf::from(path);
     path.is_file().then(|| (path, Some(name.to_string())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stated_lines_apply_to_the_entries_after_them() {
+        let text = "a = 1\n# pipeline: atrous=3\n# radius: 2\nb = 2\n# radius: 4\nc = 3\n# radius: x\nd = 4\n";
+        assert!(pipeline_of(text, "a").is_none() && radius_of(text, "a").is_none());
+        assert_eq!(radius_of(text, "b").unwrap().unwrap(), 2);
+        assert_eq!(radius_of(text, "c").unwrap().unwrap(), 4);
+        assert_eq!(pipeline_of(text, "c").unwrap().unwrap().to_string(), "atrous=3");
+        let bad = radius_of(text, "d").unwrap().unwrap_err().to_string();
+        assert!(bad.contains("`# radius: x` before `d`"), "{bad}");
+        assert!(radius_of(text, "missing").is_none());
+    }
 }

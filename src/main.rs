@@ -332,9 +332,11 @@ struct EvolveArgs {
     #[arg(long, default_value_t = filterjit::gp::Objectives::Error)]
     objectives: filterjit::gp::Objectives,
     /// With `--objectives error,cost`: how many islands (the first) keep
-    /// minimising error alone at the run's radius, feeding the front's accurate end [0].
-    #[arg(long, default_value_t = 0)]
-    error_islands: usize,
+    /// minimising error alone at the run's radius, feeding the front's
+    /// accurate end through migration [default: all but one, as measured in
+    /// docs/BENCHMARKS.md].
+    #[arg(long)]
+    error_islands: Option<usize>,
     /// Run directory: checkpoint, log, hall of fame, summary [default: runs/evolve, or
     /// runs/evolve-2, -3, … when it holds a run already; with --resume the newest of them].
     #[arg(short, long)]
@@ -813,7 +815,11 @@ fn evolve_on(
         seed: args.seed.unwrap_or(preset.seed),
         simplify_offspring: args.simplify_offspring,
         objectives: args.objectives,
-        error_islands: args.error_islands,
+        error_islands: match (args.objectives, args.error_islands) {
+            (_, Some(n)) => n,
+            (filterjit::gp::Objectives::ErrorCost, None) => args.islands.unwrap_or(preset.islands).saturating_sub(1),
+            (filterjit::gp::Objectives::Error, None) => 0,
+        },
     };
     let size = args.render.size.unwrap_or(size);
     let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
