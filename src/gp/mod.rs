@@ -65,6 +65,11 @@ impl Fitness {
             _ => vec![WORST.max(self.value), WORST],
         }
     }
+
+    /// Its point's exact identity, for keeping one individual per point.
+    fn point_key(&self) -> Vec<u64> {
+        self.objectives().iter().map(|v| v.to_bits()).collect()
+    }
 }
 
 /// What the search minimises.
@@ -519,10 +524,8 @@ impl<'e> Engine<'e> {
         let mut seen = std::collections::HashSet::new();
         // One individual per point: clones and equally good twins (say, many
         // weights that filter nothing) would otherwise crowd out the front.
-        let (distinct, repeats): (Vec<usize>, Vec<usize>) = (0..pool.len()).partition(|&k| {
-            let point: Vec<u64> = pool[k].fitness.objectives().iter().map(|v| v.to_bits()).collect();
-            seen.insert(point)
-        });
+        let (distinct, repeats): (Vec<usize>, Vec<usize>) =
+            (0..pool.len()).partition(|&k| seen.insert(pool[k].fitness.point_key()));
         let points: Vec<Vec<f64>> = distinct.iter().map(|&k| pool[k].fitness.objectives()).collect();
         let chosen = pareto::order(&points).into_iter().map(|k| distinct[k]).chain(repeats);
         chosen.take(self.settings.island_size).map(|k| pool[k].clone()).collect()
@@ -760,7 +763,7 @@ pub fn pareto_front(state: &State) -> Vec<StoredMember> {
         .iter()
         .flatten()
         .filter(|m| m.fitness.invalid.is_none() && m.fitness.value < NO_CHOICE)
-        .filter(|m| seen.insert(m.fitness.objectives().iter().map(|v| v.to_bits()).collect::<Vec<u64>>()))
+        .filter(|m| seen.insert(m.fitness.point_key()))
         .collect();
     let points: Vec<Vec<f64>> = members.iter().map(|m| m.fitness.objectives()).collect();
     let rank = pareto::fronts(&points);
