@@ -38,6 +38,8 @@ pub struct GpuEvaluator<'g> {
     /// How fitness kernels are lowered: every optimisation, and workgroup
     /// tiles for the run's radius on hardware adapters ([`Tiles::Auto`]).
     options: jit::LowerOptions,
+    /// Expressions per fitness kernel ([`Fusion`]).
+    fuse: usize,
     time: EvalTime,
 }
 
@@ -97,15 +99,22 @@ impl<'g> GpuEvaluator<'g> {
             pipeline,
             threads,
             options: jit::LowerOptions::ALL,
+            fuse: 1,
             time: EvalTime::default(),
         };
         evaluator.set_tiles(Tiles::Auto.enabled(gpu));
+        evaluator.set_fusion(Fusion::Auto);
         Ok(evaluator)
     }
 
     /// Lower fitness kernels with workgroup tiles or without.
     pub fn set_tiles(&mut self, on: bool) {
         self.options.tile_radius = on.then_some(self.radius);
+    }
+
+    /// How many expressions each fitness kernel scores (results are identical either way).
+    pub fn set_fusion(&mut self, fusion: Fusion) {
+        self.fuse = fusion.members(self.gpu);
     }
 
     /// The radius expressions are scored at when they carry none.
@@ -145,22 +154,9 @@ impl<'g> GpuEvaluator<'g> {
         options.tile_radius = options.tile_radius.map(|_| radius);
         let start = Instant::now();
         let threads = self.threads.max(1);
-        // A candidate that does not compile, or binds more than this device
-        // allows, is an invalid individual with its reason, never a failed batch.
         let shape = jit::Shape::of(&self.pipeline);
-        let kernels = jit::compile_each_shaped(exprs, KernelKind::Fitness, options, shape, threads);
-        let unsupported: Vec<Option<String>> = kernels
-            .iter()
-            .map(|k| match k {
-                Ok(k) => self.gpu.check_bindings(k).err().map(|e| e.to_string()),
-                Err(e) => Some(format!("does not compile: {e}")),
-            })
-            .collect();
-        let refs: Vec<&jit::ValidatedKernel> = kernels
-            .iter()
-            .zip(&unsupported)
-            .filter_map(|(k, u)| if u.is_none() { k.as_ref().ok() } else { None })
-            .collect();
+        let (kernels, unsupported) = self.fitness_kernels(exprs, options, shape, threads);
+        let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
         let devices: Vec<&Gpu> = std::iter::once(self.gpu).chain(self.more.iter()).collect();
         // Contiguous shares, one per device; results come back in order.
         let share = refs.len().div_ceil(devices.len()).max(1);
@@ -213,6 +209,59 @@ impl<'g> GpuEvaluator<'g> {
             .collect();
         self.time.evaluate += start.elapsed().saturating_sub(driver_compile);
         Ok(out)
+    }
+
+    /// The batch's fitness kernels, in order, and why each expression that
+    /// has none could not be scored. Expressions are grouped in order into
+    /// kernels of up to `fuse` members within the device's binding limit; a
+    /// group whose kernel fails is compiled member by member, so that a
+    /// candidate that does not compile, or binds more than this device allows,
+    /// is an invalid individual with its reason, never a failed batch.
+    fn fitness_kernels(
+        &self,
+        exprs: &[Expr],
+        options: jit::LowerOptions,
+        shape: jit::Shape,
+        threads: usize,
+    ) -> (Vec<jit::ValidatedKernel>, Vec<Option<String>>) {
+        let limit = self.gpu.storage_buffer_limit();
+        let fuse = if shape.atrous { 1 } else { self.fuse.max(1) };
+        let mut groups: Vec<Vec<Expr>> = Vec::new();
+        for e in exprs {
+            let fits = groups.last().is_some_and(|g: &Vec<Expr>| {
+                let mut with = g.clone();
+                with.push(e.clone());
+                let layout = jit::KernelLayout::of_all(&with);
+                g.len() < fuse
+                    && jit::BindingInterface::of(KernelKind::Fitness, &layout, shape).storage_buffers() <= limit
+            });
+            match groups.last_mut() {
+                Some(g) if fits => g.push(e.clone()),
+                _ => groups.push(vec![e.clone()]),
+            }
+        }
+        let kernel_for = |g: &[Expr]| -> std::result::Result<jit::ValidatedKernel, String> {
+            let kernel = jit::compile_fused(g, options, shape).map_err(|e| format!("does not compile: {e}"))?;
+            self.gpu.check_bindings(&kernel).map_err(|e| e.to_string())?;
+            Ok(kernel)
+        };
+        let compiled = in_parallel(&groups, threads, |g| match kernel_for(g) {
+            Ok(kernel) => vec![Ok(kernel)],
+            Err(_) if g.len() > 1 => g.iter().map(|e| kernel_for(std::slice::from_ref(e))).collect(),
+            Err(reason) => vec![Err(reason)],
+        });
+        let mut kernels = Vec::new();
+        let mut unsupported = Vec::new();
+        for result in compiled.into_iter().flatten() {
+            match result {
+                Ok(k) => {
+                    unsupported.extend(std::iter::repeat_n(None, k.source().exprs.len()));
+                    kernels.push(k);
+                }
+                Err(reason) => unsupported.push(Some(reason)),
+            }
+        }
+        (kernels, unsupported)
     }
 
     pub fn noisy_relmse(&self) -> &[f64] {
@@ -659,6 +708,8 @@ pub struct RunOptions<'a> {
     /// Whether fitness kernels stage their windows in workgroup memory
     /// (results are identical either way; only the time differs).
     pub tiles: Tiles,
+    /// How many individuals each fitness kernel scores (identical results).
+    pub fusion: Fusion,
 }
 
 /// When fitness kernels get workgroup tiles.
@@ -678,6 +729,58 @@ impl Tiles {
             Tiles::Auto => !gpu.is_software(),
             Tiles::On => true,
             Tiles::Off => false,
+        }
+    }
+}
+
+/// `f` of every item, on up to `threads` threads (contiguous shares); results in order.
+fn in_parallel<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let chunk = items.len().div_ceil(threads.max(1)).max(1);
+    let f = &f;
+    std::thread::scope(|s| {
+        let handles: Vec<_> =
+            items.chunks(chunk).map(|part| s.spawn(move || part.iter().map(f).collect::<Vec<R>>())).collect();
+        handles.into_iter().flat_map(|h| h.join().expect("compile thread panicked")).collect()
+    })
+}
+
+/// How many individuals one fitness kernel scores. Fitness is the same
+/// either way (tests/evolve.rs); only the driver's compile time differs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Fusion {
+    /// [`FUSED_ON_SOFTWARE`] on software adapters, whose compile cost is per
+    /// module and grows with its size more slowly than linearly; one per
+    /// kernel on hardware, which compiles fast and runs each kernel apart.
+    #[default]
+    Auto,
+    /// This many per kernel (1: a kernel per individual, the thesis's design).
+    Members(usize),
+}
+
+/// Individuals per fitness kernel on software adapters, by measurement
+/// (docs/BENCHMARKS.md, "Fused fitness kernels").
+pub const FUSED_ON_SOFTWARE: usize = 12;
+
+impl Fusion {
+    pub fn members(self, gpu: &Gpu) -> usize {
+        match self {
+            Fusion::Auto if gpu.is_software() => FUSED_ON_SOFTWARE,
+            Fusion::Auto => 1,
+            Fusion::Members(n) => n.max(1),
+        }
+    }
+}
+
+impl std::str::FromStr for Fusion {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(Fusion::Auto),
+            n => match n.parse::<usize>() {
+                Ok(n) if n >= 1 => Ok(Fusion::Members(n)),
+                _ => Err(format!("`{s}` is not `auto` or a number of individuals per kernel (1 or more)")),
+            },
         }
     }
 }
@@ -748,8 +851,19 @@ fn prepare_run_dir(output: &Path, resume: bool, settings: &Settings, config: &Ru
 /// summary, the others `None`.
 pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transport) -> Result<Option<Summary>> {
     let start = Instant::now();
-    let RunOptions { settings, config, output, resume, threads, stop_after, on_report, on_render, baselines, tiles } =
-        options;
+    let RunOptions {
+        settings,
+        config,
+        output,
+        resume,
+        threads,
+        stop_after,
+        on_report,
+        on_render,
+        baselines,
+        tiles,
+        fusion,
+    } = options;
     settings.check().map_err(anyhow::Error::msg)?;
     let root = transport.is_root();
     let resumed = if root { prepare_run_dir(&output, resume, &settings, &config)? } else { None };
@@ -775,6 +889,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let scenes = load_all(&training, &features, &variances, &config.pipeline)?;
     let mut evaluator = GpuEvaluator::for_pipeline(gpu, scenes, config.radius, config.pipeline, threads)?;
     evaluator.set_tiles(tiles.enabled(gpu));
+    evaluator.set_fusion(fusion);
     // `level` (the à-trous pass) is a terminal where there are passes: a filter may change with scale.
     let level = config.pipeline.is_atrous().then_some(ScalarVar::Level);
     let terminals = gp::operators::Terminals {

@@ -151,6 +151,9 @@ enum Command {
         generation_sizes: Vec<u32>,
         #[arg(long, default_value_t = 10)]
         generation_radius: u32,
+        /// Individuals per fitness kernel, as `evolve --fuse` (auto: 12 on software adapters, 1 on hardware).
+        #[arg(long, default_value = "auto")]
+        fuse: filterjit::evolve::Fusion,
         #[arg(short, long, default_value = "bench.json")]
         output: PathBuf,
     },
@@ -353,6 +356,9 @@ struct EvolveArgs {
     /// Stage fitness kernels' windows in workgroup memory: auto = on hardware GPUs, off on software adapters (same results either way).
     #[arg(long, value_enum, default_value_t = filterjit::evolve::Tiles::Auto)]
     tiles: filterjit::evolve::Tiles,
+    /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
+    #[arg(long, default_value = "auto")]
+    fuse: filterjit::evolve::Fusion,
     /// Share the islands among the ranks of the MPI job this process was
     /// started in (`mpirun -n 4 filterjit evolve --mpi …`; a filterjit built
     /// with `--features mpi`; docs/DISTRIBUTED.md). Same seed, same result as one process.
@@ -516,7 +522,17 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Bench { size, radius, repeats, population, lengths, generation_sizes, generation_radius, output } => {
+        Command::Bench {
+            size,
+            radius,
+            repeats,
+            population,
+            lengths,
+            generation_sizes,
+            generation_radius,
+            fuse,
+            output,
+        } => {
             let settings = filterjit::bench::BenchSettings {
                 radius,
                 repeats: repeats.max(1),
@@ -525,6 +541,7 @@ fn run(cli: Cli) -> Result<()> {
                 generation_sizes: generation_sizes.into_iter().filter(|s| *s > 0).collect(),
                 generation_radius,
                 seed: 0,
+                fusion: fuse,
             };
             bench(size, &settings, &output)
         }
@@ -869,7 +886,7 @@ fn evolve_on(
     }
     if root {
         eprintln!(
-            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{} on {}{}",
+            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{}, {} per fitness kernel, on {}{}",
             settings.islands,
             settings.island_size,
             settings.generations,
@@ -878,6 +895,10 @@ fn evolve_on(
             config.pipeline,
             size.0,
             size.1,
+            match args.fuse.members(&gpu) {
+                1 => "one individual".to_string(),
+                n => format!("up to {n} individuals"),
+            },
             gpu.describe(),
             match transport.ranks() {
                 1 => String::new(),
@@ -918,6 +939,7 @@ fn evolve_on(
             on_render: &mut on_render,
             baselines: args.baseline.iter().map(|b| resolve_expr(b)).collect::<Result<_>>()?,
             tiles: args.tiles,
+            fusion: args.fuse,
         },
         transport,
     )?;

@@ -74,6 +74,18 @@ fn try_run(
     stop_after: Option<u32>,
     tiles: evolve::Tiles,
 ) -> anyhow::Result<Option<evolve::Summary>> {
+    try_run_with(dir, settings, config, resume, stop_after, tiles, evolve::Fusion::Members(8))
+}
+
+fn try_run_with(
+    dir: &Path,
+    settings: Settings,
+    config: RunConfig,
+    resume: bool,
+    stop_after: Option<u32>,
+    tiles: evolve::Tiles,
+    fusion: evolve::Fusion,
+) -> anyhow::Result<Option<evolve::Summary>> {
     let gpu = gpu();
     evolve::run(
         &gpu,
@@ -88,6 +100,7 @@ fn try_run(
             on_render: &mut |_, _| {},
             baselines: Vec::new(),
             tiles,
+            fusion,
         },
     )
 }
@@ -109,9 +122,12 @@ fn runs_are_deterministic_and_resume_exactly() {
         summary.best
     );
 
-    // The same seed and inputs: the same run, bit for bit, also without workgroup tiles.
+    // The same seed and inputs: the same run, bit for bit, also without
+    // workgroup tiles and with a kernel per individual instead of eight.
     let b = temp_dir("b");
-    try_run(&b, small(), config(training, test), false, None, evolve::Tiles::Off).unwrap().expect("finished");
+    try_run_with(&b, small(), config(training, test), false, None, evolve::Tiles::Off, evolve::Fusion::Members(1))
+        .unwrap()
+        .expect("finished");
     let state = |dir: &Path| {
         serde_json::from_str::<serde_json::Value>(&read(dir.join(evolve::CHECKPOINT_FILE))).unwrap()["state"].clone()
     };

@@ -207,3 +207,58 @@ fn trusted_kernels_give_the_same_bits_as_checked_ones() {
     }
     gpu.set_kernel_runtime_checks(false);
 }
+
+/// Fused fitness kernels (several individuals, one kernel) give every member
+/// the relMSE and domain flags of its own kernel, bit for bit: in the window
+/// form and the remodulating one, with tiles and without, on scenes of
+/// several dispatch bands, with members that read different inputs and raise
+/// different domain errors.
+#[test]
+fn fused_fitness_kernels_score_each_member_as_its_own_kernel() {
+    let gpu = gpu();
+    let exprs: Vec<Expr> = [
+        "exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3))",
+        "sqrt(dot(normal, color) - 0.5)",
+        "exp(-distance2(texture) / 0.1)",
+        "acos(distance1(pixel) / 2) + pow(distance2(color) - 0.3, 0.5)",
+        "1",
+    ]
+    .iter()
+    .map(|t| parse_expr(t).unwrap())
+    .collect();
+    // Small scenes, and one tall enough for several dispatch bands at radius 10.
+    let scenes = [scene_with_albedo(19, 13, 4), scene_with_albedo(16, 620, 5)];
+    for (text, radius) in [("window", 2), ("demodulate,window", 3), ("window", 10)] {
+        let p = pipeline(text);
+        for tiles in [None, Some(radius)] {
+            let options = LowerOptions { tile_radius: tiles, ..LowerOptions::ALL };
+            let shape = Shape::of(&p);
+            let singles: Vec<_> =
+                exprs.iter().map(|e| jit::compile_shaped(e, KernelKind::Fitness, options, shape).unwrap()).collect();
+            let fused = [
+                jit::compile_fused(&exprs[..3], options, shape).unwrap(),
+                jit::compile_fused(&exprs[3..], options, shape).unwrap(),
+            ];
+            assert_eq!(fused[0].source().exprs.len(), 3);
+            let data: Vec<&Scene> = scenes.iter().collect();
+            let mut prepared: Vec<_> =
+                scenes.iter().map(|s| FitnessScene::for_pipeline(&gpu, s, &p).unwrap()).collect();
+            let one_by_one =
+                gpu.evaluate_fitness(&singles.iter().collect::<Vec<_>>(), &mut prepared, &data, radius).unwrap();
+            let together =
+                gpu.evaluate_fitness(&fused.iter().collect::<Vec<_>>(), &mut prepared, &data, radius).unwrap();
+            assert_eq!(together.len(), exprs.len(), "one row per member");
+            for ((e, a), b) in exprs.iter().zip(&one_by_one).zip(&together) {
+                for (s, (x, y)) in a.iter().zip(b).enumerate() {
+                    let what = format!("{text} r{radius} tiles {tiles:?} scene {s} `{e}`");
+                    assert_eq!(x.relmse.to_bits(), y.relmse.to_bits(), "{what}: {} against {}", x.relmse, y.relmse);
+                    assert_eq!(x.flags, y.flags, "{what}: domain flags");
+                }
+            }
+            // The members raise different flags: sqrt of a negative, acos out of range.
+            let flags: Vec<u32> = one_by_one.iter().map(|row| row[0].flags).collect();
+            assert!(flags[1] != 0 && flags[3] != 0 && flags[1] != flags[3], "{flags:?}");
+            assert_eq!(flags[0] | flags[2] | flags[4], 0, "{flags:?}");
+        }
+    }
+}

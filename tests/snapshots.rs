@@ -49,6 +49,26 @@ fn pipeline_kernels_match_snapshots() {
     });
 }
 
+/// The fitness kernels evolve compiles: one individual's, three fused into
+/// one kernel (the default on software adapters), and the reduction kernel
+/// both feed.
+#[test]
+fn fitness_kernels_match_snapshots() {
+    use filterjit::jit::{KernelKind, LowerOptions, Shape};
+    let domains = corpus::parse_named(CORPUS).into_iter().find(|(n, _)| *n == "domains").expect("in the corpus").1;
+    let members: Vec<_> = [corpus::lookup("thesis1").unwrap(), corpus::lookup("bilateral").unwrap(), domains]
+        .iter()
+        .map(|text| parse_expr(text).unwrap())
+        .collect();
+    settings().bind(|| {
+        let single = jit::compile_shaped(&members[0], KernelKind::Fitness, LowerOptions::ALL, Shape::WINDOW).unwrap();
+        insta::assert_snapshot!("fitness__thesis1", single.wgsl());
+        let fused = jit::compile_fused(&members, LowerOptions::ALL, Shape::WINDOW).unwrap();
+        insta::assert_snapshot!("fitness__fused3", fused.wgsl());
+        insta::assert_snapshot!("fitness__reduce", jit::reduce_wgsl());
+    });
+}
+
 /// The exported shader of the thesis's first expression in every text target,
 /// and its manifest: what an engine developer copies out.
 #[test]

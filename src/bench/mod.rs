@@ -28,6 +28,9 @@ pub struct BenchSettings {
     pub generation_sizes: Vec<u32>,
     pub generation_radius: u32,
     pub seed: u64,
+    /// Individuals per fitness kernel in the population's "as evolve does"
+    /// measurement and the generations (`evolve --fuse`).
+    pub fusion: crate::evolve::Fusion,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -100,6 +103,13 @@ pub struct PopulationResult {
     pub per_individual_ms: f64,
     /// The same with wgpu's run-time bounds checks and loop bounding kept in the kernels.
     pub checked_per_individual_ms: f64,
+    /// As `evolve` scores a batch (every queue of its evaluator, lowering to
+    /// fitness): a kernel per individual, then `fused_members` per kernel.
+    pub evolve_single_per_individual_ms: f64,
+    pub evolve_fused_per_individual_ms: f64,
+    pub fused_members: usize,
+    /// Whether both gave every individual the same errors and flags, bit for bit.
+    pub fused_identical: bool,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -427,7 +437,21 @@ pub fn run(
     gpu.evaluate_fitness(&refs, &mut fitness_scene, &[scene], settings.radius)?;
     let checked = t.elapsed();
     gpu.set_kernel_runtime_checks(false);
+    // As evolve scores a generation: one kernel per individual, then fused kernels.
+    let mut evaluator = crate::evolve::GpuEvaluator::new(gpu, vec![scene.clone()], settings.radius, threads)?;
+    let mut per_individual = |fusion| -> anyhow::Result<(f64, Vec<crate::evolve::ScoredErrors>)> {
+        evaluator.set_fusion(fusion);
+        let t = Instant::now();
+        let scored = evaluator.errors(&distinct)?;
+        Ok((ms(t.elapsed()) / distinct.len() as f64, scored))
+    };
+    let (evolve_single_per_individual_ms, single) = per_individual(crate::evolve::Fusion::Members(1))?;
+    let (evolve_fused_per_individual_ms, fused) = per_individual(settings.fusion)?;
     let population_result = PopulationResult {
+        evolve_single_per_individual_ms,
+        evolve_fused_per_individual_ms,
+        fused_members: settings.fusion.members(gpu),
+        fused_identical: bit_identical(&single, &fused),
         checked_per_individual_ms: ms(lower_validate + checked) / population.len() as f64,
         individuals: population.len(),
         distinct: distinct.len(),
@@ -449,7 +473,7 @@ pub fn run(
         interface: jit::BindingInterface::of(KernelKind::Filter, &layout, jit::Shape::WINDOW),
         layout,
         tile_radius: None,
-        expr: bilateral.clone(),
+        exprs: vec![bilateral.clone()],
         wgsl: HANDWRITTEN_BILATERAL.to_string(),
     })?;
     let generated = jit::compile(&bilateral)?;
@@ -512,6 +536,7 @@ pub fn run(
         let features: Vec<Feature> = gscene.features.keys().copied().chain([Feature::Color, Feature::Pixel]).collect();
         let variances: Vec<ScalarVar> = gscene.variances.keys().copied().collect();
         let mut evaluator = crate::evolve::GpuEvaluator::new(gpu, vec![gscene], settings.generation_radius, threads)?;
+        evaluator.set_fusion(settings.fusion);
         let gp_settings = gp::Settings {
             islands: 4,
             island_size: settings.population / 4,
@@ -635,6 +660,15 @@ pub const THESIS_TABLE_4_1: &[(u32, f64, f64)] =
     &[(32, 0.457, 2.667), (128, 6.799, 734.623), (256, 22.038, 3165.72), (512, 183.14, 27501.9)];
 
 /// The report as a text table.
+/// Whether two scorings agree bit for bit (NaN included).
+fn bit_identical(a: &[crate::evolve::ScoredErrors], b: &[crate::evolve::ScoredErrors]) -> bool {
+    let key = |s: &crate::evolve::ScoredErrors| match s {
+        Ok(errors) => Ok(errors.iter().map(|e| (e.relmse.to_bits(), e.flags, e.finite)).collect::<Vec<_>>()),
+        Err(reason) => Err(reason.clone()),
+    };
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| key(x) == key(y))
+}
+
 pub fn table(r: &Report) -> String {
     let mut t = String::new();
     t += &format!(
@@ -683,6 +717,14 @@ pub fn table(r: &Report) -> String {
         p.per_individual_ms,
         p.checked_per_individual_ms,
         p.checked_per_individual_ms / p.per_individual_ms
+    );
+    t += &format!(
+        "  as evolve scores them (every queue): a kernel per individual {:.2} ms per individual; {} per kernel {:.2} ms ({:.2}x faster; results {})\n",
+        p.evolve_single_per_individual_ms,
+        p.fused_members,
+        p.evolve_fused_per_individual_ms,
+        p.evolve_single_per_individual_ms / p.evolve_fused_per_individual_ms,
+        if p.fused_identical { "identical" } else { "DIFFER" }
     );
     let h = &r.handwritten;
     t += &format!(

@@ -1,24 +1,30 @@
-//! Fitness on the device: many kernels on many scenes in few submissions,
-//! each dispatch reducing its relMSE terms per workgroup; only the partial
-//! sums come back.
+//! Fitness on the device: many kernels on many scenes in few submissions.
+//! A fitness kernel writes every pixel's relMSE terms for each of its
+//! members; the reduction kernel (`jit::reduce`) sums them per workgroup;
+//! only the partial sums come back.
+
+use std::sync::OnceLock;
 
 use wgpu::util::DeviceExt;
 
 use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
-use super::{Gpu, GpuError};
-use crate::jit::{KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
+use super::{Gpu, GpuError, Pipeline};
+use crate::jit::{KernelKind, Params, ReduceParams, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
 use crate::pipeline::FilterPipeline;
 use crate::scene::Scene;
 
 /// Dispatches per submission: small enough to keep each submission short.
 const DISPATCHES_PER_SUBMISSION: usize = 64;
 
-/// A scene with its reference on the device.
+/// A scene with its reference on the device, and room for the per-pixel
+/// terms of the largest fitness kernel it has scored (reused by every kernel).
 pub struct FitnessScene {
     buffers: SceneBuffers,
     reference: wgpu::Buffer,
     width: u32,
     height: u32,
+    /// Per-pixel terms and flags, and how many members they have room for.
+    terms: Option<(wgpu::Buffer, wgpu::Buffer, u32)>,
 }
 
 /// The error of one kernel on one scene.
@@ -55,12 +61,37 @@ impl FitnessScene {
             reference,
             width: scene.width as u32,
             height: scene.height as u32,
+            terms: None,
         })
     }
 
     fn groups(&self) -> u64 {
         self.width.div_ceil(WORKGROUP[0]) as u64 * self.height.div_ceil(WORKGROUP[1]) as u64
     }
+
+    /// Make room for the terms of kernels with up to `members` members.
+    fn ensure_terms(&mut self, gpu: &Gpu, members: u32) {
+        if self.terms.as_ref().is_some_and(|(_, _, room)| *room >= members) {
+            return;
+        }
+        let size = (self.width as u64 * self.height as u64 * members as u64 * 4).max(4);
+        let make = |label| {
+            gpu.device().create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            })
+        };
+        self.terms = Some((make("fitness terms"), make("fitness pixel flags"), members));
+    }
+}
+
+fn reduce_module() -> Result<&'static ValidatedModule, GpuError> {
+    static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+    MODULE.get_or_init(|| crate::jit::reduce_module().map_err(|e| e.to_string())).as_ref().map_err(|message| {
+        GpuError::Pipeline { expression: "<fitness reduction>".into(), message: message.clone(), wgsl: String::new() }
+    })
 }
 
 /// A full evaluation, or one workgroup per kernel to make the driver compile.
@@ -71,6 +102,16 @@ enum Pass {
 }
 
 impl Gpu {
+    fn reduce_pipeline(&self) -> Result<&Pipeline, GpuError> {
+        if let Some(p) = self.reduce.get() {
+            return Ok(p);
+        }
+        let pipeline = self.create_pipeline(reduce_module()?, "filterjit fitness reduction").map_err(|message| {
+            GpuError::Pipeline { expression: "<fitness reduction>".into(), message, wgsl: crate::jit::reduce_wgsl() }
+        })?;
+        Ok(self.reduce.get_or_init(|| pipeline))
+    }
+
     /// Create the pipelines of `kernels` on up to `threads` threads (cache hits are free).
     pub fn prepare_pipelines(&self, kernels: &[&ValidatedKernel], threads: usize) -> Result<(), GpuError> {
         let threads = threads.clamp(1, kernels.len().max(1));
@@ -89,7 +130,8 @@ impl Gpu {
         self.pipelines.lock().expect("pipeline cache lock").retain(|k, _| keep(k));
     }
 
-    /// Evaluate every fitness kernel on every scene. `result[k][s]` is kernel k on scene s.
+    /// Evaluate every fitness kernel on every scene. `result[m][s]` is member
+    /// m on scene s, members in kernel order (one per kernel unless fused).
     pub fn evaluate_fitness(
         &self,
         kernels: &[&ValidatedKernel],
@@ -137,7 +179,10 @@ impl Gpu {
         for k in kernels {
             pipelines.push(self.pipeline(k)?.0);
         }
+        let reduce = self.reduce_pipeline()?;
         let _turn = self.gl_turn();
+        let members: Vec<u32> = kernels.iter().map(|k| k.source().exprs.len() as u32).collect();
+        let most = members.iter().copied().max().unwrap_or(1);
         for k in kernels {
             for (fs, scene) in scenes.iter_mut().zip(data) {
                 for (_, input) in k.source().interface.inputs() {
@@ -145,12 +190,15 @@ impl Gpu {
                 }
             }
         }
+        for fs in scenes.iter_mut() {
+            fs.ensure_terms(self, most);
+        }
 
-        // One region of the partials buffers per (kernel, scene), aligned for binding offsets.
+        // One region of the partials buffers per (member, scene), aligned for binding offsets.
         let align = (self.limits.min_storage_buffer_offset_alignment as u64 / 4).max(1);
         let mut offsets = Vec::new();
         let mut total = 0u64;
-        for _ in kernels {
+        for _ in 0..members.iter().sum::<u32>() {
             for fs in scenes.iter() {
                 offsets.push(total);
                 total += fs.groups().div_ceil(align) * align;
@@ -191,41 +239,74 @@ impl Gpu {
             })
             .collect();
 
+        // The reduction's parameters per scene and member.
+        let reduce_params: Vec<Vec<wgpu::Buffer>> = scenes
+            .iter()
+            .map(|fs| {
+                (0..most)
+                    .map(|member| {
+                        let params = ReduceParams { width: fs.width, height: fs.height, member, _pad: 0 };
+                        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                            label: Some("reduce params"),
+                            contents: bytemuck::bytes_of(&params),
+                            usage: wgpu::BufferUsages::UNIFORM,
+                        })
+                    })
+                    .collect()
+            })
+            .collect();
+
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         let mut pending = 0;
+        let mut first_member = 0usize;
         for (k, (kernel, pipeline)) in kernels.iter().zip(&pipelines).enumerate() {
             for (s, fs) in scenes.iter().enumerate() {
-                let offset = offsets[k * scenes.len() + s] * 4;
-                let size = std::num::NonZeroU64::new(fs.groups() * 4);
-                let partial = |buffer| wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size });
+                let (terms, pixel_flags, _) = fs.terms.as_ref().expect("terms are made before dispatching");
                 for (params, level, rows) in bands[s].iter().take(if run == Pass::Prime { 1 } else { usize::MAX }) {
                     let bind_group = self.bind_group(pipeline, &kernel.source().interface, |role| match role {
                         Role::Params => params.as_entire_binding(),
-                        Role::Output => partial(&partials),
-                        Role::Flags => partial(&partial_flags),
+                        Role::Output => terms.as_entire_binding(),
+                        Role::Flags => pixel_flags.as_entire_binding(),
                         Role::Reference => fs.reference.as_entire_binding(),
                         role => fs.buffers.pass_resource(role, *level).expect("inputs are uploaded before binding"),
                     });
-                    {
-                        let mut pass = encoder
-                            .begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-                        pass.set_pipeline(&pipeline.pipeline);
-                        pass.set_bind_group(0, &bind_group, &[]);
-                        let groups = match run {
-                            Pass::Prime => (1, 1),
-                            Pass::Full => (fs.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1])),
-                        };
-                        pass.dispatch_workgroups(groups.0, groups.1, 1);
-                    }
+                    let groups = match run {
+                        Pass::Prime => (1, 1),
+                        Pass::Full => (fs.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1])),
+                    };
+                    dispatch(&mut encoder, &pipeline.pipeline, &bind_group, groups);
                     pending += 1;
-                    if pending == DISPATCHES_PER_SUBMISSION {
-                        let full = std::mem::replace(&mut encoder, device.create_command_encoder(&Default::default()));
-                        self.queue().submit([full.finish()]);
-                        pending = 0;
-                    }
+                }
+                // The member's terms are complete once every band (and pass) has run.
+                for member in 0..members[k] as usize {
+                    let offset = offsets[(first_member + member) * scenes.len() + s] * 4;
+                    let size = std::num::NonZeroU64::new(fs.groups() * 4);
+                    let partial = |buffer| wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size });
+                    let bind_group = self.bind_in_slot_order(
+                        reduce,
+                        vec![
+                            reduce_params[s][member].as_entire_binding(),
+                            terms.as_entire_binding(),
+                            pixel_flags.as_entire_binding(),
+                            partial(&partials),
+                            partial(&partial_flags),
+                        ],
+                    );
+                    let groups = match run {
+                        Pass::Prime => (1, 1),
+                        Pass::Full => (fs.width.div_ceil(WORKGROUP[0]), fs.height.div_ceil(WORKGROUP[1])),
+                    };
+                    dispatch(&mut encoder, &reduce.pipeline, &bind_group, groups);
+                    pending += 1;
+                }
+                if pending >= DISPATCHES_PER_SUBMISSION {
+                    let full = std::mem::replace(&mut encoder, device.create_command_encoder(&Default::default()));
+                    self.queue().submit([full.finish()]);
+                    pending = 0;
                 }
             }
+            first_member += members[k] as usize;
         }
         if run == Pass::Prime {
             self.queue().submit([encoder.finish()]);
@@ -246,8 +327,9 @@ impl Gpu {
         let bytes = self.finish_and_read(encoder, scope, "evaluating fitness", &staging)?;
         let sums: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[..(total * 4) as usize]);
         let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(total * 4) as usize..]);
-        let mut out = Vec::with_capacity(kernels.len());
-        for k in 0..kernels.len() {
+        let total_members = members.iter().sum::<u32>() as usize;
+        let mut out = Vec::with_capacity(total_members);
+        for k in 0..total_members {
             let mut row = Vec::with_capacity(scenes.len());
             for (s, fs) in scenes.iter().enumerate() {
                 let start = offsets[k * scenes.len() + s] as usize;
@@ -261,4 +343,16 @@ impl Gpu {
         }
         Ok(out)
     }
+}
+
+fn dispatch(
+    encoder: &mut wgpu::CommandEncoder,
+    pipeline: &wgpu::ComputePipeline,
+    bind_group: &wgpu::BindGroup,
+    groups: (u32, u32),
+) {
+    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+    pass.set_pipeline(pipeline);
+    pass.set_bind_group(0, bind_group, &[]);
+    pass.dispatch_workgroups(groups.0, groups.1, 1);
 }

@@ -66,6 +66,7 @@ pub struct Gpu {
     pipelines: Mutex<HashMap<KernelKey, Arc<Pipeline>>>,
     tracer: OnceLock<Pipeline>,
     prepass: OnceLock<Pipeline>,
+    reduce: OnceLock<Pipeline>,
     /// Whether kernels keep wgpu's run-time checks ([`Gpu::set_kernel_runtime_checks`]).
     kernel_checks: std::sync::atomic::AtomicBool,
     /// wgpu's GL backend shares one context per device and panics when a
@@ -121,6 +122,7 @@ impl Gpu {
             pipelines: Mutex::new(HashMap::new()),
             tracer: OnceLock::new(),
             prepass: OnceLock::new(),
+            reduce: OnceLock::new(),
             kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,
         })
@@ -169,6 +171,11 @@ impl Gpu {
     }
 
     /// Whether the device allows as many storage buffers as the kernel binds.
+    /// Storage buffers a kernel may bind on this device.
+    pub fn storage_buffer_limit(&self) -> u32 {
+        self.limits.max_storage_buffers_per_shader_stage
+    }
+
     pub fn check_bindings(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
         let source = kernel.source();
         let needed = source.interface.storage_buffers();

@@ -212,8 +212,9 @@ impl BindingInterface {
                 roles.push((Role::Flags, written(Element::U32), "buf_flags".into()));
             }
             KernelKind::Fitness => {
-                roles.push((Role::Output, written(Element::F32), "buf_partials".into()));
-                roles.push((Role::Flags, written(Element::U32), "buf_partial_flags".into()));
+                // Per pixel and member; `jit::reduce` sums them per workgroup.
+                roles.push((Role::Output, written(Element::F32), "buf_terms".into()));
+                roles.push((Role::Flags, written(Element::U32), "buf_pixel_flags".into()));
             }
             KernelKind::Export(format) => {
                 roles.push((Role::Output, Resource::StorageTexture(format), "tex_out".into()))

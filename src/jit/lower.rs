@@ -16,7 +16,7 @@ use crate::semantics;
 
 /// Bumped whenever the template or the lowering changes what a kernel computes
 /// or how it binds its inputs; part of every pipeline-cache key.
-pub const TEMPLATE_VERSION: u32 = 3;
+pub const TEMPLATE_VERSION: u32 = 4;
 
 /// Workgroup shape of every filter kernel.
 pub const WORKGROUP: [u32; 2] = [8, 8];
@@ -58,14 +58,21 @@ pub struct KernelLayout {
 impl KernelLayout {
     /// Exactly the inputs `expr` reads, in a canonical order.
     pub fn of(expr: &Expr) -> Self {
+        Self::of_all(std::slice::from_ref(expr))
+    }
+
+    /// Exactly the inputs any of `exprs` reads (a fused kernel's), in a canonical order.
+    pub fn of_all(exprs: &[Expr]) -> Self {
         let mut inputs = BTreeSet::new();
-        for f in expr.features() {
-            if matches!(f.source(), FeatureSource::Stored(_) | FeatureSource::Gradient(_)) && f != Feature::Color {
-                inputs.insert(Input::Feature(f));
+        for expr in exprs {
+            for f in expr.features() {
+                if matches!(f.source(), FeatureSource::Stored(_) | FeatureSource::Gradient(_)) && f != Feature::Color {
+                    inputs.insert(Input::Feature(f));
+                }
             }
-        }
-        for v in expr.stored_variables() {
-            inputs.insert(Input::Variance(v));
+            for v in expr.stored_variables() {
+                inputs.insert(Input::Variance(v));
+            }
         }
         KernelLayout { inputs: inputs.into_iter().collect() }
     }
@@ -83,8 +90,10 @@ pub enum KernelKind {
     Filter,
     /// The raw weight w_ii per pixel, for testing operator semantics.
     Probe,
-    /// The filter's relMSE terms and domain errors, reduced per workgroup
-    /// (binding 2 partial sums, 3 partial flags; the reference after the inputs).
+    /// The filter's relMSE terms and domain errors per pixel (binding 2 the
+    /// terms, 3 the flags, member-major; the reference after the inputs),
+    /// reduced per workgroup by `jit::reduce`'s kernel. One kernel may score
+    /// several expressions ([`lower_fused`]).
     Fitness,
     /// The filter as a standalone shader for other programs: inputs are
     /// sampled textures normalised in the shader by scales from the uniform,
@@ -237,8 +246,10 @@ pub struct KernelSource {
     pub kind: KernelKind,
     pub options: LowerOptions,
     pub shape: Shape,
-    pub expr: Expr,
-    /// The expression's canonical text.
+    /// The expressions the kernel computes: one, or a fused fitness kernel's
+    /// members in the order of their terms ([`lower_fused`]).
+    pub exprs: Vec<Expr>,
+    /// The expressions' canonical text (members joined by `; `).
     pub canonical: String,
     pub layout: KernelLayout,
     /// Every binding and the uniform; the only owner of slot numbers.
@@ -257,6 +268,8 @@ pub enum LowerError {
     Template(String),
     #[error("{0:?} kernels have no à-trous or remodulating form")]
     Shape(KernelKind),
+    #[error("only window-form fitness kernels fuse several expressions")]
+    Fused,
 }
 
 /// Lower an expression to the WGSL source of its filter kernel.
@@ -281,28 +294,84 @@ pub fn lower_shaped(
     options: LowerOptions,
     shape: Shape,
 ) -> Result<KernelSource, LowerError> {
-    expr.validate().map_err(LowerError::Literal)?;
+    lower_members(std::slice::from_ref(expr), kind, options, shape)
+}
+
+/// Lower several expressions into one window-form fitness kernel: every
+/// neighbour's features are loaded once and each member's weight, sums,
+/// terms and domain flags are its own, computed by exactly the code its own
+/// kernel would run (member m's terms at `m * width * height + pixel`). Fewer,
+/// larger modules are what software drivers compile fastest
+/// (docs/BENCHMARKS.md); the fitness is the same as the members' own kernels'.
+pub fn lower_fused(exprs: &[Expr], options: LowerOptions, shape: Shape) -> Result<KernelSource, LowerError> {
+    if exprs.is_empty() || (exprs.len() > 1 && shape.atrous) {
+        return Err(LowerError::Fused);
+    }
+    lower_members(exprs, KernelKind::Fitness, options, shape)
+}
+
+/// One member's code in a kernel: its hoisted per-pixel values, its
+/// per-neighbour values and the weight expression, for the templates.
+#[derive(Serialize)]
+struct MemberCode {
+    index: usize,
+    /// What the member's names end in: nothing in a kernel of one.
+    suffix: String,
+    centre_lines: Vec<String>,
+    neighbour_lines: Vec<String>,
+    /// The SSA value (or literal) of the expression; the weight clamps it.
+    result: String,
+    weight: String,
+}
+
+fn lower_members(
+    exprs: &[Expr],
+    kind: KernelKind,
+    options: LowerOptions,
+    shape: Shape,
+) -> Result<KernelSource, LowerError> {
+    for expr in exprs {
+        expr.validate().map_err(LowerError::Literal)?;
+    }
     if shape != Shape::WINDOW && !matches!(kind, KernelKind::Filter | KernelKind::Fitness) {
         return Err(LowerError::Shape(kind));
     }
-    let layout = KernelLayout::of(expr);
-    let mut body = Body { options, ..Body::default() };
-    let result = body.emit(expr);
-    // Folding never turns a non-variance into a variance or back, so the unfolded root tells.
-    let root_in_range = in_range(expr);
+    let fused = exprs.len() > 1;
+    if exprs.is_empty() || (fused && (kind != KernelKind::Fitness || shape.atrous)) {
+        return Err(LowerError::Fused);
+    }
+    let layout = KernelLayout::of_all(exprs);
+    let members: Vec<MemberCode> = exprs
+        .iter()
+        .enumerate()
+        .map(|(index, expr)| {
+            let prefix = if fused { format!("_m{index}e") } else { "_e".to_string() };
+            let mut body = Body { options, prefix, ..Body::default() };
+            let result = body.emit(expr);
+            // Folding never turns a non-variance into a variance or back, so the unfolded root tells.
+            let weight = if options.skip_redundant_checks && in_range(expr) {
+                format!("max({result}, 0.0)")
+            } else {
+                format!("fj_weight({result})")
+            };
+            let suffix = if fused { format!("_m{index}") } else { String::new() };
+            MemberCode { index, suffix, centre_lines: body.centre, neighbour_lines: body.lines, result, weight }
+        })
+        .collect();
 
     let interface = BindingInterface::of(kind, &layout, shape);
     let loads = Loads::of(&interface);
     // An à-trous pass reads taps 2^level apart: a workgroup's window is no tile.
-    let tile = options.tile_radius.filter(|_| !shape.atrous).and_then(|radius| Tile::plan(expr, &interface, radius));
+    let tile = options.tile_radius.filter(|_| !shape.atrous).and_then(|radius| Tile::plan(exprs, &interface, radius));
     let neighbour_side = if tile.is_some() { Loads::Tiled } else { loads };
-    let centre_lines: Vec<String> = centre_loads(expr, &loads).into_iter().chain(body.centre).collect();
-    let neighbour_lines: Vec<String> = neighbour_side
-        .neighbour_prelude()
-        .into_iter()
-        .chain(neighbour_loads(expr, &neighbour_side))
-        .chain(body.lines)
-        .collect();
+    let shared_centre_lines = centre_loads(exprs, &loads);
+    let shared_neighbour_lines: Vec<String> =
+        neighbour_side.neighbour_prelude().into_iter().chain(neighbour_loads(exprs, &neighbour_side)).collect();
+    // A kernel of one member, as the single-expression templates read it.
+    let first = &members[0];
+    let centre_lines: Vec<String> = shared_centre_lines.iter().chain(&first.centre_lines).cloned().collect();
+    let neighbour_lines: Vec<String> = shared_neighbour_lines.iter().chain(&first.neighbour_lines).cloned().collect();
+    let weight = first.weight.clone();
 
     /// An input binding as the templates' header comments describe it.
     #[derive(Serialize)]
@@ -324,19 +393,26 @@ pub fn lower_shaped(
         })
         .collect();
 
-    let canonical = expr.canonical();
+    let canonicals: Vec<String> = exprs.iter().map(|e| e.canonical()).collect();
+    let canonical = canonicals.join("; ");
     let mut context = tera::Context::new();
     context.insert("crate_version", env!("CARGO_PKG_VERSION"));
     context.insert("template_version", &TEMPLATE_VERSION);
     context.insert("expression", &canonical);
-    context.insert("length", &expr.len());
-    let weight = if options.skip_redundant_checks && root_in_range {
-        format!("max({result}, 0.0)")
-    } else {
-        format!("fj_weight({result})")
-    };
-    context.insert("ops", &helpers_for(&wgsl_body_text(&centre_lines, &neighbour_lines, &weight)));
+    context.insert("expressions", &canonicals);
+    context.insert("length", &exprs.iter().map(|e| e.len()).sum::<usize>());
+    let code: Vec<String> = members
+        .iter()
+        .flat_map(|m| m.centre_lines.iter().chain(&m.neighbour_lines).chain(std::iter::once(&m.weight)))
+        .cloned()
+        .collect();
+    context.insert("ops", &helpers_for(&wgsl_body_text(&shared_centre_lines, &shared_neighbour_lines, &code)));
     context.insert("weight", &weight);
+    context.insert("result", &first.result);
+    context.insert("members", &members);
+    context.insert("fused", &fused);
+    context.insert("shared_centre_lines", &shared_centre_lines);
+    context.insert("shared_neighbour_lines", &shared_neighbour_lines);
     context.insert("bindings", &bindings);
     context.insert("declarations", &interface.declarations());
     context.insert("relmse_epsilon", &format!("{:?}", crate::metrics::RELMSE_EPSILON as f32));
@@ -345,7 +421,6 @@ pub fn lower_shaped(
     context.insert("workgroup_y", &WORKGROUP[1]);
     context.insert("centre_lines", &centre_lines);
     context.insert("neighbour_lines", &neighbour_lines);
-    context.insert("result", &result);
     if let KernelKind::Export(format) = kind {
         context.insert("output_format", format.wgsl());
     }
@@ -365,7 +440,7 @@ pub fn lower_shaped(
     context.insert("stencil", &stencil);
     let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
     let tile_radius = tile.map(|t| t.radius);
-    Ok(KernelSource { kind, options, shape, expr: expr.clone(), canonical, layout, interface, tile_radius, wgsl })
+    Ok(KernelSource { kind, options, shape, exprs: exprs.to_vec(), canonical, layout, interface, tile_radius, wgsl })
 }
 
 /// A workgroup tile: the (8 + 2r)² window of colour and neighbour features
@@ -388,11 +463,11 @@ struct TileArray {
 impl Tile {
     /// The tile of `expr`'s neighbour-side features for `radius`, if the
     /// kind reads storage buffers through a window and the tile fits.
-    fn plan(expr: &Expr, interface: &BindingInterface, radius: u32) -> Option<Tile> {
+    fn plan(exprs: &[Expr], interface: &BindingInterface, radius: u32) -> Option<Tile> {
         if !matches!(interface.kind, KernelKind::Filter | KernelKind::Fitness) {
             return None;
         }
-        let (_, neighbour) = pair_sides(expr);
+        let (_, neighbour) = pair_sides(exprs);
         let elements: Vec<(Feature, Element)> = neighbour
             .into_iter()
             .filter(|f| !matches!(f, Feature::Color | Feature::Pixel))
@@ -462,12 +537,12 @@ fn helper_items() -> &'static (String, Vec<(String, String)>) {
     })
 }
 
-fn wgsl_body_text(centre: &[String], neighbour: &[String], weight: &str) -> String {
+fn wgsl_body_text(centre: &[String], neighbour: &[String], members: &[String]) -> String {
     let mut text = centre.join("\n");
     text.push('\n');
     text.push_str(&neighbour.join("\n"));
     text.push('\n');
-    text.push_str(weight);
+    text.push_str(&members.join("\n"));
     // The probe kernel saturates its raw value with fj_fin.
     text.push_str("\nfj_fin(");
     text
@@ -646,27 +721,31 @@ fn scale_of(interface: &BindingInterface, input: Input) -> String {
     format!("params.scale[{k}].x")
 }
 
-fn pair_sides(expr: &Expr) -> (BTreeSet<Feature>, BTreeSet<Feature>) {
+/// The features read at the centre and at the neighbour by any of `exprs`.
+fn pair_sides(exprs: &[Expr]) -> (BTreeSet<Feature>, BTreeSet<Feature>) {
     let (mut centre, mut neighbour) = (BTreeSet::new(), BTreeSet::new());
-    expr.visit(&mut |e| {
-        if let Expr::Pair(_, i, j) = e {
-            centre.insert(*i);
-            neighbour.insert(*j);
-        }
-    });
+    for expr in exprs {
+        expr.visit(&mut |e| {
+            if let Expr::Pair(_, i, j) = e {
+                centre.insert(*i);
+                neighbour.insert(*j);
+            }
+        });
+    }
     (centre, neighbour)
 }
 
-fn centre_loads(expr: &Expr, loads: &Loads<'_>) -> Vec<String> {
-    let (centre, _) = pair_sides(expr);
+fn centre_loads(exprs: &[Expr], loads: &Loads<'_>) -> Vec<String> {
+    let (centre, _) = pair_sides(exprs);
     let features =
         centre.into_iter().map(|f| format!("let {} = {};", feature_ident('i', f), loads.feature(f, "i", ("x", "y"))));
-    let vars = expr.variables().into_iter().map(|v| format!("let {} = {};", var_ident(v), loads.variance(v)));
+    let variables: BTreeSet<ScalarVar> = exprs.iter().flat_map(|e| e.variables()).collect();
+    let vars = variables.into_iter().map(|v| format!("let {} = {};", var_ident(v), loads.variance(v)));
     features.chain(vars).collect()
 }
 
-fn neighbour_loads(expr: &Expr, loads: &Loads<'_>) -> Vec<String> {
-    let (_, neighbour) = pair_sides(expr);
+fn neighbour_loads(exprs: &[Expr], loads: &Loads<'_>) -> Vec<String> {
+    let (_, neighbour) = pair_sides(exprs);
     neighbour
         .into_iter()
         .map(|f| {
@@ -680,6 +759,8 @@ fn neighbour_loads(expr: &Expr, loads: &Loads<'_>) -> Vec<String> {
 #[derive(Default)]
 struct Body {
     options: LowerOptions,
+    /// What the SSA names start with (`_e`, or `_m3e` for member 3 of a fused kernel).
+    prefix: String,
     /// Values computed once per pixel, before the neighbour loop.
     centre: Vec<String>,
     /// Values computed for every neighbour.
@@ -698,7 +779,7 @@ fn reads_neighbour(e: &Expr) -> bool {
 
 impl Body {
     fn temp(&mut self, value: String, per_pixel: bool) -> String {
-        let name = format!("_e{}", self.temps);
+        let name = format!("{}{}", self.prefix, self.temps);
         self.temps += 1;
         let line = format!("let {name} = {value};");
         if per_pixel {

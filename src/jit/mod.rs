@@ -5,15 +5,17 @@ pub mod helpers;
 pub mod interface;
 pub mod lower;
 pub mod prepass;
+pub mod reduce;
 pub mod validate;
 
 pub use helpers::Helper;
 pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot};
 pub use lower::{
-    lower, lower_kind, lower_shaped, lower_with, Input, KernelKind, KernelLayout, KernelSource, LowerError,
-    LowerOptions, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP,
+    lower, lower_fused, lower_kind, lower_shaped, lower_with, Input, KernelKind, KernelLayout, KernelSource,
+    LowerError, LowerOptions, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP,
 };
 pub use prepass::{prepass_module, prepass_wgsl, PrepassParams};
+pub use reduce::{reduce_module, reduce_wgsl, ReduceParams, REDUCE_SLOTS};
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 
 /// Lower and validate in one step.
@@ -62,6 +64,16 @@ pub fn compile_shaped(
     shape: Shape,
 ) -> Result<ValidatedKernel, CompileError> {
     Ok(validate(lower_shaped(expr, kind, options, shape)?)?)
+}
+
+/// Lower and validate one fitness kernel scoring every expression of `exprs`
+/// ([`lower_fused`]).
+pub fn compile_fused(
+    exprs: &[crate::lang::Expr],
+    options: LowerOptions,
+    shape: Shape,
+) -> Result<ValidatedKernel, CompileError> {
+    Ok(validate(lower_fused(exprs, options, shape)?)?)
 }
 
 /// Lower and validate many expressions on up to `threads` threads, each on
