@@ -7,16 +7,100 @@
 //! what the operator table says (`UnaryOp::cost` and friends); the form
 //! decides the taps. How well it ranks measured times is reported with every
 //! front (`pareto.json`, docs/BENCHMARKS.md).
+//!
+//! The weights are the operator table's unless a [`CostModel`] measured on a
+//! device replaces them: `filterjit bench` measures one (`bench.json`'s
+//! `cost_model`), `evolve --cost-model FILE` searches with it and keeps it in
+//! the run's checkpoint.
 
-use std::collections::HashSet;
+use std::collections::{BTreeMap, HashSet};
 
-use crate::lang::Expr;
+use serde::{Deserialize, Serialize};
+
+use crate::lang::{BinaryOp, Expr, PairOp, UnaryOp};
 use crate::pipeline::{FilterPipeline, Form, OUTLIER_RADIUS};
 
 /// One tap's fixed work: the loop step, the neighbour's colour load and the two accumulations.
 pub const TAP: f64 = 6.0;
 /// One pixel's fixed work in a pass: bounds, centre colour, the division, the store.
 pub const PIXEL: f64 = 10.0;
+
+/// Per-operator costs in units of one add and the fixed work per tap and per
+/// pixel, as one device runs them (or as the operator table states them).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CostModel {
+    /// What the weights were measured on; `operator table` for the defaults.
+    pub device: String,
+    pub tap: f64,
+    pub pixel: f64,
+    /// The cost of each operator, by its name in the language; an operator
+    /// that is missing costs what the operator table says.
+    pub operators: BTreeMap<String, f64>,
+}
+
+impl Default for CostModel {
+    fn default() -> Self {
+        CostModel::table()
+    }
+}
+
+impl CostModel {
+    /// The operator table's weights (`UnaryOp::cost` and friends), [`TAP`] and [`PIXEL`].
+    pub fn table() -> CostModel {
+        let mut operators = BTreeMap::new();
+        for op in UnaryOp::ALL {
+            operators.insert(op.name().to_string(), op.cost());
+        }
+        for op in BinaryOp::ALL {
+            operators.insert(op.name().to_string(), op.cost());
+        }
+        for op in PairOp::ALL {
+            operators.insert(op.name().to_string(), op.cost());
+        }
+        CostModel { device: "operator table".into(), tap: TAP, pixel: PIXEL, operators }
+    }
+
+    fn unary(&self, op: UnaryOp) -> f64 {
+        self.operators.get(op.name()).copied().unwrap_or(op.cost())
+    }
+    fn binary(&self, op: BinaryOp) -> f64 {
+        self.operators.get(op.name()).copied().unwrap_or(op.cost())
+    }
+    fn pair(&self, op: PairOp) -> f64 {
+        self.operators.get(op.name()).copied().unwrap_or(op.cost())
+    }
+
+    /// A model read from `path`: a bare model, or `bench.json` (its `cost_model`).
+    pub fn read(path: &std::path::Path) -> Result<CostModel, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let value: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| format!("{}: not JSON: {e}", path.display()))?;
+        let model = value.get("cost_model").cloned().unwrap_or(value);
+        let model: CostModel = serde_json::from_value(model)
+            .map_err(|e| format!("{}: not a cost model or a bench report with one: {e}", path.display()))?;
+        let known: HashSet<&str> = UnaryOp::ALL
+            .iter()
+            .map(|o| o.name())
+            .chain(BinaryOp::ALL.iter().map(|o| o.name()))
+            .chain(PairOp::ALL.iter().map(|o| o.name()))
+            .collect();
+        for (name, cost) in &model.operators {
+            if !known.contains(name.as_str()) {
+                return Err(format!("{}: `{name}` is not an operator", path.display()));
+            }
+            if !(cost.is_finite() && *cost >= 0.0) {
+                return Err(format!(
+                    "{}: the cost of `{name}` must be a finite number ≥ 0, not {cost}",
+                    path.display()
+                ));
+            }
+        }
+        if !(model.tap.is_finite() && model.tap >= 0.0 && model.pixel.is_finite() && model.pixel >= 0.0) {
+            return Err(format!("{}: `tap` and `pixel` must be finite numbers ≥ 0", path.display()));
+        }
+        Ok(model)
+    }
+}
 
 /// What an expression costs where it is computed.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -28,10 +112,15 @@ pub struct ExprCost {
 }
 
 impl ExprCost {
+    /// With the operator table's weights.
     pub fn of(expr: &Expr) -> ExprCost {
+        Self::with(expr, &CostModel::table())
+    }
+
+    pub fn with(expr: &Expr, model: &CostModel) -> ExprCost {
         let mut cost = ExprCost::default();
         let mut seen = HashSet::new();
-        walk(expr, &mut seen, &mut cost);
+        walk(expr, model, &mut seen, &mut cost);
         cost
     }
 }
@@ -48,7 +137,7 @@ fn reads_neighbour(e: &Expr) -> bool {
     found
 }
 
-fn walk(e: &Expr, seen: &mut HashSet<String>, cost: &mut ExprCost) {
+fn walk(e: &Expr, model: &CostModel, seen: &mut HashSet<String>, cost: &mut ExprCost) {
     if is_constant(e) || !seen.insert(e.to_string()) {
         return;
     }
@@ -56,15 +145,15 @@ fn walk(e: &Expr, seen: &mut HashSet<String>, cost: &mut ExprCost) {
         Expr::Const(_) => 0.0,
         // A centre load.
         Expr::Var(_) => 1.0,
-        Expr::Pair(op, ..) => op.cost(),
+        Expr::Pair(op, ..) => model.pair(*op),
         Expr::Unary(op, a) => {
-            walk(a, seen, cost);
-            op.cost()
+            walk(a, model, seen, cost);
+            model.unary(*op)
         }
         Expr::Binary(op, a, b) => {
-            walk(a, seen, cost);
-            walk(b, seen, cost);
-            op.cost()
+            walk(a, model, seen, cost);
+            walk(b, model, seen, cost);
+            model.binary(*op)
         }
     };
     if reads_neighbour(e) {
@@ -85,14 +174,19 @@ pub fn taps(pipeline: &FilterPipeline, radius: u32) -> (f64, f64) {
     }
 }
 
-/// The whole pipeline's cost per pixel: pre-pass, then every pass of the form.
+/// The whole pipeline's cost per pixel (operator table weights): pre-pass, then every pass of the form.
 pub fn model(expr: &Expr, pipeline: &FilterPipeline, radius: u32) -> f64 {
-    let e = ExprCost::of(expr);
+    model_with(expr, pipeline, radius, &CostModel::table())
+}
+
+/// [`model`] with a device's weights.
+pub fn model_with(expr: &Expr, pipeline: &FilterPipeline, radius: u32, weights: &CostModel) -> f64 {
+    let e = ExprCost::with(expr, weights);
     let (taps, passes) = taps(pipeline, radius);
     let side = (2 * OUTLIER_RADIUS + 1) as f64;
-    let prepass = if pipeline.outliers.is_some() { (side * side - 1.0) * TAP } else { 0.0 }
-        + if pipeline.demodulate { PIXEL } else { 0.0 };
-    prepass + passes * (PIXEL + e.per_pixel + taps * (TAP + e.per_tap))
+    let prepass = if pipeline.outliers.is_some() { (side * side - 1.0) * weights.tap } else { 0.0 }
+        + if pipeline.demodulate { weights.pixel } else { 0.0 };
+    prepass + passes * (weights.pixel + e.per_pixel + taps * (weights.tap + e.per_tap))
 }
 
 /// Spearman's rank correlation of two equally long samples (ties get their mean rank).
@@ -154,6 +248,29 @@ mod tests {
         let atrous: FilterPipeline = "atrous=5".parse().unwrap();
         assert!(model(&bilateral, &atrous, 3) < window(10));
         assert!(model(&parse_expr("1").unwrap(), &FilterPipeline::WINDOW, 3) < window(3) / 3.0);
+    }
+
+    #[test]
+    fn a_measured_model_replaces_the_table_where_it_names_an_operator() {
+        let mut measured = CostModel::table();
+        assert_eq!(
+            model_with(&parse_expr("exp(distance2(color))").unwrap(), &FilterPipeline::WINDOW, 2, &measured),
+            model(&parse_expr("exp(distance2(color))").unwrap(), &FilterPipeline::WINDOW, 2)
+        );
+        measured.operators.insert("exp".into(), 60.0);
+        measured.operators.remove("distance2");
+        let c = ExprCost::with(&parse_expr("exp(distance2(color))").unwrap(), &measured);
+        assert_eq!(c.per_tap, 60.0 + PairOp::Distance2.cost());
+        let dir = std::env::temp_dir().join(format!("filterjit-cost-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("bench.json");
+        std::fs::write(&file, serde_json::json!({ "cost_model": measured }).to_string()).unwrap();
+        assert_eq!(CostModel::read(&file).unwrap(), measured);
+        measured.operators.insert("cosh".into(), 1.0);
+        std::fs::write(&file, serde_json::to_string(&measured).unwrap()).unwrap();
+        let err = CostModel::read(&file).unwrap_err();
+        assert!(err.contains("`cosh` is not an operator") && err.contains("bench.json"), "{err}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

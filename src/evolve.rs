@@ -40,6 +40,8 @@ pub struct GpuEvaluator<'g> {
     options: jit::LowerOptions,
     /// Expressions per fitness kernel ([`Fusion`]).
     fuse: usize,
+    /// The weights of the modelled cost (multi-objective searches).
+    cost_model: crate::cost::CostModel,
     time: EvalTime,
 }
 
@@ -100,6 +102,7 @@ impl<'g> GpuEvaluator<'g> {
             threads,
             options: jit::LowerOptions::ALL,
             fuse: 1,
+            cost_model: crate::cost::CostModel::table(),
             time: EvalTime::default(),
         };
         evaluator.set_tiles(Tiles::Auto.enabled(gpu));
@@ -110,6 +113,11 @@ impl<'g> GpuEvaluator<'g> {
     /// Lower fitness kernels with workgroup tiles or without.
     pub fn set_tiles(&mut self, on: bool) {
         self.options.tile_radius = on.then_some(self.radius);
+    }
+
+    /// The weights each candidate's modelled cost is computed with.
+    pub fn set_cost_model(&mut self, model: crate::cost::CostModel) {
+        self.cost_model = model;
     }
 
     /// How many expressions each fitness kernel scores (results are identical either way).
@@ -292,7 +300,7 @@ impl Evaluator for GpuEvaluator<'_> {
             .iter()
             .zip(&at)
             .map(|(result, (expr, radius))| {
-                self.fitness(result).with_cost(crate::cost::model(expr, &self.pipeline, *radius))
+                self.fitness(result).with_cost(crate::cost::model_with(expr, &self.pipeline, *radius, &self.cost_model))
             })
             .collect())
     }
@@ -401,6 +409,10 @@ pub struct RunConfig {
     /// The pipeline every individual is scored through (runs made before pipelines existed: `window`).
     #[serde(default)]
     pub pipeline: FilterPipeline,
+    /// The weights of the modelled cost a multi-objective search trades
+    /// against error (runs made before it existed: the operator table's).
+    #[serde(default)]
+    pub cost_model: crate::cost::CostModel,
 }
 
 pub const CHECKPOINT_FILE: &str = "checkpoint.json";
@@ -500,7 +512,7 @@ pub struct FrontMember {
     pub radius: u32,
     /// Training fitness (mean relMSE / noisy relMSE).
     pub fitness: f64,
-    /// The modelled cost per pixel ([`crate::cost::model`]).
+    /// The modelled cost per pixel ([`crate::cost::model_with`], the run's weights).
     pub cost: f64,
     /// Mean over the test scenes of relMSE / noisy relMSE.
     pub test_normalised: f64,
@@ -517,6 +529,9 @@ pub struct Front {
     /// The scene timed (the first test scene, tiled to the timing side), and its size.
     pub timing_scene: String,
     pub timing_pixels: usize,
+    /// What the modelled costs' weights were measured on (`operator table` for the defaults).
+    #[serde(default)]
+    pub cost_model: String,
     /// Spearman's rank correlation of the modelled cost and the measured time over the members.
     pub rank_correlation: f64,
     /// Cheapest first.
@@ -622,6 +637,7 @@ fn measure_front(
         device: gpu.describe(),
         timing_scene: timing_scene.name.clone(),
         timing_pixels: timing_scene.pixels(),
+        cost_model: config.cost_model.device.clone(),
         rank_correlation: crate::cost::rank_correlation(&costs, &ms),
         members,
     })
@@ -888,6 +904,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     }
     let scenes = load_all(&training, &features, &variances, &config.pipeline)?;
     let mut evaluator = GpuEvaluator::for_pipeline(gpu, scenes, config.radius, config.pipeline, threads)?;
+    evaluator.set_cost_model(config.cost_model.clone());
     evaluator.set_tiles(tiles.enabled(gpu));
     evaluator.set_fusion(fusion);
     // `level` (the à-trous pass) is a terminal where there are passes: a filter may change with scale.

@@ -356,6 +356,12 @@ struct EvolveArgs {
     /// Stage fitness kernels' windows in workgroup memory: auto = on hardware GPUs, off on software adapters (same results either way).
     #[arg(long, value_enum, default_value_t = filterjit::evolve::Tiles::Auto)]
     tiles: filterjit::evolve::Tiles,
+    /// The weights of the modelled cost that `--objectives error,cost` trades
+    /// against error, as `filterjit bench` measured them on this device
+    /// (its `bench.json`, or a file holding just its `cost_model`) [default:
+    /// the operator table's]. Kept in the run's checkpoint.
+    #[arg(long, value_name = "FILE")]
+    cost_model: Option<PathBuf>,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
     fuse: filterjit::evolve::Fusion,
@@ -854,6 +860,10 @@ fn evolve_on(
         radius: args.render.radius.unwrap_or(radius),
         seed_expr: seed_text,
         pipeline: args.render.pipeline.unwrap_or_default(),
+        cost_model: match &args.cost_model {
+            Some(path) => filterjit::cost::CostModel::read(path).map_err(anyhow::Error::msg)?,
+            None => filterjit::cost::CostModel::table(),
+        },
     };
     let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {

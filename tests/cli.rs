@@ -259,6 +259,7 @@ fn export_picks_the_most_accurate_front_member_within_a_budget() {
         device: "a test device".into(),
         timing_scene: "tiled".into(),
         timing_pixels: 65536,
+        cost_model: "operator table".into(),
         rank_correlation: 1.0,
         members: vec![
             member("front1", "exp(-distance2(color))", 1, 0.4, 100.0),

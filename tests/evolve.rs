@@ -53,6 +53,7 @@ pub(crate) fn config(training: &Path, test: &Path) -> RunConfig {
         radius: 2,
         seed_expr: parse_expr(corpus::lookup("bilateral").unwrap()).unwrap().to_string(),
         pipeline: Default::default(),
+        cost_model: Default::default(),
     }
 }
 
@@ -389,4 +390,43 @@ fn a_multi_objective_run_writes_a_measured_front_and_resumes_exactly() {
     let points =
         |f: &evolve::Front| f.members.iter().map(|m| (m.expr.clone(), m.radius, m.fitness)).collect::<Vec<_>>();
     assert_eq!(points(&again), points(&front));
+}
+
+/// `bench`'s calibration measures a weight for every operator on this
+/// device, on the operator table's scale, and a search run with it keeps it
+/// in its checkpoint and its cost objective follows it.
+#[test]
+fn the_cost_model_is_measured_on_the_device_and_kept_by_the_run() {
+    let gpu = gpu();
+    let scene = crate::common::synthetic_scene(40, 40, 3);
+    let mut buffers = filterjit::gpu::SceneBuffers::new(&gpu, &scene);
+    let (model, probes) = filterjit::bench::calibrate(&gpu, &mut buffers, &scene, 4, 3).unwrap();
+    let table = filterjit::cost::CostModel::table();
+    assert_eq!(model.device, gpu.describe());
+    assert_eq!(model.operators.keys().collect::<Vec<_>>(), table.operators.keys().collect::<Vec<_>>());
+    assert!(model.operators.values().all(|w| w.is_finite() && *w >= 0.0), "{model:?}");
+    let sum = |m: &filterjit::cost::CostModel| m.operators.values().sum::<f64>();
+    assert!((sum(&model) - sum(&table)).abs() < 1e-6 * sum(&table), "{model:?}");
+    // pow (a log, an exponential and its guards) costs far more than an add on any device.
+    assert!(model.operators["pow"] > model.operators["add"], "{model:?} {probes:?}");
+
+    // A run with a model of its own (pow made prohibitive): the checkpoint keeps
+    // it and every front member costs what it says.
+    let mut heavy = table.clone();
+    heavy.device = "a test model".into();
+    heavy.operators.insert("pow".into(), 1e6);
+    let (training, test) = datasets();
+    let dir = temp_dir("cost-model");
+    let settings = Settings { objectives: filterjit::gp::Objectives::ErrorCost, generations: 2, ..small() };
+    let config = RunConfig { cost_model: heavy.clone(), ..config(training, test) };
+    run(&dir, settings, config, false, None).expect("finished");
+    let checkpoint = evolve::read_checkpoint(&dir).unwrap();
+    assert_eq!(checkpoint.run.cost_model, heavy);
+    let front = evolve::Front::read(&dir.join(evolve::FRONT_FILE)).unwrap();
+    assert_eq!(front.cost_model, "a test model");
+    for m in &front.members {
+        let e = parse_expr(&m.expr).unwrap();
+        let expected = filterjit::cost::model_with(&e, &front.pipeline, m.radius, &heavy);
+        assert!((m.cost - expected).abs() <= 1e-9 * expected, "{}: {} against {expected}", m.expr, m.cost);
+    }
 }
