@@ -927,10 +927,18 @@ fn evolve_on(
     let bar =
         if root { indicatif::ProgressBar::new(settings.generations as u64) } else { indicatif::ProgressBar::hidden() };
     bar.set_style(
-        indicatif::ProgressStyle::with_template("generation {pos:>4}/{len} {bar:20} {msg}").expect("valid template"),
+        indicatif::ProgressStyle::with_template(
+            "generation {pos:>4}/{len} {bar:20} {elapsed} elapsed, {eta} left | {msg}",
+        )
+        .expect("valid template"),
     );
+    let mut first_report = true;
     let mut on_report = |r: &filterjit::gp::Report| {
         bar.set_position(r.generation as u64);
+        if std::mem::take(&mut first_report) {
+            // A resumed run starts at its checkpoint: time left counts from here.
+            bar.reset_eta();
+        }
         bar.set_message(format!(
             "best {:.4} median {:.4} invalid {} | compile {:.1}s evaluate {:.1}s gp {:.2}s",
             r.best, r.median, r.invalid, r.compile_s, r.evaluate_s, r.gp_s
