@@ -253,7 +253,7 @@ impl<'g> GpuEvaluator<'g> {
             self.gpu.check_bindings(&kernel).map_err(|e| e.to_string())?;
             Ok(kernel)
         };
-        let compiled = in_parallel(&groups, threads, |g| match kernel_for(g) {
+        let compiled = crate::parallel::map(&groups, threads, |g| match kernel_for(g) {
             Ok(kernel) => vec![Ok(kernel)],
             Err(_) if g.len() > 1 => g.iter().map(|e| kernel_for(std::slice::from_ref(e))).collect(),
             Err(reason) => vec![Err(reason)],
@@ -747,17 +747,6 @@ impl Tiles {
             Tiles::Off => false,
         }
     }
-}
-
-/// `f` of every item, on up to `threads` threads (contiguous shares); results in order.
-fn in_parallel<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
-    let chunk = items.len().div_ceil(threads.max(1)).max(1);
-    let f = &f;
-    std::thread::scope(|s| {
-        let handles: Vec<_> =
-            items.chunks(chunk).map(|part| s.spawn(move || part.iter().map(f).collect::<Vec<R>>())).collect();
-        handles.into_iter().flat_map(|h| h.join().expect("compile thread panicked")).collect()
-    })
 }
 
 /// How many individuals one fitness kernel scores. Fitness is the same

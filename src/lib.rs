@@ -16,6 +16,7 @@ pub mod io;
 pub mod jit;
 pub mod lang;
 pub mod metrics;
+pub mod parallel;
 pub mod pipeline;
 pub mod preview;
 pub mod render;

@@ -114,15 +114,7 @@ impl Gpu {
 
     /// Create the pipelines of `kernels` on up to `threads` threads (cache hits are free).
     pub fn prepare_pipelines(&self, kernels: &[&ValidatedKernel], threads: usize) -> Result<(), GpuError> {
-        let threads = threads.clamp(1, kernels.len().max(1));
-        let chunk = kernels.len().div_ceil(threads).max(1);
-        std::thread::scope(|s| {
-            let handles: Vec<_> = kernels
-                .chunks(chunk)
-                .map(|part| s.spawn(move || part.iter().try_for_each(|k| self.pipeline(k).map(|_| ()))))
-                .collect();
-            handles.into_iter().try_for_each(|h| h.join().expect("pipeline thread panicked"))
-        })
+        crate::parallel::map(kernels, threads, |k| self.pipeline(k).map(|_| ())).into_iter().collect()
     }
 
     /// Keep only the cached pipelines for which `keep` holds.

@@ -95,16 +95,7 @@ pub fn compile_each_shaped(
     shape: Shape,
     threads: usize,
 ) -> Vec<Result<ValidatedKernel, CompileError>> {
-    let chunk = exprs.len().div_ceil(threads.max(1)).max(1);
-    std::thread::scope(|s| {
-        let handles: Vec<_> = exprs
-            .chunks(chunk)
-            .map(|part| {
-                s.spawn(move || part.iter().map(|e| compile_shaped(e, kind, options, shape)).collect::<Vec<_>>())
-            })
-            .collect();
-        handles.into_iter().flat_map(|h| h.join().expect("compile thread panicked")).collect()
-    })
+    crate::parallel::map(exprs, threads, |e| compile_shaped(e, kind, options, shape))
 }
 
 #[derive(Debug, thiserror::Error)]
