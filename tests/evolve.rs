@@ -64,21 +64,11 @@ pub(crate) fn run(
     resume: bool,
     stop_after: Option<u32>,
 ) -> Option<evolve::Summary> {
-    try_run(dir, settings, config, resume, stop_after, evolve::Tiles::On).unwrap()
+    try_run(dir, settings, config, resume, stop_after, evolve::Tiles::On, evolve::Fusion::Members(8)).unwrap()
 }
 
+/// A run with the given tiles and fusion (results are the same with any).
 fn try_run(
-    dir: &Path,
-    settings: Settings,
-    config: RunConfig,
-    resume: bool,
-    stop_after: Option<u32>,
-    tiles: evolve::Tiles,
-) -> anyhow::Result<Option<evolve::Summary>> {
-    try_run_with(dir, settings, config, resume, stop_after, tiles, evolve::Fusion::Members(8))
-}
-
-fn try_run_with(
     dir: &Path,
     settings: Settings,
     config: RunConfig,
@@ -126,7 +116,7 @@ fn runs_are_deterministic_and_resume_exactly() {
     // The same seed and inputs: the same run, bit for bit, also without
     // workgroup tiles and with a kernel per individual instead of eight.
     let b = temp_dir("b");
-    try_run_with(&b, small(), config(training, test), false, None, evolve::Tiles::Off, evolve::Fusion::Members(1))
+    try_run(&b, small(), config(training, test), false, None, evolve::Tiles::Off, evolve::Fusion::Members(1))
         .unwrap()
         .expect("finished");
     let state = |dir: &Path| {
@@ -146,10 +136,19 @@ fn runs_are_deterministic_and_resume_exactly() {
     assert_eq!(read(c.join(evolve::LOG_FILE)).lines().count(), 5);
 
     // Starting over an existing run, or resuming with other settings, is refused.
-    let err = try_run(&a, small(), config(training, test), false, None, evolve::Tiles::On).unwrap_err();
-    assert!(err.to_string().contains("--resume"), "{err}");
-    let err = try_run(&a, Settings { seed: 8, ..small() }, config(training, test), true, None, evolve::Tiles::On)
+    let err = try_run(&a, small(), config(training, test), false, None, evolve::Tiles::On, evolve::Fusion::Members(8))
         .unwrap_err();
+    assert!(err.to_string().contains("--resume"), "{err}");
+    let err = try_run(
+        &a,
+        Settings { seed: 8, ..small() },
+        config(training, test),
+        true,
+        None,
+        evolve::Tiles::On,
+        evolve::Fusion::Auto,
+    )
+    .unwrap_err();
     assert!(err.to_string().contains("other settings"), "{err}");
 }
 

@@ -304,9 +304,6 @@ pub fn lower_shaped(
 /// larger modules are what software drivers compile fastest
 /// (docs/BENCHMARKS.md); the fitness is the same as the members' own kernels'.
 pub fn lower_fused(exprs: &[Expr], options: LowerOptions, shape: Shape) -> Result<KernelSource, LowerError> {
-    if exprs.is_empty() || (exprs.len() > 1 && shape.atrous) {
-        return Err(LowerError::Fused);
-    }
     lower_members(exprs, KernelKind::Fitness, options, shape)
 }
 
