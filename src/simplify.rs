@@ -126,21 +126,184 @@ fn symbol(op: BinaryOp) -> Option<&'static str> {
     }
 }
 
+/// An interval that holds every value a class can take, on every input,
+/// under the CPU semantics (within [-BIG, BIG] but for raw variances). Bounds come from each
+/// operator's monotonicity on the semantics' own functions (`fin` is
+/// monotone), so they are sound, not tight; `tests/simplify.rs` checks them
+/// against the CPU evaluator on random expressions.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Range {
+    pub lo: f64,
+    pub hi: f64,
+}
+
+impl Range {
+    /// What is known of an arbitrary value.
+    pub const ANY: Range = Range { lo: -semantics::BIG, hi: semantics::BIG };
+
+    fn point(value: f64) -> Range {
+        Range { lo: value, hi: value }
+    }
+
+    /// The smallest range holding every value.
+    fn hull(values: impl IntoIterator<Item = f64>) -> Range {
+        values
+            .into_iter()
+            .fold(Range { lo: f64::INFINITY, hi: f64::NEG_INFINITY }, |r, v| Range { lo: r.lo.min(v), hi: r.hi.max(v) })
+    }
+
+    pub fn nonneg(self) -> bool {
+        self.lo >= 0.0
+    }
+
+    /// Where both hold (members of a class are equal, so both ranges hold).
+    fn intersect(self, other: Range) -> Range {
+        let both = Range { lo: self.lo.max(other.lo), hi: self.hi.min(other.hi) };
+        // Empty only if a bound were unsound; keep the first rather than invent one.
+        if both.lo <= both.hi {
+            both
+        } else {
+            self
+        }
+    }
+
+    /// The range of |x|.
+    fn magnitude(self) -> Range {
+        if self.lo >= 0.0 {
+            self
+        } else if self.hi <= 0.0 {
+            Range { lo: -self.hi, hi: -self.lo }
+        } else {
+            Range { lo: 0.0, hi: self.hi.max(-self.lo) }
+        }
+    }
+
+    /// Where a non-decreasing `f` takes this range.
+    fn increasing(self, f: impl Fn(f64) -> f64) -> Range {
+        Range { lo: f(self.lo), hi: f(self.hi) }
+    }
+
+    /// The divisor after `protect`: `None` where it may be either sign.
+    fn protected(self) -> Option<Range> {
+        let eps = semantics::DIV_EPS;
+        if self.lo >= 0.0 {
+            Some(Range { lo: self.lo.max(eps), hi: self.hi.max(eps) })
+        } else if self.hi < 0.0 {
+            Some(Range { lo: self.lo.min(-eps), hi: self.hi.min(-eps) })
+        } else {
+            None
+        }
+    }
+
+    fn is_integer_point(self) -> bool {
+        self.lo == self.hi && self.lo == self.lo.round()
+    }
+}
+
+/// Where an operator's result lies, given where its operands lie.
+fn unary_range(op: UnaryOp, a: Range) -> Range {
+    use semantics as s;
+    // The window kernels decrease in |x| on [0, 1] and are 0 beyond.
+    let kernel = |f: fn(f64) -> f64| {
+        let m = a.magnitude();
+        Range { lo: f(m.hi), hi: f(m.lo) }
+    };
+    match op {
+        UnaryOp::Neg => Range { lo: s::neg(a.hi), hi: s::neg(a.lo) },
+        UnaryOp::Abs => a.magnitude(),
+        UnaryOp::Exp => a.increasing(s::exp),
+        UnaryOp::Sqrt => a.magnitude().increasing(|x| s::sqrt(x, &mut 0)),
+        UnaryOp::Atan => a.increasing(s::atan),
+        UnaryOp::Asin => a.increasing(|x| s::asin(x, &mut 0)),
+        UnaryOp::Acos => Range { lo: s::acos(a.hi, &mut 0), hi: s::acos(a.lo, &mut 0) },
+        UnaryOp::Sin | UnaryOp::Cos => Range { lo: -1.0, hi: 1.0 },
+        UnaryOp::Epanechnikov => kernel(s::epanechnikov),
+        UnaryOp::Biweight => kernel(s::biweight),
+        UnaryOp::Tricube => kernel(s::tricube),
+        // Not monotone; both stay within [-1, 1].
+        UnaryOp::Mitchell | UnaryOp::Sinc => Range { lo: -1.0, hi: 1.0 },
+        UnaryOp::Tan => Range::ANY,
+    }
+}
+
+fn binary_range(op: BinaryOp, a: Range, b: Range) -> Range {
+    use semantics as s;
+    let corners =
+        |f: &dyn Fn(f64, f64) -> f64| Range::hull([f(a.lo, b.lo), f(a.lo, b.hi), f(a.hi, b.lo), f(a.hi, b.hi)]);
+    match op {
+        BinaryOp::Add => Range { lo: s::add(a.lo, b.lo), hi: s::add(a.hi, b.hi) },
+        BinaryOp::Sub => Range { lo: s::sub(a.lo, b.hi), hi: s::sub(a.hi, b.lo) },
+        BinaryOp::Mul => corners(&s::mul),
+        // a / d is monotone in each operand while d keeps its sign.
+        BinaryOp::Div => match b.protected() {
+            Some(d) => Range::hull(
+                [(a.lo, d.lo), (a.lo, d.hi), (a.hi, d.lo), (a.hi, d.hi)].map(|(x, y)| semantics::fin(x / y)),
+            ),
+            None => Range::ANY,
+        },
+        BinaryOp::Pow => {
+            if a == Range::point(1.0) {
+                // The exponent multiplies log2(1) = 0.
+                Range::point(1.0)
+            } else if a.lo >= 0.0 && a.hi <= 1.0 && b.lo >= 0.0 {
+                Range { lo: 0.0, hi: 1.0 }
+            } else if a.lo >= 1.0 && b.lo >= 0.0 {
+                Range { lo: 1.0, hi: s::BIG }
+            } else if a.lo >= 0.0 || (b.is_integer_point() && b.lo % 2.0 == 0.0) {
+                Range { lo: 0.0, hi: s::BIG }
+            } else {
+                Range::ANY
+            }
+        }
+    }
+}
+
+/// Whether an operator can raise a flag itself, given where its operands lie.
+fn unary_flags(op: UnaryOp, a: Range) -> bool {
+    match op {
+        UnaryOp::Sqrt => a.lo < 0.0,
+        UnaryOp::Asin | UnaryOp::Acos => a.lo < -1.0 || a.hi > 1.0,
+        _ => {
+            debug_assert!(!op.can_flag(), "{op:?} flags: say when");
+            false
+        }
+    }
+}
+
+fn binary_flags(op: BinaryOp, a: Range, b: Range) -> bool {
+    match op {
+        BinaryOp::Pow => a.lo < 0.0 && !b.is_integer_point(),
+        _ => {
+            debug_assert!(!op.can_flag(), "{op:?} flags: say when");
+            false
+        }
+    }
+}
+
 /// What the e-graph knows of a class.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Facts {
-    /// The class's value when it is constant (evaluated with the CPU semantics, no flag raised).
-    constant: Option<f64>,
+    /// The class's value when it is constant (evaluated with the CPU
+    /// semantics, no flag raised), or when its range is one point and it
+    /// never flags (`pow(1, x)` is 1 wherever `x` never flags).
+    pub constant: Option<f64>,
     /// Whether some input can make the class raise a domain flag. Members of
     /// a class agree on flags (every rule keeps them), so one member that
     /// provably never flags clears it for the class.
-    may_flag: bool,
-    /// Whether the class is ≥ 0 on every input (members are equal, so one
-    /// member that provably is makes the class so).
-    nonneg: bool,
+    pub may_flag: bool,
+    /// Where the class's values lie (members are equal, so each member's
+    /// range holds for the class).
+    pub range: Range,
 }
 
-/// The e-graph analysis: constant values and whether a class may flag.
+impl Facts {
+    fn of(range: Range, may_flag: bool) -> Facts {
+        let constant = (range.lo == range.hi && !may_flag).then_some(range.lo);
+        Facts { constant, may_flag, range }
+    }
+}
+
+/// The e-graph analysis: constant values, ranges and whether a class may flag.
 #[derive(Default)]
 pub struct Semantics;
 
@@ -149,29 +312,20 @@ impl Analysis<Node> for Semantics {
 
     fn make(egraph: &mut EGraph<Node, Self>, node: &Node, _: Id) -> Facts {
         let facts = |id: &Id| &egraph[*id].data;
-        let constant = |value: f64| Facts { constant: Some(value), may_flag: false, nonneg: value >= 0.0 };
+        let constant = |value: f64| Facts { constant: Some(value), may_flag: false, range: Range::point(value) };
         match node {
             Node::Const(bits) => constant(semantics::literal(f64::from_bits(*bits))),
-            Node::Var(_) => Facts { constant: None, may_flag: false, nonneg: false },
-            Node::Pair(op, ..) => Facts { constant: None, may_flag: false, nonneg: *op != PairOp::Dot },
+            Node::Var(ScalarVar::Level) => Facts::of(Range { lo: 0.0, hi: semantics::BIG }, false),
+            // Variances are read as the scene holds them, unsaturated: any finite f32.
+            Node::Var(_) => Facts::of(Range { lo: f32::MIN as f64, hi: f32::MAX as f64 }, false),
+            Node::Pair(PairOp::Dot, ..) => Facts::of(Range::ANY, false),
+            Node::Pair(..) => Facts::of(Range { lo: 0.0, hi: semantics::BIG }, false),
             Node::Unary(op, [a]) => {
                 let a = facts(a);
                 let mut flags = 0;
                 match a.constant.map(|x| op.eval(x, &mut flags)) {
                     Some(value) if flags == 0 => constant(value),
-                    _ => Facts {
-                        constant: None,
-                        may_flag: a.may_flag || op.can_flag(),
-                        nonneg: matches!(
-                            op,
-                            UnaryOp::Abs
-                                | UnaryOp::Exp
-                                | UnaryOp::Sqrt
-                                | UnaryOp::Epanechnikov
-                                | UnaryOp::Biweight
-                                | UnaryOp::Tricube
-                        ),
-                    },
+                    _ => Facts::of(unary_range(*op, a.range), a.may_flag || unary_flags(*op, a.range)),
                 }
             }
             Node::Binary(op, [a, b]) => {
@@ -179,38 +333,26 @@ impl Analysis<Node> for Semantics {
                 let mut flags = 0;
                 match a.constant.zip(b.constant).map(|(x, y)| op.eval(x, y, &mut flags)) {
                     Some(value) if flags == 0 => constant(value),
-                    _ => Facts {
-                        constant: None,
-                        may_flag: a.may_flag || b.may_flag || op.can_flag(),
-                        // fin keeps signs, protect moves +0 to +DIV_EPS, and
-                        // pow of a non-negative base is a magnitude.
-                        nonneg: match op {
-                            BinaryOp::Add | BinaryOp::Mul | BinaryOp::Div => a.nonneg && b.nonneg,
-                            BinaryOp::Pow => a.nonneg,
-                            BinaryOp::Sub => false,
-                        },
-                    },
+                    _ => Facts::of(
+                        binary_range(*op, a.range, b.range),
+                        a.may_flag || b.may_flag || binary_flags(*op, a.range, b.range),
+                    ),
                 }
             }
         }
     }
 
     fn merge(&mut self, a: &mut Facts, b: Facts) -> DidMerge {
-        let mut changed_a = false;
-        if a.constant.is_none() && b.constant.is_some() {
-            a.constant = b.constant;
-            changed_a = true;
-        }
-        if a.may_flag && !b.may_flag {
-            a.may_flag = false;
-            changed_a = true;
-        }
-        if !a.nonneg && b.nonneg {
-            a.nonneg = true;
-            changed_a = true;
-        }
-        let changed_b =
-            (b.constant.is_none() && a.constant.is_some()) || (b.may_flag && !a.may_flag) || (!b.nonneg && a.nonneg);
+        let merged = Facts {
+            constant: a.constant.or(b.constant),
+            may_flag: a.may_flag && b.may_flag,
+            range: a.range.intersect(b.range),
+        };
+        let merged =
+            Facts { constant: merged.constant.or(Facts::of(merged.range, merged.may_flag).constant), ..merged };
+        let changed_a = merged != *a;
+        let changed_b = merged != b;
+        *a = merged;
         DidMerge(changed_a, changed_b)
     }
 
@@ -321,11 +463,11 @@ fn holds(condition: Condition, x: &Facts, exponents: impl FnOnce() -> (Option<f6
     match condition {
         Condition::Always => true,
         Condition::XNeverFlags => !x.may_flag,
-        Condition::XNonNegative => x.nonneg,
+        Condition::XNonNegative => x.range.nonneg(),
         // Constant bases are folded already; merging their powers would only
         // make new constants without end.
         Condition::NestedPower => {
-            x.nonneg && x.constant.is_none() && matches!(exponents(), (Some(p), Some(q)) if p > 0.0 && q >= 1.0)
+            x.range.nonneg() && x.constant.is_none() && matches!(exponents(), (Some(p), Some(q)) if p > 0.0 && q >= 1.0)
         }
     }
 }
@@ -431,12 +573,17 @@ pub fn simplify(expr: &Expr) -> Expr {
 /// sees it (the same test a conditional rule makes; exponents of
 /// [`Condition::NestedPower`] are the caller's to choose).
 pub fn condition_holds(condition: Condition, expr: &Expr) -> bool {
+    holds(condition, &facts(expr), || (None, None))
+}
+
+/// What the e-graph's analysis knows of `expr` alone, before any rewrite.
+pub fn facts(expr: &Expr) -> Facts {
     let mut rec = RecExpr::default();
     to_rec(expr, &mut rec);
     let mut egraph = EGraph::<Node, Semantics>::default();
     let root = egraph.add_expr(&rec);
     egraph.rebuild();
-    holds(condition, &egraph[root].data, || (None, None))
+    egraph[root].data.clone()
 }
 
 /// The cost extraction minimises, of a whole expression, in units of one add.
@@ -470,11 +617,25 @@ mod tests {
     }
 
     #[test]
+    fn ranges_prove_what_no_flag_and_no_sign_can_hide() {
+        // pow of a non-negative base never flags, so pow(1, ·) of it is 1.
+        assert_eq!(simplified("pow(1, pow(distance2(color), 0.1))"), "1");
+        assert_eq!(simplified("pow(2 * pow(1, distance2(normal) / 0), distance2(pixel))"), "pow(2, distance2(pixel))");
+        // sqrt of a magnitude never flags either; exp is never negative.
+        assert_eq!(simplified("sqrt(abs(dot(normal))) * 0 + distance1(color)"), "distance1(color)");
+        assert_eq!(simplified("abs(exp(dot(normal)))"), "exp(dot(normal))");
+        // A kernel past its support is 0.
+        assert_eq!(simplified("epanechnikov(distance2(normal) + 1) * dot(color)"), "0");
+    }
+
+    #[test]
     fn what_the_semantics_forbid_is_left_alone() {
         // x / x is 0 at x = 0; sqrt of a negative flags, so its product with 0 stays.
         assert_eq!(simplified("distance2(normal) / distance2(normal)"), "distance2(normal) / distance2(normal)");
         assert_eq!(simplified("sqrt(dot(normal)) * 0"), "sqrt(dot(normal)) * 0");
         // Folding that would raise a flag is not done.
         assert_eq!(simplified("sqrt(0 - 1)"), "sqrt(-1)");
+        // sqrt of a dot product may flag, so pow(1, ·) of it keeps it.
+        assert_eq!(simplified("pow(1, sqrt(dot(normal)))"), "pow(1, sqrt(dot(normal)))");
     }
 }

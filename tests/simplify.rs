@@ -42,6 +42,8 @@ fn operands(rng: &mut Rng, count: usize) -> Vec<Expr> {
         "distance2(normal) / distance1(texture)",
         "pow(distance1(color), 3)",
         "abs(sin(distance2(pixel)))",
+        "0.5 * sin(distance2(pixel))",
+        "epanechnikov(dot(normal)) - 1.5",
     ]
     .iter()
     .map(|t| parse_expr(t).unwrap())
@@ -81,6 +83,50 @@ fn every_rule_keeps_weights_and_flags_on_the_cpu() {
         }
         assert!(checked >= 5, "rule {name} was checked on only {checked} operands");
     }
+}
+
+/// The analysis behind the conditional rules and range folding is sound:
+/// every value lies in the range it states, a class it calls constant has
+/// that value, and one it says never flags never does.
+#[test]
+fn ranges_constants_and_flag_predictions_hold_on_the_cpu() {
+    let scene = synthetic_scene(9, 7, 6);
+    let mut rng = Rng::seeded(12);
+    let mut exprs = operands(&mut rng, env_usize("FILTERJIT_RANGE_CASES", 400));
+    // Compositions of the edge cases, where bounds meet saturation and the window kernels' supports.
+    let edges = exprs[..14].to_vec();
+    for (k, a) in edges.iter().enumerate() {
+        let b = &edges[(k * 5 + 1) % edges.len()];
+        for op in BinaryOp::ALL {
+            exprs.push(Expr::binary(*op, a.clone(), b.clone()));
+        }
+        for op in UnaryOp::ALL {
+            exprs.push(Expr::unary(*op, a.clone()));
+        }
+    }
+    let (mut never_flag, mut narrow) = (0, 0);
+    for expr in &exprs {
+        let facts = simplify::facts(expr);
+        never_flag += usize::from(!facts.may_flag);
+        narrow += usize::from(facts.range != simplify::Range::ANY);
+        // A constant class holds its folded literal too, rounded to f32 once
+        // (see WEIGHT_TOLERANCE), and so may its range.
+        let slack = |bound: f64| WEIGHT_TOLERANCE * bound.abs().max(1.0);
+        for (w, flags) in evaluations(expr, &scene) {
+            assert!(
+                facts.range.lo - slack(facts.range.lo) <= w && w <= facts.range.hi + slack(facts.range.hi),
+                "`{expr}` gives {w:e}, outside its range [{:e}, {:e}]",
+                facts.range.lo,
+                facts.range.hi
+            );
+            if let Some(c) = facts.constant {
+                assert!(close(w, c), "`{expr}` gives {w:e} but was called the constant {c:e}");
+            }
+            assert!(facts.may_flag || flags == 0, "`{expr}` raised flags {flags} but was said never to");
+        }
+    }
+    // The check means something only if the analysis claims something.
+    assert!(never_flag * 2 > exprs.len() && narrow * 4 > exprs.len(), "{never_flag} never flag, {narrow} narrow");
 }
 
 #[test]
