@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::fitness_tiles::{self, TileSampling};
 use crate::gp::transport::{InProcess, Transport};
 use crate::gp::{self, EvalTime, Evaluator, Fitness, Settings, State};
 use crate::gpu::{FitnessScene, Gpu};
@@ -19,6 +20,9 @@ use crate::render::{self, RenderSettings};
 use crate::scene::{self, Request, Scene};
 use crate::{metrics, semantics};
 
+/// For each tile, the scene it was cut from and how many pixels it counts.
+type Pooling = Vec<(usize, f64)>;
+
 /// Fitness of expressions on a set of scenes, on the GPU.
 pub struct GpuEvaluator<'g> {
     gpu: &'g Gpu,
@@ -27,9 +31,15 @@ pub struct GpuEvaluator<'g> {
     /// thread, so a queue per core compiles a generation's kernels in parallel.
     more: Vec<Gpu>,
     scenes: Vec<Scene>,
-    /// The scenes on each device, `gpu` first.
+    /// What the kernels run on: the scenes, or their fitness tiles.
+    scored: Vec<Scene>,
+    /// With fitness tiles, the scene each tile was cut from and the pixels
+    /// it counts: a scene's error pools its tiles'.
+    pooling: Option<Pooling>,
+    /// What is scored on each device, `gpu` first.
     device_scenes: Vec<Vec<FitnessScene>>,
-    /// relMSE of each scene's noisy input: fitness divides by it (thesis 3.2.3).
+    /// relMSE of each scene's noisy input (over its tiles' interiors, with
+    /// tiles): fitness divides by it (thesis 3.2.3).
     noisy: Vec<f64>,
     radius: u32,
     /// The pipeline around every kernel; the scenes' buffers are prepared for it.
@@ -72,29 +82,80 @@ impl<'g> GpuEvaluator<'g> {
         threads: usize,
         devices: usize,
     ) -> Result<Self> {
+        Self::build(gpu, scenes, None, radius, pipeline, threads, devices)
+    }
+
+    /// An evaluator that scores each scene on the tiles `sampling` draws
+    /// from `seed` ([`crate::fitness_tiles`]); a scene's error is its tiles'
+    /// interiors' together.
+    pub fn on_tiles(
+        gpu: &'g Gpu,
+        scenes: Vec<Scene>,
+        sampling: TileSampling,
+        seed: u64,
+        radius: u32,
+        pipeline: FilterPipeline,
+        threads: usize,
+    ) -> Result<Self> {
+        let devices = if gpu.is_software() { threads.max(1) } else { 1 };
+        Self::build(gpu, scenes, Some((sampling, seed)), radius, pipeline, threads, devices)
+    }
+
+    fn build(
+        gpu: &'g Gpu,
+        scenes: Vec<Scene>,
+        tiles: Option<(TileSampling, u64)>,
+        radius: u32,
+        pipeline: FilterPipeline,
+        threads: usize,
+        devices: usize,
+    ) -> Result<Self> {
+        for s in &scenes {
+            s.reference.as_ref().with_context(|| format!("scene `{}` has no reference image", s.name))?;
+        }
+        let (scored, counted, pooling): (Vec<Scene>, Vec<Option<crate::gpu::Region>>, Option<Pooling>) = match tiles {
+            None => (scenes.clone(), vec![None; scenes.len()], None),
+            Some((sampling, seed)) => {
+                let tiles = fitness_tiles::cut(&scenes, sampling, &pipeline, radius, seed);
+                let pooling = tiles.iter().map(|t| (t.scene, (t.counted.width * t.counted.height) as f64)).collect();
+                let counted = tiles.iter().map(|t| Some(t.counted)).collect();
+                (tiles.into_iter().map(|t| t.crop).collect(), counted, Some(pooling))
+            }
+        };
         let mut more = Vec::new();
         for _ in 1..devices.max(1) {
             more.push(Gpu::open_like(gpu)?);
         }
         let mut device_scenes = Vec::new();
         for device in std::iter::once(gpu).chain(more.iter()) {
-            device_scenes.push(
-                scenes
-                    .iter()
-                    .map(|s| FitnessScene::for_pipeline(device, s, &pipeline))
-                    .collect::<Result<Vec<_>, _>>()?,
-            );
+            let mut on_device = Vec::new();
+            for (s, region) in scored.iter().zip(&counted) {
+                let fs = FitnessScene::for_pipeline(device, s, &pipeline)?;
+                on_device.push(match region {
+                    Some(region) => fs.counting(*region),
+                    None => fs,
+                });
+            }
+            device_scenes.push(on_device);
         }
-        let mut noisy = Vec::new();
-        for s in &scenes {
-            let reference =
-                s.reference.as_ref().with_context(|| format!("scene `{}` has no reference image", s.name))?;
-            noisy.push(metrics::errors(&s.color, reference, s.spp).relmse.max(1e-12));
-        }
+        // The noisy input's relMSE over exactly the pixels that count, pooled as errors are (`pooled`).
+        let noisy = match &pooling {
+            None => scored.iter().map(|s| noisy_relmse(s, None).max(1e-12)).collect(),
+            Some(pooling) => {
+                let mut sums = vec![(0.0f64, 0.0f64); scenes.len()];
+                for ((s, region), (owner, pixels)) in scored.iter().zip(&counted).zip(pooling) {
+                    sums[*owner].0 += noisy_relmse(s, *region) * pixels;
+                    sums[*owner].1 += pixels;
+                }
+                sums.iter().map(|(sum, n)| (sum / n).max(1e-12)).collect()
+            }
+        };
         let mut evaluator = GpuEvaluator {
             gpu,
             more,
             scenes,
+            scored,
+            pooling,
             device_scenes,
             noisy,
             radius,
@@ -174,7 +235,7 @@ impl<'g> GpuEvaluator<'g> {
         }
         let compiled = start.elapsed();
         let start = Instant::now();
-        let data: Vec<&Scene> = self.scenes.iter().collect();
+        let data: Vec<&Scene> = self.scored.iter().collect();
         type DeviceResult = Result<(Duration, Vec<Vec<crate::gpu::FitnessError>>), crate::gpu::GpuError>;
         let results: Vec<DeviceResult> = std::thread::scope(|s| {
             let handles: Vec<_> = devices
@@ -207,7 +268,7 @@ impl<'g> GpuEvaluator<'g> {
             evaluated.extend(out);
         }
         self.time.compile += compiled + driver_compile;
-        let mut evaluated = evaluated.into_iter();
+        let mut evaluated = evaluated.into_iter().map(|row| self.pooled(row));
         let out = unsupported
             .into_iter()
             .map(|u| match u {
@@ -275,6 +336,69 @@ impl<'g> GpuEvaluator<'g> {
     pub fn noisy_relmse(&self) -> &[f64] {
         &self.noisy
     }
+
+    /// The scenes, whole (the evaluator's buffers are freed).
+    pub fn into_scenes(self) -> Vec<Scene> {
+        self.scenes
+    }
+
+    /// Whether fitness is scored on tiles rather than whole scenes.
+    pub fn on_tiles_only(&self) -> bool {
+        self.pooling.is_some()
+    }
+
+    /// One error per scene from one per scored image: with tiles, a scene's
+    /// relMSE is over all its tiles' counted pixels, its flags any tile's.
+    fn pooled(&self, row: Vec<crate::gpu::FitnessError>) -> Vec<crate::gpu::FitnessError> {
+        let Some(pooling) = &self.pooling else { return row };
+        let mut out = vec![(0.0, 0.0, 0u32, true); self.scenes.len()];
+        for (e, (scene, pixels)) in row.iter().zip(pooling) {
+            let pooled = &mut out[*scene];
+            pooled.0 += e.relmse * pixels;
+            pooled.1 += pixels;
+            pooled.2 |= e.flags;
+            pooled.3 &= e.finite;
+        }
+        out.into_iter()
+            .map(|(sum, n, flags, finite)| crate::gpu::FitnessError { relmse: sum / n, flags, finite })
+            .collect()
+    }
+}
+
+/// The hall of fame's fitness on `whole`'s scenes, member by member.
+fn rescore(whole: &mut GpuEvaluator<'_>, hall: &[(usize, gp::StoredMember)]) -> Result<Vec<Rescored>> {
+    let mut unique: Vec<&gp::StoredMember> = Vec::new();
+    for (_, m) in hall {
+        if m.fitness.invalid.is_none() && !unique.iter().any(|u| u.expr == m.expr) {
+            unique.push(m);
+        }
+    }
+    let mut at = Vec::new();
+    for m in &unique {
+        let expr = crate::lang::parse_expr(&m.expr).map_err(|e| anyhow::anyhow!("hall of fame: {e}"))?;
+        at.push((expr, m.radius.unwrap_or(whole.radius())));
+    }
+    let errors = whole.errors_each(&at)?;
+    Ok(unique
+        .iter()
+        .zip(&errors)
+        .map(|(m, result)| {
+            let fitness = whole.fitness(result);
+            Rescored {
+                expr: m.expr.clone(),
+                fitness_on_tiles: m.fitness.value,
+                fitness: fitness.invalid.is_none().then_some(fitness.value),
+                invalid: fitness.invalid.clone(),
+            }
+        })
+        .collect())
+}
+
+/// relMSE of a scene's noisy input against its reference, over `region` (all of it when `None`).
+fn noisy_relmse(scene: &Scene, region: Option<crate::gpu::Region>) -> f64 {
+    let inside = region.map(|r| scene.crop(r.x as usize, r.y as usize, r.width as usize, r.height as usize));
+    let scene = inside.as_ref().unwrap_or(scene);
+    metrics::errors(&scene.color, scene.reference.as_ref().expect("fitness scenes have references"), scene.spp).relmse
 }
 
 /// The thesis's fitness (section 3.2.3): the mean over scenes of relMSE /
@@ -413,6 +537,20 @@ pub struct RunConfig {
     /// against error (runs made before it existed: the operator table's).
     #[serde(default)]
     pub cost_model: crate::cost::CostModel,
+    /// Fitness on tiles of each training scene instead of whole images
+    /// ([`crate::fitness_tiles`]; runs made before tiles existed: whole images).
+    #[serde(default)]
+    pub fitness_tiles: Option<TileSampling>,
+}
+
+impl RunConfig {
+    /// What the training fitness in the log and the hall of fame is measured on.
+    pub fn scored_on(&self) -> String {
+        match self.fitness_tiles {
+            None => "whole training images".into(),
+            Some(t) => format!("{} tiles of {}x{} pixels per training scene", t.count, t.size, t.size),
+        }
+    }
 }
 
 pub const CHECKPOINT_FILE: &str = "checkpoint.json";
@@ -455,28 +593,65 @@ pub fn log_upto(dir: &Path, generation: u32) -> Result<()> {
     crate::io::write_bytes_atomically(&path, kept.as_bytes()).map_err(anyhow::Error::msg)
 }
 
-pub fn append_log(dir: &Path, report: &gp::Report) -> Result<()> {
+/// One generation's line: the report, and what its fitness was measured on.
+pub fn append_log(dir: &Path, report: &gp::Report, scored_on: &str) -> Result<()> {
+    let mut line = serde_json::to_value(report)?;
+    line["scored_on"] = scored_on.into();
+    append_log_line(dir, &line)
+}
+
+fn append_log_line(dir: &Path, line: &serde_json::Value) -> Result<()> {
     use std::io::Write;
     let mut file = std::fs::OpenOptions::new().create(true).append(true).open(dir.join(LOG_FILE))?;
-    writeln!(file, "{}", serde_json::to_string(report)?)?;
+    writeln!(file, "{}", serde_json::to_string(line)?)?;
     Ok(())
+}
+
+/// A hall-of-fame member scored again on whole training images, after a run on tiles.
+#[derive(Clone, Debug, Serialize)]
+pub struct Rescored {
+    pub expr: String,
+    /// Its fitness on the run's tiles.
+    pub fitness_on_tiles: f64,
+    /// Its fitness on the whole training images (`None`: invalid there, with the reason in `invalid`).
+    pub fitness: Option<f64>,
+    pub invalid: Option<String>,
 }
 
 /// The hall of fame in the named-expression format `filter --expr @FILE` reads;
 /// a multi-objective run's front follows as `front1` (cheapest) … `frontN`.
-pub fn hall_of_fame_text(state: &State, k: usize, pipeline: &FilterPipeline, front: &[gp::StoredMember]) -> String {
+/// `rescored`, after a run on tiles: each member's fitness on whole training
+/// images, which then orders the entries (the first is the one to use).
+pub fn hall_of_fame_text(
+    state: &State,
+    k: usize,
+    pipeline: &FilterPipeline,
+    front: &[gp::StoredMember],
+    rescored: &[Rescored],
+) -> String {
     let mut text = String::from("# filterjit hall of fame: the best expressions of every island, best first.\n# Use one with `filterjit filter --expr @hall_of_fame.txt:NAME` (the first without :NAME);\n# it is filtered through the pipeline it was scored with:\n");
     text.push_str(&format!("{} {pipeline}\n", crate::corpus::PIPELINE_PREFIX));
+    if !rescored.is_empty() {
+        text.push_str("# The search scored fitness on tiles; `fitness` below is on the whole training images.\n");
+    }
+    let whole = |expr: &str| rescored.iter().find(|r| r.expr == expr).map(|r| r.fitness.unwrap_or(f64::INFINITY));
     let mut entries = gp::hall_of_fame(state, k);
-    entries.sort_by(|a, b| a.1.fitness.value.total_cmp(&b.1.fitness.value));
+    entries.sort_by(|a, b| {
+        let key = |m: &gp::StoredMember| whole(&m.expr).unwrap_or(m.fitness.value);
+        key(&a.1).total_cmp(&key(&b.1))
+    });
     let mut rank_in_island = vec![0usize; state.islands.len()];
     for (island, m) in entries {
         rank_in_island[island] += 1;
         let parsed = crate::lang::parse_expr(&m.expr).ok();
         let len = parsed.as_ref().map_or(0, |e| e.len());
-        let fitness = match &m.fitness.invalid {
-            Some(reason) => format!("invalid ({reason})"),
-            None => format!("{:.6}", m.fitness.value),
+        let fitness = match (&m.fitness.invalid, rescored.iter().find(|r| r.expr == m.expr)) {
+            (Some(reason), _) => format!("invalid ({reason})"),
+            (None, Some(r)) => match (r.fitness, &r.invalid) {
+                (Some(f), _) => format!("{f:.6} (on tiles {:.6})", r.fitness_on_tiles),
+                (None, reason) => format!("invalid on whole images ({})", reason.as_deref().unwrap_or("?")),
+            },
+            (None, None) => format!("{:.6}", m.fitness.value),
         };
         text.push_str(&format!("# fitness {fitness}, length {len}\n"));
         if let Some(simplified) = parsed.map(|e| crate::simplify::simplify(&e)) {
@@ -658,6 +833,11 @@ pub struct TestResult {
 #[derive(Clone, Debug, Serialize)]
 pub struct Summary {
     pub generations: u32,
+    /// What `best.fitness` (the search's training fitness) was measured on.
+    pub training_scored_on: String,
+    /// After a run on tiles: the hall of fame on whole training images
+    /// (`best` is the best of it there); empty otherwise.
+    pub rescored_hall_of_fame: Vec<Rescored>,
     pub best: gp::StoredMember,
     /// The best expression simplified (the same weights; what `export` and `report` use).
     pub best_simplified: String,
@@ -892,7 +1072,12 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         }
     }
     let scenes = load_all(&training, &features, &variances, &config.pipeline)?;
-    let mut evaluator = GpuEvaluator::for_pipeline(gpu, scenes, config.radius, config.pipeline, threads)?;
+    let mut evaluator = match config.fitness_tiles {
+        None => GpuEvaluator::for_pipeline(gpu, scenes, config.radius, config.pipeline, threads)?,
+        Some(sampling) => {
+            GpuEvaluator::on_tiles(gpu, scenes, sampling, settings.seed, config.radius, config.pipeline, threads)?
+        }
+    };
     evaluator.set_cost_model(config.cost_model.clone());
     evaluator.set_tiles(tiles.enabled(gpu));
     evaluator.set_fusion(fusion);
@@ -918,7 +1103,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     // A generation is done once it is logged and checkpointed, in that order: a
     // resumed run drops log lines past its checkpoint.
     let mut record = |state: &State, report: &gp::Report| -> Result<()> {
-        append_log(&output, report)?;
+        append_log(&output, report, &config.scored_on())?;
         write_checkpoint(
             &output,
             &Checkpoint { version: 1, settings: settings.clone(), run: config.clone(), state: state.clone() },
@@ -949,11 +1134,32 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     // The others end here: the run directory, the hall of fame and the test scenes are the root's.
     let Some(state) = state.filter(|_| root) else { return Ok(None) };
 
+    // Fitness on tiles picked the hall of fame; whole images say which of it is best.
+    let rescored = if evaluator.on_tiles_only() {
+        let mut whole =
+            GpuEvaluator::for_pipeline(gpu, evaluator.into_scenes(), config.radius, config.pipeline, threads)?;
+        whole.set_cost_model(config.cost_model.clone());
+        whole.set_tiles(tiles.enabled(gpu));
+        whole.set_fusion(fusion);
+        let rescored = rescore(&mut whole, &gp::hall_of_fame(&state, settings.hall_of_fame))?;
+        append_log_line(
+            &output,
+            &serde_json::json!({
+                "generation": state.generation,
+                "scored_on": "whole training images",
+                "rescored_hall_of_fame": rescored,
+            }),
+        )?;
+        rescored
+    } else {
+        drop(evaluator);
+        Vec::new()
+    };
     let front = match settings.objectives {
         gp::Objectives::Error => Vec::new(),
         gp::Objectives::ErrorCost => gp::pareto_front(&state),
     };
-    let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline, &front);
+    let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline, &front, &rescored);
     crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes()).map_err(anyhow::Error::msg)?;
     let frequencies = gp::feature_frequencies(&state);
     crate::io::write_bytes_atomically(
@@ -961,11 +1167,19 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         serde_json::to_string_pretty(&frequencies)?.as_bytes(),
     )
     .map_err(anyhow::Error::msg)?;
-    let best = gp::hall_of_fame(&state, 1)
-        .into_iter()
-        .map(|(_, m)| m)
-        .min_by(|a, b| a.fitness.value.total_cmp(&b.fitness.value))
-        .expect("a non-empty population");
+    let best_whole = rescored.iter().filter_map(|r| r.fitness.map(|f| (f, r))).min_by(|a, b| a.0.total_cmp(&b.0));
+    let best = match best_whole.map(|(_, r)| r) {
+        Some(r) => gp::hall_of_fame(&state, settings.hall_of_fame)
+            .into_iter()
+            .map(|(_, m)| m)
+            .find(|m| m.expr == r.expr)
+            .expect("rescored members are the hall of fame's"),
+        None => gp::hall_of_fame(&state, 1)
+            .into_iter()
+            .map(|(_, m)| m)
+            .min_by(|a, b| a.fitness.value.total_cmp(&b.fitness.value))
+            .expect("a non-empty population"),
+    };
 
     let test_sets = resolve_scenes(gpu, &config.test, &config.render, &mut *on_render)?;
     let test_scenes = load_all(&test_sets, &features, &variances, &config.pipeline)?;
@@ -989,6 +1203,8 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     }
     let summary = Summary {
         generations: state.generation,
+        training_scored_on: config.scored_on(),
+        rescored_hall_of_fame: rescored,
         best_simplified: crate::simplify::simplify(&compared[0]).to_string(),
         best,
         test_scenes: names,

@@ -10,6 +10,7 @@ pub mod cost;
 pub mod cpu;
 pub mod evolve;
 pub mod export;
+pub mod fitness_tiles;
 pub mod gp;
 pub mod gpu;
 pub mod io;

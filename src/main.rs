@@ -362,6 +362,13 @@ struct EvolveArgs {
     /// the operator table's]. Kept in the run's checkpoint.
     #[arg(long, value_name = "FILE")]
     cost_model: Option<PathBuf>,
+    /// Score fitness on COUNT tiles of SIZExSIZE pixels per training scene
+    /// (e.g. `8x32`), each with the halo the pipeline reads, drawn once from
+    /// the seed, instead of on whole images: a generation on 256x256 renders
+    /// then costs about what one on small scenes does. The hall of fame is
+    /// scored on whole images at the end [default: whole images].
+    #[arg(long, value_name = "COUNTxSIZE")]
+    fitness_tiles: Option<filterjit::fitness_tiles::TileSampling>,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
     fuse: filterjit::evolve::Fusion,
@@ -864,6 +871,7 @@ fn evolve_on(
             Some(path) => filterjit::cost::CostModel::read(path).map_err(anyhow::Error::msg)?,
             None => filterjit::cost::CostModel::table(),
         },
+        fitness_tiles: args.fitness_tiles,
     };
     let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {
@@ -896,7 +904,7 @@ fn evolve_on(
     }
     if root {
         eprintln!(
-            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{}, {} per fitness kernel, on {}{}",
+            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{}{}, {} per fitness kernel, on {}{}",
             settings.islands,
             settings.island_size,
             settings.generations,
@@ -905,7 +913,12 @@ fn evolve_on(
             config.pipeline,
             size.0,
             size.1,
-            match args.fuse.members(&gpu) {
+            match config.fitness_tiles {
+                Some(t) => format!(" scored on {} tiles of {}x{} each", t.count, t.size, t.size),
+                None => String::new(),
+            },
+            // A cascade's passes each read the last one's output: its kernels are never fused.
+            match if config.pipeline.is_atrous() { 1 } else { args.fuse.members(&gpu) } {
                 1 => "one individual".to_string(),
                 n => format!("up to {n} individuals"),
             },
@@ -968,11 +981,17 @@ fn evolve_on(
     if summary.best_simplified != summary.best.expr {
         println!("          = {} (simplified)", summary.best_simplified);
     }
-    println!(
-        "fitness   {:.5} (training: mean relMSE / noisy relMSE), length {}",
-        summary.best.fitness.value,
-        lang::parse_expr(&summary.best.expr).map(|e| e.len()).unwrap_or(0)
-    );
+    let length = lang::parse_expr(&summary.best.expr).map(|e| e.len()).unwrap_or(0);
+    match summary.rescored_hall_of_fame.iter().find(|r| r.expr == summary.best.expr).and_then(|r| r.fitness) {
+        Some(whole) => println!(
+            "fitness   {whole:.5} (training, whole images: mean relMSE / noisy relMSE; {:.5} on the search's {}), length {length}",
+            summary.best.fitness.value, summary.training_scored_on
+        ),
+        None => println!(
+            "fitness   {:.5} (training: mean relMSE / noisy relMSE), length {length}",
+            summary.best.fitness.value
+        ),
+    }
     let baseline_names: Vec<String> = (0..summary.test_baselines.len()).map(|k| format!("baseline{}", k + 1)).collect();
     println!(
         "test      {:<16} {:>12} {:>12} {:>12}{}",

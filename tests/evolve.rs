@@ -54,6 +54,7 @@ pub(crate) fn config(training: &Path, test: &Path) -> RunConfig {
         seed_expr: parse_expr(corpus::lookup("bilateral").unwrap()).unwrap().to_string(),
         pipeline: Default::default(),
         cost_model: Default::default(),
+        fitness_tiles: None,
     }
 }
 
@@ -428,4 +429,32 @@ fn the_cost_model_is_measured_on_the_device_and_kept_by_the_run() {
         let expected = filterjit::cost::model_with(&e, &front.pipeline, m.radius, &heavy);
         assert!((m.cost - expected).abs() <= 1e-9 * expected, "{}: {} against {expected}", m.expr, m.cost);
     }
+}
+
+/// A run on fitness tiles logs what its fitness was measured on, scores its
+/// hall of fame again on whole training images, and reports the best there.
+#[test]
+fn a_run_on_fitness_tiles_is_rescored_on_whole_images() {
+    let (training, test) = datasets();
+    let dir = temp_dir("fitness-tiles");
+    let tiles: filterjit::fitness_tiles::TileSampling = "2x8".parse().unwrap();
+    let config = RunConfig { fitness_tiles: Some(tiles), ..config(training, test) };
+    let settings = Settings { generations: 2, ..small() };
+    let summary = run(&dir, settings, config, false, None).expect("finished");
+    assert_eq!(summary.training_scored_on, "2 tiles of 8x8 pixels per training scene");
+    let log = read(dir.join(evolve::LOG_FILE));
+    let lines: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.len(), 4, "the initial population, two generations, the rescoring");
+    assert!(lines[..3].iter().all(|l| l["scored_on"] == summary.training_scored_on.as_str()));
+    assert_eq!(lines[3]["scored_on"], "whole training images");
+    let rescored = &summary.rescored_hall_of_fame;
+    assert!(!rescored.is_empty() && rescored.iter().all(|r| r.fitness.is_some()));
+    // Half of each 16x16 scene's cells is not the whole scene.
+    assert!(rescored.iter().any(|r| r.fitness != Some(r.fitness_on_tiles)));
+    let best = rescored.iter().filter_map(|r| r.fitness.map(|f| (f, &r.expr))).min_by(|a, b| a.0.total_cmp(&b.0));
+    assert_eq!(best.map(|(_, e)| e), Some(&summary.best.expr), "the best on whole images is the run's best");
+    let hall = read(dir.join(evolve::HALL_OF_FAME_FILE));
+    assert!(hall.contains("on the whole training images") && hall.contains("(on tiles "), "{hall}");
+    let first = hall.lines().find(|l| l.contains(" = ")).unwrap();
+    assert!(first.ends_with(&summary.best.expr), "the first entry is the best: {first}");
 }

@@ -262,3 +262,49 @@ fn fused_fitness_kernels_score_each_member_as_its_own_kernel() {
         }
     }
 }
+
+/// Fitness on tiles: a tile's interior is filtered from the same data as in
+/// the whole image (its halo holds what the pipeline reads), so tiles that
+/// cover a scene give its whole-image error, through every pipeline stage.
+#[test]
+fn fitness_tiles_covering_a_scene_give_its_whole_image_error() {
+    use filterjit::evolve::GpuEvaluator;
+    use filterjit::fitness_tiles::TileSampling;
+    let gpu = gpu();
+    let exprs: Vec<Expr> = [
+        "exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3 + distance2(pixel) / 4))",
+        "exp(-distance2(texture) / 0.1) * tricube(distance1(pixel) / 3)",
+        "sqrt(dot(normal, color) - 0.5)",
+    ]
+    .iter()
+    .map(|t| parse_expr(t).unwrap())
+    .collect();
+    let scenes = vec![scene_with_albedo(48, 40, 9), scene_with_albedo(32, 24, 10)];
+    for (text, radius) in [("window", 2), ("outliers=2,demodulate,atrous=3", 2)] {
+        let p = pipeline(text);
+        let mut whole = GpuEvaluator::with_devices(&gpu, scenes.clone(), radius, p, 1, 1).unwrap();
+        let every_cell = TileSampling { count: 1000, size: 8 };
+        let mut tiled = GpuEvaluator::on_tiles(&gpu, scenes.clone(), every_cell, 3, radius, p, 1).unwrap();
+        assert!(tiled.on_tiles_only() && !whole.on_tiles_only());
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-30);
+        for (a, b) in whole.noisy_relmse().iter().zip(tiled.noisy_relmse()) {
+            assert!(close(*a, *b), "{text}: noisy relMSE {a} whole, {b} on tiles");
+        }
+        let (w, t) = (whole.errors(&exprs).unwrap(), tiled.errors(&exprs).unwrap());
+        for ((e, w), t) in exprs.iter().zip(&w).zip(&t) {
+            let (w, t) = (w.as_ref().unwrap(), t.as_ref().unwrap());
+            assert_eq!(w.len(), scenes.len(), "one error per scene, not per tile");
+            for (s, (w, t)) in w.iter().zip(t).enumerate() {
+                assert!(close(w.relmse, t.relmse), "{text} scene {s} `{e}`: {} whole, {} on tiles", w.relmse, t.relmse);
+                assert_eq!(w.flags, t.flags, "{text} scene {s} `{e}`: flags");
+            }
+        }
+        // The square-root member flags on these scenes; the check above compared something.
+        assert_ne!(w[2].as_ref().unwrap()[0].flags, 0);
+        // A few tiles are a sample, not the whole.
+        let mut sampled =
+            GpuEvaluator::on_tiles(&gpu, scenes.clone(), TileSampling { count: 3, size: 8 }, 3, radius, p, 1).unwrap();
+        let s = sampled.errors(&exprs[..1]).unwrap();
+        assert_ne!(s[0].as_ref().unwrap()[0].relmse, w[0].as_ref().unwrap()[0].relmse, "{text}: three tiles of thirty");
+    }
+}

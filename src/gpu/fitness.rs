@@ -25,6 +25,35 @@ pub struct FitnessScene {
     height: u32,
     /// Per-pixel terms and flags, and how many members they have room for.
     terms: Option<(wgpu::Buffer, wgpu::Buffer, u32)>,
+    /// The pixels whose errors count (all when `None`): a fitness tile's
+    /// interior, whose halo only feeds the filter.
+    counted: Option<Region>,
+}
+
+/// A rectangle of pixels whose sides lie on workgroup boundaries, so that it
+/// is a set of whole reduction partials.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Region {
+    pub x: u32,
+    pub y: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Region {
+    /// Whether every side lies on a workgroup boundary.
+    pub fn is_aligned(&self) -> bool {
+        [self.x, self.width].iter().all(|v| v % WORKGROUP[0] == 0)
+            && [self.y, self.height].iter().all(|v| v % WORKGROUP[1] == 0)
+    }
+
+    /// The reduction partials (workgroup indices) of an image `width` pixels across that the region covers.
+    fn partials(&self, width: u32) -> impl Iterator<Item = usize> {
+        let across = width.div_ceil(WORKGROUP[0]);
+        let (x0, y0) = (self.x / WORKGROUP[0], self.y / WORKGROUP[1]);
+        let (w, h) = (self.width / WORKGROUP[0], self.height / WORKGROUP[1]);
+        (y0..y0 + h).flat_map(move |gy| (x0..x0 + w).map(move |gx| (gy * across + gx) as usize))
+    }
 }
 
 /// The error of one kernel on one scene.
@@ -62,7 +91,16 @@ impl FitnessScene {
             width: scene.width as u32,
             height: scene.height as u32,
             terms: None,
+            counted: None,
         })
+    }
+
+    /// Count only `region`'s errors (its sides on workgroup boundaries, inside the scene).
+    pub fn counting(mut self, region: Region) -> Self {
+        assert!(region.is_aligned(), "a counted region lies on workgroup boundaries: {region:?}");
+        assert!(region.x + region.width <= self.width && region.y + region.height <= self.height, "{region:?} inside");
+        self.counted = Some(region);
+        self
     }
 
     fn groups(&self) -> u64 {
@@ -216,8 +254,14 @@ impl Gpu {
                 let atrous = pipeline.is_atrous();
                 let passes = pipeline.passes();
                 let rows = rows_per_dispatch(fs.width, pipeline.pass_radius(radius));
+                // One pass computes only the rows whose errors count; a cascade
+                // needs every pixel of each pass but the last.
+                let (first, end) = match fs.counted {
+                    Some(region) if passes == 1 => (region.y, region.y + region.height),
+                    _ => (0, fs.height),
+                };
                 (0..passes)
-                    .flat_map(|level| (0..fs.height).step_by(rows as usize).map(move |row| (level, row)))
+                    .flat_map(|level| (first..end).step_by(rows as usize).map(move |row| (level, row)))
                     .map(|(level, row)| {
                         let base = Params { width: fs.width, height: fs.height, radius, row_offset: row };
                         let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -225,7 +269,7 @@ impl Gpu {
                             contents: &uniform_bytes(atrous, base, level, passes),
                             usage: wgpu::BufferUsages::UNIFORM,
                         });
-                        (buffer, level, rows.min(fs.height - row))
+                        (buffer, level, rows.min(end - row))
                     })
                     .collect()
             })
@@ -325,11 +369,19 @@ impl Gpu {
             let mut row = Vec::with_capacity(scenes.len());
             for (s, fs) in scenes.iter().enumerate() {
                 let start = offsets[k * scenes.len() + s] as usize;
-                let range = start..start + fs.groups() as usize;
-                let sum: f64 = sums[range.clone()].iter().map(|v| *v as f64).sum();
-                let bits = flags[range].iter().fold(0, |a, b| a | b);
-                let pixels = (fs.width * fs.height) as f64;
-                row.push(SceneError { relmse: sum / pixels, flags: bits, finite: sum.is_finite() });
+                let (sum, bits, pixels) = match fs.counted {
+                    None => {
+                        let range = start..start + fs.groups() as usize;
+                        let sum: f64 = sums[range.clone()].iter().map(|v| *v as f64).sum();
+                        (sum, flags[range].iter().fold(0, |a, b| a | b), fs.width * fs.height)
+                    }
+                    Some(region) => {
+                        region.partials(fs.width).fold((0.0, 0, region.width * region.height), |(sum, bits, n), w| {
+                            (sum + sums[start + w] as f64, bits | flags[start + w], n)
+                        })
+                    }
+                };
+                row.push(SceneError { relmse: sum / pixels as f64, flags: bits, finite: sum.is_finite() });
             }
             out.push(row);
         }

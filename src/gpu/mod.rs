@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
-pub use fitness::{FitnessScene, SceneError as FitnessError};
+pub use fitness::{FitnessScene, Region, SceneError as FitnessError};
 pub use raw::{RawBuffer, RawKernel};
 pub use trace::{TraceScene, PATHTRACE_WGSL};
 

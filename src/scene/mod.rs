@@ -139,6 +139,30 @@ impl Scene {
     pub fn variance(&self, v: ScalarVar) -> Option<&[f32]> {
         self.variances.get(&v).map(Vec::as_slice)
     }
+
+    /// The `width`×`height` pixels from (`x`, `y`) of every image the scene
+    /// holds, as a scene of their own named `name@x,y`. Features were
+    /// preprocessed on the whole image, so the crop's values are the whole's.
+    pub fn crop(&self, x: usize, y: usize, width: usize, height: usize) -> Scene {
+        assert!(x + width <= self.width && y + height <= self.height, "the crop lies inside the scene");
+        fn rows<T: Copy>(data: &[T], stride: usize, x: usize, y: usize, width: usize, height: usize) -> Vec<T> {
+            (y..y + height).flat_map(|row| data[row * stride + x..row * stride + x + width].iter().copied()).collect()
+        }
+        let cut = |data: &[[f32; 3]]| rows(data, self.width, x, y, width, height);
+        Scene {
+            name: format!("{}@{x},{y}", self.name),
+            width,
+            height,
+            spp: self.spp,
+            layout: self.layout,
+            color: cut(&self.color),
+            reference: self.reference.as_deref().map(cut),
+            features: self.features.iter().map(|(f, v)| (*f, cut(v))).collect(),
+            variances: self.variances.iter().map(|(k, v)| (*k, rows(v, self.width, x, y, width, height))).collect(),
+            albedo: self.albedo.as_deref().map(cut),
+            notes: Vec::new(),
+        }
+    }
 }
 
 struct Files {

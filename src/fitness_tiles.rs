@@ -1,0 +1,193 @@
+//! Fitness on tiles: each training scene contributes a few S×S tiles
+//! instead of all its pixels, so that a generation on full-size renders
+//! costs what one on small scenes does.
+//!
+//! A tile is cut from the scene with a halo as wide as everything the
+//! pipeline reads around a pixel (the pre-pass's neighbourhood, the window
+//! or the whole à-trous cascade), rounded up to whole workgroups; only its
+//! interior counts (`gpu::Region`). So an interior pixel is filtered from the
+//! same data as in the whole image: its error is the one the whole image
+//! would give it, bit for bit (tested), but for expressions that read
+//! absolute pixel positions (`dot(pixel)`, `distance2(normal, pixel)`),
+//! which see the tile's own coordinates. The run scores its hall of fame on
+//! whole images at the end.
+//!
+//! Tiles are fixed for a run: drawn once from the run's seed, from a grid of
+//! S×S cells (without repeats), so fitness values stay comparable across
+//! generations, the hall of fame stays meaningful, and a resumed run cuts the
+//! same tiles.
+
+use serde::{Deserialize, Serialize};
+
+use crate::gpu::Region;
+use crate::jit::WORKGROUP;
+use crate::pipeline::{FilterPipeline, Form, OUTLIER_RADIUS};
+use crate::rng::Rng;
+use crate::scene::Scene;
+
+/// How many tiles of what size each training scene contributes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub struct TileSampling {
+    /// Tiles per scene (a scene with fewer cells gives all of them).
+    pub count: u32,
+    /// Side of a tile's counted interior, in pixels (a multiple of the workgroup's 8).
+    pub size: u32,
+}
+
+impl std::fmt::Display for TileSampling {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}x{}", self.count, self.size)
+    }
+}
+
+impl std::str::FromStr for TileSampling {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        let bad = |why: &str| {
+            format!("fitness tiles `{text}`: {why} (write COUNTxSIZE, e.g. `8x32`: 8 tiles of 32x32 pixels per scene)")
+        };
+        let (count, size) = text.split_once('x').ok_or_else(|| bad("no `x`"))?;
+        let count: u32 = count.trim().parse().map_err(|_| bad("the count is not a whole number"))?;
+        let size: u32 = size.trim().parse().map_err(|_| bad("the size is not a whole number"))?;
+        if count == 0 {
+            return Err(bad("at least one tile per scene"));
+        }
+        if size == 0 || !size.is_multiple_of(WORKGROUP[0]) || !size.is_multiple_of(WORKGROUP[1]) {
+            return Err(bad(&format!("the size must be a positive multiple of {}", WORKGROUP[0])));
+        }
+        Ok(TileSampling { count, size })
+    }
+}
+
+/// How far from a pixel the whole pipeline reads, in pixels: the outlier
+/// pre-pass's neighbourhood, then the window's radius or the sum of the
+/// à-trous passes' reaches (each pass filters the previous one's output).
+pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
+    let prepass = if pipeline.outliers.is_some() { OUTLIER_RADIUS } else { 0 };
+    let form = match pipeline.form {
+        Form::Window => radius,
+        Form::Atrous { passes } => {
+            (0..passes).map(|level| pipeline.pass_radius(radius) * FilterPipeline::step(level)).sum()
+        }
+    };
+    prepass + form
+}
+
+/// The halo cut around a tile: the pipeline's reach, rounded up to whole
+/// workgroups so that the interior is a set of whole reduction partials.
+pub fn halo(pipeline: &FilterPipeline, radius: u32) -> u32 {
+    reach(pipeline, radius).div_ceil(WORKGROUP[0].max(WORKGROUP[1])) * WORKGROUP[0].max(WORKGROUP[1])
+}
+
+/// One tile: the crop (interior and halo) and where its interior lies in it.
+pub struct Tile {
+    /// Index of the training scene it was cut from.
+    pub scene: usize,
+    pub crop: Scene,
+    pub counted: Region,
+}
+
+/// The tiles of every scene, drawn from `seed`. A scene no larger than one
+/// tile is one tile: the whole scene.
+pub fn cut(scenes: &[Scene], sampling: TileSampling, pipeline: &FilterPipeline, radius: u32, seed: u64) -> Vec<Tile> {
+    let halo = halo(pipeline, radius) as usize;
+    let size = sampling.size as usize;
+    let mut tiles = Vec::new();
+    for (index, scene) in scenes.iter().enumerate() {
+        let (across, down) = (scene.width / size, scene.height / size);
+        if across * down <= 1 {
+            let all = Region { x: 0, y: 0, width: 0, height: 0 };
+            let whole = Region {
+                width: (scene.width as u32 / WORKGROUP[0]) * WORKGROUP[0],
+                height: (scene.height as u32 / WORKGROUP[1]) * WORKGROUP[1],
+                ..all
+            };
+            tiles.push(Tile { scene: index, crop: scene.crop(0, 0, scene.width, scene.height), counted: whole });
+            continue;
+        }
+        // A stream per scene, so that adding a scene does not move another's tiles.
+        let mut rng = Rng::seeded(seed ^ 0x7469_6c65_7300_0000 ^ (index as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15));
+        let mut cells: Vec<(usize, usize)> = (0..down).flat_map(|r| (0..across).map(move |c| (c, r))).collect();
+        let wanted = (sampling.count as usize).min(cells.len());
+        // A partial Fisher–Yates shuffle: the first `wanted` cells, without repeats.
+        for k in 0..wanted {
+            let j = k + rng.below(cells.len() - k);
+            cells.swap(k, j);
+        }
+        let mut chosen = cells[..wanted].to_vec();
+        chosen.sort_unstable_by_key(|&(c, r)| (r, c));
+        for (c, r) in chosen {
+            let (x, y) = (c * size, r * size);
+            let (x0, y0) = (x.saturating_sub(halo), y.saturating_sub(halo));
+            let (x1, y1) = ((x + size + halo).min(scene.width), (y + size + halo).min(scene.height));
+            let counted = Region { x: (x - x0) as u32, y: (y - y0) as u32, width: size as u32, height: size as u32 };
+            tiles.push(Tile { scene: index, crop: scene.crop(x0, y0, x1 - x0, y1 - y0), counted });
+        }
+    }
+    tiles
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::pipeline::Outliers;
+
+    #[test]
+    fn sampling_parses_and_says_what_is_wrong() {
+        assert_eq!("8x32".parse::<TileSampling>(), Ok(TileSampling { count: 8, size: 32 }));
+        assert_eq!(TileSampling { count: 8, size: 32 }.to_string(), "8x32");
+        for bad in ["8", "0x32", "8x30", "ax32", "8x0"] {
+            let error = bad.parse::<TileSampling>().unwrap_err();
+            assert!(error.contains(bad) && error.contains("COUNTxSIZE"), "{error}");
+        }
+    }
+
+    #[test]
+    fn the_halo_covers_what_the_pipeline_reads() {
+        assert_eq!(reach(&FilterPipeline::WINDOW, 3), 3);
+        assert_eq!(halo(&FilterPipeline::WINDOW, 3), 8);
+        assert_eq!(halo(&FilterPipeline::WINDOW, 10), 16);
+        let atrous =
+            FilterPipeline { outliers: Some(Outliers { k: 2.0 }), demodulate: true, form: Form::Atrous { passes: 5 } };
+        // 2 (pre-pass) + 2 · (1 + 2 + 4 + 8 + 16).
+        assert_eq!(reach(&atrous, 3), 64);
+        assert_eq!(halo(&atrous, 3), 64);
+    }
+
+    #[test]
+    fn tiles_are_distinct_cells_with_their_halo_and_the_same_for_the_same_seed() {
+        let color: Vec<[f32; 3]> = (0..96 * 80).map(|i| [i as f32, 0.0, 0.0]).collect();
+        let scene = Scene::from_color("s", 96, 80, color);
+        let sampling = TileSampling { count: 4, size: 16 };
+        let tiles = cut(std::slice::from_ref(&scene), sampling, &FilterPipeline::WINDOW, 3, 5);
+        assert_eq!(tiles.len(), 4);
+        let mut origins = Vec::new();
+        for t in &tiles {
+            let (x0, y0): (usize, usize) = t
+                .crop
+                .name
+                .trim_start_matches("s@")
+                .split_once(',')
+                .map(|(a, b)| (a.parse().unwrap(), b.parse().unwrap()))
+                .unwrap();
+            let (x, y) = (x0 + t.counted.x as usize, y0 + t.counted.y as usize);
+            assert!(x % 16 == 0 && y % 16 == 0 && t.counted.width == 16, "{:?}", t.counted);
+            // The crop holds the scene's own pixels, and a halo of 8 wherever the scene has them.
+            assert_eq!(
+                t.crop.color[t.counted.y as usize * t.crop.width + t.counted.x as usize][0],
+                (y * 96 + x) as f32
+            );
+            assert_eq!(t.counted.x, x.min(8) as u32);
+            assert!(x0 + t.crop.width == (x + 16 + 8).min(96));
+            origins.push((x, y));
+        }
+        origins.sort();
+        origins.dedup();
+        assert_eq!(origins.len(), 4, "distinct cells");
+        let again = cut(std::slice::from_ref(&scene), sampling, &FilterPipeline::WINDOW, 3, 5);
+        assert!(tiles.iter().zip(&again).all(|(a, b)| a.crop.name == b.crop.name));
+        let other = cut(std::slice::from_ref(&scene), sampling, &FilterPipeline::WINDOW, 3, 6);
+        assert!(tiles.iter().zip(&other).any(|(a, b)| a.crop.name != b.crop.name), "another seed, other tiles");
+    }
+}
