@@ -463,7 +463,18 @@ pub fn resolve_scenes(
     for arg in args {
         let path = Path::new(arg);
         let is_dataset = path.is_dir() || path.extension().is_some_and(|e| e == "exr");
-        if is_dataset {
+        if path.is_dir() && !scene::is_dataset_dir(path) {
+            // A folder of datasets: each subfolder that is one, in name order.
+            let inside = scene::datasets_in(path)?;
+            if inside.is_empty() {
+                bail!(
+                    "{} is neither a dataset (it has no {}) nor a folder of datasets (no subfolder has one)",
+                    path.display(),
+                    scene::NOISY_FILE
+                );
+            }
+            out.extend(inside);
+        } else if is_dataset {
             out.push(path.to_path_buf());
         } else {
             let d = render::describe(arg)?;

@@ -275,7 +275,7 @@ struct EvolveArgs {
     /// Values for every flag not given.
     #[arg(long, value_enum, default_value_t = Preset::Quick)]
     preset: Preset,
-    /// Training scenes: built-in names, .toml files or dataset directories [default: the built-in training scenes].
+    /// Training scenes: built-in names, .toml files, dataset directories, or folders whose subfolders are datasets (each is a scene) [default: the built-in training scenes].
     #[arg(long, value_delimiter = ',')]
     scenes: Vec<String>,
     /// Test scenes, likewise [default: the built-in test scenes].

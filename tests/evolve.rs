@@ -458,3 +458,30 @@ fn a_run_on_fitness_tiles_is_rescored_on_whole_images() {
     let first = hall.lines().find(|l| l.contains(" = ")).unwrap();
     assert!(first.ends_with(&summary.best.expr), "the first entry is the best: {first}");
 }
+
+/// `--scenes FOLDER` takes every dataset in a folder of them, in name order,
+/// next to single datasets; a folder with none is an error that names it.
+#[test]
+fn a_folder_of_datasets_is_its_datasets() {
+    let gpu = gpu();
+    let (training, test) = datasets();
+    let folder = temp_dir("folder-of-datasets");
+    for (name, from) in [("b-test", test), ("a-training", training)] {
+        let to = folder.join(name);
+        std::fs::create_dir_all(&to).unwrap();
+        for file in std::fs::read_dir(from).unwrap() {
+            let file = file.unwrap().path();
+            std::fs::copy(&file, to.join(file.file_name().unwrap())).unwrap();
+        }
+    }
+    std::fs::create_dir_all(folder.join("c-not-a-dataset")).unwrap();
+    let args = [folder.display().to_string(), training.display().to_string()];
+    let resolved = evolve::resolve_scenes(&gpu, &args, &RenderSettings::default(), &mut |_, _| {}).unwrap();
+    assert_eq!(resolved, vec![folder.join("a-training"), folder.join("b-test"), training.clone()]);
+    let empty = folder.join("c-not-a-dataset");
+    let error =
+        evolve::resolve_scenes(&gpu, &[empty.display().to_string()], &RenderSettings::default(), &mut |_, _| {})
+            .unwrap_err()
+            .to_string();
+    assert!(error.contains("c-not-a-dataset") && error.contains("folder of datasets"), "{error}");
+}

@@ -199,6 +199,25 @@ fn locate(path: &Path, request: &Request) -> Result<Files, SceneError> {
     Ok(Files { reference, variance: beside(VARIANCE_FILE), meta: beside(META_FILE), noisy, name })
 }
 
+/// Whether `dir` is a dataset: it holds a noisy image.
+pub fn is_dataset_dir(dir: &Path) -> bool {
+    dir.join(NOISY_FILE).is_file()
+}
+
+/// The datasets among `dir`'s subfolders, in name order (for `--scenes FOLDER`).
+pub fn datasets_in(dir: &Path) -> Result<Vec<PathBuf>, SceneError> {
+    let io = |source| SceneError::Io { file: dir.to_path_buf(), source };
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).map_err(io)? {
+        let path = entry.map_err(io)?.path();
+        if path.is_dir() && is_dataset_dir(&path) {
+            out.push(path);
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
 /// The features and variances a scene on disk provides, from its channel names alone.
 pub fn provides(path: &Path) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>), SceneError> {
     let files = locate(path, &Request::default())?;
