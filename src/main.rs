@@ -386,6 +386,14 @@ fn main() -> ExitCode {
     if std::env::var_os("NODEVICE_SELECT").is_none() {
         std::env::set_var("NODEVICE_SELECT", "1");
     }
+    // A reader that stops early (`filterjit simplify E | head -1`) ends the
+    // program quietly, as it does other command-line tools, instead of
+    // making `println!` panic on the closed pipe.
+    #[cfg(unix)]
+    // SAFETY: restoring the default action of one signal, before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     // Compile timings must include the driver's compilation: Mesa would
     // otherwise answer from its on-disk shader cache.

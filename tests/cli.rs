@@ -301,3 +301,20 @@ fn export_picks_the_most_accurate_front_member_within_a_budget() {
     assert!(!tight.status.success());
     assert!(text(&tight.stderr).contains("no member of the front fits 50 ms"), "{}", text(&tight.stderr));
 }
+
+/// A reader that closes the pipe early ends the program quietly, without a panic.
+#[cfg(unix)]
+#[test]
+fn a_closed_pipe_ends_the_program_quietly() {
+    use std::process::Stdio;
+    let mut child = Command::new(env!("CARGO_BIN_EXE_filterjit"))
+        .args(["simplify", "pow(pow(distance2(color), 2), 1) / 1"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the binary runs");
+    drop(child.stdout.take());
+    let output = child.wait_with_output().unwrap();
+    let stderr = text(&output.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
