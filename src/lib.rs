@@ -11,6 +11,7 @@ pub mod cpu;
 pub mod evolve;
 pub mod export;
 pub mod fitness_tiles;
+pub mod flip;
 pub mod gp;
 pub mod gpu;
 pub mod io;

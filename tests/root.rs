@@ -6,6 +6,7 @@ mod cli;
 mod distributed;
 mod evolve;
 mod export;
+mod flip;
 mod gpu_vs_cpu;
 mod lang;
 mod pipeline;
