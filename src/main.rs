@@ -701,9 +701,11 @@ fn filter(
         Some(reference) => {
             let noisy = metrics::errors(&scene.color, reference, scene.spp);
             let filtered = metrics::errors(&rgb, reference, scene.spp);
-            println!("error     {:<10} {:>12} {:>14} {:>12}", "", "relMSE", "relMSE*m/2", "MSE");
-            print_errors("noisy", &noisy);
-            print_errors("filtered", &filtered);
+            let flip =
+                |image: &[[f32; 3]]| filterjit::flip::hdr_flip(reference, image, scene.width, scene.height).mean();
+            println!("error     {:<10} {:>12} {:>14} {:>12} {:>10}", "", "relMSE", "relMSE*m/2", "MSE", "HDR-FLIP");
+            print_errors("noisy", &noisy, flip(&scene.color));
+            print_errors("filtered", &filtered, flip(&rgb));
         }
         None => println!("error     no reference image: errors not computed"),
     }
@@ -1073,9 +1075,9 @@ fn bench(size: (u32, u32), settings: &filterjit::bench::BenchSettings, output: &
     Ok(())
 }
 
-fn print_errors(label: &str, e: &Errors) {
+fn print_errors(label: &str, e: &Errors, flip: f64) {
     let m2 = e.relmse_half_spp.map_or("-".to_string(), |v| format!("{v:.6}"));
-    println!("          {label:<10} {:>12.6} {:>14} {:>12.6}", e.relmse, m2, e.mse);
+    println!("          {label:<10} {:>12.6} {:>14} {:>12.6} {flip:>10.6}", e.relmse, m2, e.mse);
 }
 
 fn ms(d: std::time::Duration) -> f64 {

@@ -41,6 +41,16 @@ fn filter_runs_the_first_thesis_expression_on_the_mitsuba_sample() {
     let stdout = text(&run.stdout);
     assert!(run.status.success(), "stdout:\n{stdout}\nstderr:\n{}", text(&run.stderr));
     assert!(relmse(&stdout, "filtered") < relmse(&stdout, "noisy"), "{stdout}");
+    // HDR-FLIP, the last column. thesis1 without its direct-illumination
+    // channel lowers relMSE but blurs edges a person sees, so FLIP rises:
+    // the reason the thesis (4.5) wants a perceptual metric beside relMSE.
+    assert!(stdout.lines().any(|l| l.starts_with("error") && l.trim_end().ends_with("HDR-FLIP")), "{stdout}");
+    let flip = |row: &str| -> f64 {
+        let line = stdout.lines().find(|l| l.split_whitespace().next() == Some(row)).unwrap();
+        line.split_whitespace().last().unwrap().parse().unwrap()
+    };
+    assert!(flip("noisy") > 0.0 && flip("filtered") > 0.0 && flip("filtered") < 1.0, "{stdout}");
+    assert!(flip("filtered") > flip("noisy"), "{stdout}");
     assert!(output.is_file() && output.with_extension("png").is_file());
     let written = filterjit::scene::load(&output, &Default::default()).unwrap();
     assert_eq!((written.width, written.height), (64, 64));

@@ -74,20 +74,32 @@ fn a_report_on_the_mitsuba_sample_writes_a_complete_folder() {
     // The sample has no direct-illumination channel: the thesis's expressions cannot run, and say why.
     let reason = cell("thesis1")["unavailable"].as_str().unwrap();
     assert!(reason.contains("directIllumination"), "{reason}");
+    let noisy_flip = cell("noisy")["flip"].as_f64().unwrap();
+    assert!(noisy_flip > 0.0 && noisy_flip < 1.0, "HDR-FLIP lies in (0, 1): {noisy_flip}");
     for method in ["crossBilateralTuned", "bilateral", "island0_rank1", "island1_rank1"] {
         let c = cell(method);
         let relmse = c["relmse"].as_f64().unwrap();
         assert!(relmse < noisy, "{method} filters: {relmse} vs noisy {noisy}");
         assert!(c["ms_per_mpx"].as_f64().unwrap() > 0.0, "{method} is timed");
+        let flip = c["flip"].as_f64().unwrap();
+        assert!(flip > 0.0 && flip < 1.0, "{method}: HDR-FLIP {flip}");
     }
+    // The tuned cross-bilateral keeps edges and looks better than the noisy
+    // input; the plain bilateral blurs them and looks worse, for all its lower relMSE.
+    assert!(cell("crossBilateralTuned")["flip"].as_f64().unwrap() < noisy_flip);
+    assert!(cell("bilateral")["flip"].as_f64().unwrap() > noisy_flip);
     // Duplicates in the hall of fame are reported once.
     assert!(cells.iter().all(|c| c["method"] != "island2_rank1"));
     // Feature usage counts both hall-of-fame entries' features.
     assert_eq!(results["feature_usage"]["texture"], 2);
     let md = std::fs::read_to_string(out.join("results.md")).unwrap();
     assert!(md.contains("| thesis1 | n/a: the scene has no directIllumination"), "{md}");
+    assert!(md.contains("| HDR-FLIP |"), "{md}");
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    assert!(html.contains("<th>HDR-FLIP</th>"), "the page shows HDR-FLIP");
     let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
     assert_eq!(csv.lines().count(), 1 + cells.len(), "one CSV row per cell");
+    assert!(csv.lines().next().unwrap().contains(",hdr_flip,"));
     // The crops: one per method that ran, plus noisy and reference, and the strip.
     let crops = out.join("crops").join("mitsuba-cornell-64");
     assert_eq!(std::fs::read_dir(&crops).unwrap().count(), 2 + 4);
@@ -167,8 +179,10 @@ fn the_real_oidn_denoises_the_mitsuba_sample() {
     let noisy = relmse("noisy");
     // On this 64² render OIDN reaches 0.18 (colour) and 0.37 (with its noisy 4-spp albedo and normals) of the
     // noisy relMSE; on the 256² Mitsuba renders this plumbing reproduces BASELINES.md's figures to 3 digits.
+    let flip = |method: &str| cells.iter().find(|c| c["method"] == method).unwrap()["flip"].as_f64().unwrap();
     for method in ["OIDN colour", "OIDN colour+albedo+normal"] {
         assert!(relmse(method) < 0.5 * noisy, "{method}: {} against noisy {noisy}", relmse(method));
+        assert!(flip(method) < flip("noisy"), "{method}: HDR-FLIP {} against noisy {}", flip(method), flip("noisy"));
     }
 }
 

@@ -74,6 +74,8 @@ pub struct Cell {
     /// relMSE × m/2 (thesis equation 3.5 as printed), where m is known.
     pub relmse_half_spp: Option<f64>,
     pub mse: Option<f64>,
+    /// Mean HDR-FLIP against the reference ([`crate::flip`]): what a person sees, in [0, 1].
+    pub flip: Option<f64>,
     /// relMSE / the noisy input's relMSE.
     pub normalised: Option<f64>,
     /// Median device time per megapixel, milliseconds; none for the noisy input.
@@ -94,6 +96,7 @@ pub struct MethodInfo {
     pub pipeline: Option<String>,
     /// Means over the scenes it ran on.
     pub mean_relmse: Option<f64>,
+    pub mean_flip: Option<f64>,
     pub mean_normalised: Option<f64>,
     pub mean_ms_per_mpx: Option<f64>,
     pub scenes_run: usize,
@@ -207,12 +210,14 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         let mut strip = vec![write_crop(&crops_dir.join("noisy.png"), &scene.color, &scene, crop)?];
 
         let noisy = metrics::errors(&scene.color, &reference, scene.spp);
+        let flip = |image: &[[f32; 3]]| crate::flip::hdr_flip(&reference, image, scene.width, scene.height).mean();
         results.cells.push(Cell {
             scene: scene.name.clone(),
             method: NOISY.into(),
             relmse: Some(noisy.relmse),
             relmse_half_spp: noisy.relmse_half_spp,
             mse: Some(noisy.mse),
+            flip: Some(flip(&scene.color)),
             normalised: Some(1.0),
             ..Cell::default()
         });
@@ -291,6 +296,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                     relmse: Some(e.relmse),
                     relmse_half_spp: e.relmse_half_spp,
                     mse: Some(e.mse),
+                    flip: Some(flip(&denoised.color)),
                     normalised: Some(e.relmse / noisy.relmse.max(1e-12)),
                     ms_per_mpx: Some(times[times.len() / 2] / mpx),
                     ms_per_mpx_range: Some((times[0] / mpx, times[times.len() - 1] / mpx)),
@@ -328,6 +334,7 @@ fn summarise(cells: &[Cell], name: String, origin: Origin, method: Option<&Metho
     };
     MethodInfo {
         mean_relmse: mean(&|c| c.relmse),
+        mean_flip: mean(&|c| c.flip),
         mean_normalised: mean(&|c| c.normalised),
         mean_ms_per_mpx: mean(&|c| c.ms_per_mpx),
         scenes_run: ran.len(),
@@ -392,6 +399,7 @@ fn measure(
         relmse: Some(e.relmse),
         relmse_half_spp: e.relmse_half_spp,
         mse: Some(e.mse),
+        flip: Some(crate::flip::hdr_flip(reference, &rgb, scene.width, scene.height).mean()),
         normalised: Some(e.relmse / noisy_relmse.max(1e-12)),
         ms_per_mpx: Some(per_mpx(times[times.len() / 2])),
         ms_per_mpx_range: Some((per_mpx(times[0]), per_mpx(times[times.len() - 1]))),
@@ -516,17 +524,18 @@ fn write(results: &Results, output: &Path) -> Result<()> {
 }
 
 fn csv(results: &Results) -> String {
-    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,normalised,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable\n");
+    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,hdr_flip,normalised,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable\n");
     let opt = |v: Option<f64>| v.map(|v| format!("{v:e}")).unwrap_or_default();
     for c in &results.cells {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{}",
             c.scene,
             c.method,
             opt(c.relmse),
             opt(c.relmse_half_spp),
             opt(c.mse),
+            opt(c.flip),
             opt(c.normalised),
             opt(c.ms_per_mpx),
             opt(c.ms_per_mpx_range.map(|r| r.0)),
@@ -555,14 +564,15 @@ fn markdown(results: &Results) -> String {
             b.hand_set_fitness
         );
     }
-    out.push_str("## Mean over scenes\n\n| method | relMSE / noisy | relMSE | ms/Mpx | scenes | length |\n|---|---:|---:|---:|---:|---:|\n");
+    out.push_str("## Mean over scenes\n\n| method | relMSE / noisy | relMSE | HDR-FLIP | ms/Mpx | scenes | length |\n|---|---:|---:|---:|---:|---:|---:|\n");
     for m in &results.methods {
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} |",
             m.name,
             fmt(m.mean_normalised, 4),
             fmt(m.mean_relmse, 4),
+            fmt(m.mean_flip, 4),
             fmt(m.mean_ms_per_mpx, 1),
             m.scenes_run,
             m.length.map(|l| l.to_string()).unwrap_or_else(|| "—".into())
@@ -571,7 +581,7 @@ fn markdown(results: &Results) -> String {
     for s in &results.scenes {
         let _ = write!(
             out,
-            "\n## {} ({}x{}, {} spp)\n\n| method | relMSE | relMSE·m/2 | MSE | relMSE / noisy | ms/Mpx (min–max) | flagged px |\n|---|---:|---:|---:|---:|---:|---:|\n",
+            "\n## {} ({}x{}, {} spp)\n\n| method | relMSE | relMSE·m/2 | MSE | HDR-FLIP | relMSE / noisy | ms/Mpx (min–max) | flagged px |\n|---|---:|---:|---:|---:|---:|---:|---:|\n",
             s.name,
             s.width,
             s.height,
@@ -579,17 +589,18 @@ fn markdown(results: &Results) -> String {
         );
         for c in results.cells.iter().filter(|c| c.scene == s.name) {
             if let Some(reason) = &c.unavailable {
-                let _ = writeln!(out, "| {} | n/a: {reason} | | | | | |", c.method);
+                let _ = writeln!(out, "| {} | n/a: {reason} | | | | | | |", c.method);
                 continue;
             }
             let range = c.ms_per_mpx_range.map(|(a, b)| format!(" ({a:.1}–{b:.1})")).unwrap_or_default();
             let _ = writeln!(
                 out,
-                "| {} | {} | {} | {} | {} | {}{} | {} |",
+                "| {} | {} | {} | {} | {} | {} | {}{} | {} |",
                 c.method,
                 fmt(c.relmse, 5),
                 fmt(c.relmse_half_spp, 5),
                 fmt(c.mse, 5),
+                fmt(c.flip, 4),
                 fmt(c.normalised, 4),
                 fmt(c.ms_per_mpx, 1),
                 range,
@@ -679,14 +690,15 @@ fn html(results: &Results) -> String {
             b.hand_set_fitness
         );
     }
-    out.push_str("<h2>Mean over scenes</h2>\n<img src=\"plots/mean.svg\" alt=\"mean scatter\">\n<table><tr><th>method</th><th>relMSE / noisy</th><th>relMSE</th><th>ms/Mpx</th><th>scenes</th><th>length</th></tr>\n");
+    out.push_str("<h2>Mean over scenes</h2>\n<img src=\"plots/mean.svg\" alt=\"mean scatter\">\n<table><tr><th>method</th><th>relMSE / noisy</th><th>relMSE</th><th>HDR-FLIP</th><th>ms/Mpx</th><th>scenes</th><th>length</th></tr>\n");
     for m in &results.methods {
         let _ = writeln!(
             out,
-            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+            "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
             html_escape(&m.name),
             fmt(m.mean_normalised, 4),
             fmt(m.mean_relmse, 4),
+            fmt(m.mean_flip, 4),
             fmt(m.mean_ms_per_mpx, 1),
             m.scenes_run,
             m.length.map(|l| l.to_string()).unwrap_or_else(|| "—".into())
@@ -707,14 +719,14 @@ fn html(results: &Results) -> String {
             s.crop[1]
         );
         let _ = writeln!(out, "<img src=\"plots/{}.svg\" alt=\"scatter\">", file_name(&s.name));
-        out.push_str("<table><tr><th>method</th><th>relMSE</th><th>relMSE·m/2</th><th>MSE</th><th>relMSE / noisy</th><th>ms/Mpx</th><th>flagged px</th></tr>\n");
+        out.push_str("<table><tr><th>method</th><th>relMSE</th><th>relMSE·m/2</th><th>MSE</th><th>HDR-FLIP</th><th>relMSE / noisy</th><th>ms/Mpx</th><th>flagged px</th></tr>\n");
         let cells: Vec<&Cell> = results.cells.iter().filter(|c| c.scene == s.name).collect();
         for c in &cells {
             match &c.unavailable {
                 Some(reason) => {
                     let _ = writeln!(
                         out,
-                        "<tr><td>{}</td><td colspan=6>n/a: {}</td></tr>",
+                        "<tr><td>{}</td><td colspan=7>n/a: {}</td></tr>",
                         html_escape(&c.method),
                         html_escape(reason)
                     );
@@ -722,11 +734,12 @@ fn html(results: &Results) -> String {
                 None => {
                     let _ = writeln!(
                         out,
-                        "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
+                        "<tr><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td><td>{}</td></tr>",
                         html_escape(&c.method),
                         fmt(c.relmse, 5),
                         fmt(c.relmse_half_spp, 5),
                         fmt(c.mse, 5),
+                        fmt(c.flip, 4),
                         fmt(c.normalised, 4),
                         fmt(c.ms_per_mpx, 1),
                         c.flagged_pixels
