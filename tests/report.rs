@@ -1,7 +1,7 @@
 //! `filterjit report` and `filterjit tune`: the folder a user opens, and the
 //! tuned baseline.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use filterjit::evolve::GpuEvaluator;
@@ -108,8 +108,13 @@ fn a_report_on_the_mitsuba_sample_writes_a_complete_folder() {
 
 /// Report with OIDN as the peer: `program` is FILTERJIT_OIDN. Returns results.json.
 fn report_with_oidn(name: &str, program: &Path) -> serde_json::Value {
-    let dir = temp_dir("report", name);
-    let out = dir.join("report");
+    let out = temp_dir("report", name).join("report");
+    report_with_oidn_in(&out, program)
+}
+
+/// [`report_with_oidn`] into the folder `out`.
+fn report_with_oidn_in(out: &Path, program: &Path) -> serde_json::Value {
+    let out = out.to_path_buf();
     let sample = mitsuba_sample();
     let o = Command::new(env!("CARGO_BIN_EXE_filterjit"))
         .args(["report", "--scenes", sample.to_str().unwrap(), "--baseline", "@crossBilateralAtrous"])
@@ -131,9 +136,8 @@ fn report_with_oidn(name: &str, program: &Path) -> serde_json::Value {
 /// The plumbing, with a stand-in for `oidnDenoise` that hands back its input:
 /// OIDN's rows are in every table with the program's own times, its images are
 /// read back in the right orientation (the stand-in's output is the noisy input).
-#[test]
-fn the_report_runs_oidn_as_the_peer_through_its_program() {
-    let dir = temp_dir("report", "fake-oidn");
+/// A stand-in for `oidnDenoise` in `dir` that hands back its input and reports 2.5 ms per run.
+fn fake_oidn(dir: &Path) -> PathBuf {
     let program = dir.join("oidnDenoise");
     std::fs::write(
         &program,
@@ -146,6 +150,12 @@ fn the_report_runs_oidn_as_the_peer_through_its_program() {
         use std::os::unix::fs::PermissionsExt;
         std::fs::set_permissions(&program, std::fs::Permissions::from_mode(0o755)).unwrap();
     }
+    program
+}
+
+#[test]
+fn the_report_runs_oidn_as_the_peer_through_its_program() {
+    let program = fake_oidn(&temp_dir("report", "fake-oidn"));
     let results = report_with_oidn("fake", &program);
     let cells = results["cells"].as_array().unwrap();
     let cell = |method: &str| cells.iter().find(|c| c["method"] == method).unwrap_or_else(|| panic!("no {method}"));
@@ -231,4 +241,80 @@ fn report_refuses_bad_input_naming_it() {
         filterjit(&["report", "--run", dir.join("nothing").to_str().unwrap(), "-o", dir.join("r").to_str().unwrap()]);
     assert!(!o.status.success());
     assert!(String::from_utf8_lossy(&o.stderr).contains("nothing"), "names the missing run");
+}
+
+/// The report opened as a person would: headless Chromium loads `index.html`
+/// (through a probe page beside it that reads the loaded page's DOM) and the
+/// rendered page has the OIDN rows, the HDR-FLIP column, its plots and its
+/// crops, every picture decoded. Runs where Chromium is found (`chromium`,
+/// or FILTERJIT_CHROMIUM); CI installs it and requires it (FILTERJIT_REQUIRE_CHROMIUM).
+#[test]
+fn the_report_renders_in_a_browser_with_its_rows_plots_and_crops() {
+    let browser = std::env::var_os("FILTERJIT_CHROMIUM").map(PathBuf::from).or_else(|| {
+        ["chromium", "chromium-browser", "google-chrome"].iter().find_map(|name| {
+            std::env::var_os("PATH")?.to_str()?.split(':').map(|d| Path::new(d).join(name)).find(|p| p.is_file())
+        })
+    });
+    let Some(browser) = browser else {
+        assert!(std::env::var_os("FILTERJIT_REQUIRE_CHROMIUM").is_none(), "Chromium is required here and not found");
+        eprintln!("SKIPPED the_report_renders_in_a_browser_with_its_rows_plots_and_crops: no chromium on PATH");
+        return;
+    };
+    let dir = temp_dir("report", "browser");
+    let out = dir.join("report");
+    report_with_oidn_in(&out, &fake_oidn(&dir));
+    let probe = out.join("probe.html");
+    std::fs::write(
+        &probe,
+        r#"<!doctype html><html><body><iframe id="page" src="index.html" width="1280" height="900"></iframe><script>
+document.getElementById("page").onload = () => {
+  const d = document.getElementById("page").contentDocument;
+  const images = [...d.images];
+  const seen = {
+    images: images.length,
+    broken: images.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.getAttribute("src")),
+    svg: images.filter(i => i.getAttribute("src").endsWith(".svg")).length,
+    crops: images.filter(i => i.getAttribute("src").startsWith("crops/")).length,
+    headers: [...d.querySelectorAll("th")].map(t => t.textContent),
+    rows: [...d.querySelectorAll("tr td:first-child")].map(t => t.textContent),
+    height: d.body.scrollHeight,
+  };
+  const out = document.createElement("pre");
+  out.id = "probe";
+  out.textContent = JSON.stringify(seen);
+  document.body.appendChild(out);
+};
+</script></body></html>"#,
+    )
+    .unwrap();
+    let o = Command::new(&browser)
+        .args(["--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files"])
+        .args(["--virtual-time-budget=20000", "--dump-dom"])
+        .arg(format!("file://{}", probe.display()))
+        .output()
+        .expect("chromium runs");
+    let dom = String::from_utf8_lossy(&o.stdout);
+    let json = dom
+        .split_once("<pre id=\"probe\">")
+        .and_then(|(_, rest)| rest.split_once("</pre>"))
+        .map(|(json, _)| json.replace("&amp;", "&").replace("&lt;", "<").replace("&gt;", ">"))
+        .unwrap_or_else(|| panic!("the probe saw no page:\n{dom}\n{}", String::from_utf8_lossy(&o.stderr)));
+    let seen: serde_json::Value = serde_json::from_str(&json).unwrap();
+    let strings = |key: &str| -> Vec<String> {
+        seen[key].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect()
+    };
+    assert!(strings("broken").is_empty(), "pictures that did not load: {:?}", strings("broken"));
+    assert!(seen["svg"].as_u64().unwrap() >= 2, "the mean and per-scene scatter plots: {seen}");
+    // noisy, the baseline, the OIDN peers and the reference, at least.
+    assert!(seen["crops"].as_u64().unwrap() >= 5, "the crop strip: {seen}");
+    let headers = strings("headers");
+    assert!(
+        headers.iter().filter(|h| *h == "HDR-FLIP").count() >= 2,
+        "HDR-FLIP in the mean and scene tables: {headers:?}"
+    );
+    let rows = strings("rows");
+    for peer in ["OIDN colour", "OIDN colour+albedo+normal"] {
+        assert!(rows.iter().filter(|r| *r == peer).count() >= 2, "{peer} in the mean and scene tables: {rows:?}");
+    }
+    assert!(seen["height"].as_u64().unwrap() > 900, "a laid-out page, taller than one screen: {seen}");
 }
