@@ -72,7 +72,7 @@ fn every_builtin_scene_renders_into_a_loadable_dataset() {
         );
         assert!(scene.notes.iter().all(|n| !n.contains("non-finite")), "{name}: {:?}", scene.notes);
     }
-    assert!(splits.0 >= 5 && splits.1 >= 3, "train/test split {splits:?}");
+    assert!(splits.0 >= 12 && splits.1 >= 4, "train/test split {splits:?}");
 }
 
 #[test]

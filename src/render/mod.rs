@@ -39,6 +39,12 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("misleading", include_str!("../../scenes/misleading.toml")),
     ("glossy-cornell", include_str!("../../scenes/glossy-cornell.toml")),
     ("noise-texture", include_str!("../../scenes/noise-texture.toml")),
+    ("emitter-view", include_str!("../../scenes/emitter-view.toml")),
+    ("rough-metal", include_str!("../../scenes/rough-metal.toml")),
+    ("glass-caustic", include_str!("../../scenes/glass-caustic.toml")),
+    ("sub-pixel-texture", include_str!("../../scenes/sub-pixel-texture.toml")),
+    ("dark-corridor", include_str!("../../scenes/dark-corridor.toml")),
+    ("sky-window", include_str!("../../scenes/sky-window.toml")),
 ];
 
 /// A built-in scene by name.
