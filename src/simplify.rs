@@ -387,6 +387,20 @@ pub enum Condition {
     /// and `?q` a constant ≥ 1: then saturation and flushing of the inner
     /// power carry through the outer one, and one power of `?x` gives the same.
     NestedPower,
+    /// `?x` scaled by two constants `?p` and `?q` that are powers of two (in
+    /// [2^-20, 2^20]), the first step (`?x` times the given factor) never
+    /// saturating: scaling by a power of two is exact, so the two scales are
+    /// one (up to flushing below TINY, which moves a value by less than 1e-29).
+    PowersOfTwo(FirstScale),
+}
+
+/// What the first of two scalings multiplies `?x` by.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FirstScale {
+    TimesP,
+    OverP,
+    TimesQ,
+    OverQ,
 }
 
 /// Commutativity is left out on purpose: it would let extraction reorder
@@ -426,6 +440,12 @@ pub const RULES: &[(&str, &str, &str, Condition)] = &[
     ("pow-half", "(pow ?x 0.5)", "(sqrt ?x)", Condition::XNonNegative),
     ("sqrt-half", "(sqrt ?x)", "(pow ?x 0.5)", Condition::XNonNegative),
     ("pow-pow", "(pow (pow ?x ?p) ?q)", "(pow ?x (* ?p ?q))", Condition::NestedPower),
+    ("div-div-pow2", "(/ (/ ?x ?p) ?q)", "(/ ?x (* ?p ?q))", Condition::PowersOfTwo(FirstScale::OverP)),
+    ("mul-mul-pow2", "(* ?p (* ?q ?x))", "(* (* ?p ?q) ?x)", Condition::PowersOfTwo(FirstScale::TimesQ)),
+    ("mul-mul-pow2-right", "(* (* ?x ?p) ?q)", "(* ?x (* ?p ?q))", Condition::PowersOfTwo(FirstScale::TimesP)),
+    ("div-mul-pow2", "(/ (* ?p ?x) ?q)", "(* (/ ?p ?q) ?x)", Condition::PowersOfTwo(FirstScale::TimesP)),
+    ("div-mul-pow2-right", "(/ (* ?x ?p) ?q)", "(* ?x (/ ?p ?q))", Condition::PowersOfTwo(FirstScale::TimesP)),
+    ("mul-div-pow2", "(* ?p (/ ?x ?q))", "(* (/ ?p ?q) ?x)", Condition::PowersOfTwo(FirstScale::OverQ)),
 ];
 
 /// [`RULES`] as egg rewrites.
@@ -468,6 +488,18 @@ fn holds(condition: Condition, x: &Facts, exponents: impl FnOnce() -> (Option<f6
         // make new constants without end.
         Condition::NestedPower => {
             x.range.nonneg() && x.constant.is_none() && matches!(exponents(), (Some(p), Some(q)) if p > 0.0 && q >= 1.0)
+        }
+        Condition::PowersOfTwo(first) => {
+            let (Some(p), Some(q)) = exponents() else { return false };
+            let power_of_two = |c: f64| c > 0.0 && c.log2().fract() == 0.0 && (-20.0..=20.0).contains(&c.log2());
+            let factor = match first {
+                FirstScale::TimesP => p,
+                FirstScale::OverP => 1.0 / p,
+                FirstScale::TimesQ => q,
+                FirstScale::OverQ => 1.0 / q,
+            };
+            let largest = x.range.lo.abs().max(x.range.hi.abs());
+            x.constant.is_none() && power_of_two(p) && power_of_two(q) && largest * factor <= semantics::BIG
         }
     }
 }
@@ -576,6 +608,12 @@ pub fn condition_holds(condition: Condition, expr: &Expr) -> bool {
     holds(condition, &facts(expr), || (None, None))
 }
 
+/// Whether a rule under `condition` may fire with `x`, `p` and `q` as `?x`, `?p` and `?q`.
+pub fn condition_holds_for(condition: Condition, x: &Expr, p: &Expr, q: &Expr) -> bool {
+    let (p, q) = (facts(p).constant, facts(q).constant);
+    holds(condition, &facts(x), || (p, q))
+}
+
 /// What the e-graph's analysis knows of `expr` alone, before any rewrite.
 pub fn facts(expr: &Expr) -> Facts {
     let mut rec = RecExpr::default();
@@ -626,6 +664,18 @@ mod tests {
         assert_eq!(simplified("abs(exp(dot(normal)))"), "exp(dot(normal))");
         // A kernel past its support is 0.
         assert_eq!(simplified("epanechnikov(distance2(normal) + 1) * dot(color)"), "0");
+    }
+
+    #[test]
+    fn scalings_by_powers_of_two_merge_where_the_first_cannot_saturate() {
+        assert_eq!(simplified("distance2(color) / 2 / 0.5"), "distance2(color)");
+        assert_eq!(simplified("0.5 * (0.5 * distance2(normal))"), "0.25 * distance2(normal)");
+        assert_eq!(simplified("2 * (2 * exp(-distance2(normal)))"), "4 * exp(-distance2(normal))");
+        assert_eq!(simplified("exp(-distance1(color)) * 4 / 8"), "exp(-distance1(color)) * 0.5");
+        // Doubling first may saturate a distance; 3 is no power of two.
+        assert_eq!(simplified("distance2(color) * 2 / 2"), "distance2(color) * 2 / 2");
+        assert_eq!(simplified("2 * (2 * distance2(normal))"), "2 * (2 * distance2(normal))");
+        assert_eq!(simplified("distance2(color) / 3 / 2"), "distance2(color) / 3 / 2");
     }
 
     #[test]

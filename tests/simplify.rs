@@ -6,7 +6,7 @@ use filterjit::cpu;
 use filterjit::lang::random::Alphabet;
 use filterjit::lang::{parse_expr, BinaryOp, Expr, UnaryOp};
 use filterjit::rng::Rng;
-use filterjit::simplify::{self, Condition, RULES, WEIGHT_TOLERANCE};
+use filterjit::simplify::{self, RULES, WEIGHT_TOLERANCE};
 use filterjit::Scene;
 
 use crate::common::{env_usize, synthetic_scene};
@@ -61,18 +61,20 @@ fn every_rule_keeps_weights_and_flags_on_the_cpu() {
     let scene = synthetic_scene(9, 7, 4);
     let mut rng = Rng::seeded(31);
     let xs = operands(&mut rng, env_usize("FILTERJIT_RULE_CASES", 60));
+    // Constants for ?p and ?q: powers of two (the scaling rules) and others.
+    let constants = [0.5, 2.0, 27.0, 0.1, 3.7, 1.0, 0.25, 1024.0, 3.5, 2.0f64.powi(-20)];
     for (name, lhs, rhs, condition) in RULES {
         let mut checked = 0;
         for (k, x) in xs.iter().enumerate() {
-            // pow-pow's exponents are chosen inside its condition below; ?x must be non-negative.
-            let on_x = if *condition == Condition::NestedPower { Condition::XNonNegative } else { *condition };
-            if !simplify::condition_holds(on_x, x) {
-                continue;
-            }
             let y = &xs[(k * 7 + 3) % xs.len()];
-            // Exponents for pow-pow, inside its condition (p > 0, q ≥ 1).
-            let p = Expr::Const([0.5, 2.0, 27.0, 0.1, 3.7][k % 5]);
-            let q = Expr::Const([1.0, 2.0, 3.5, 27.0][k % 4]);
+            // The first (p, q) in a rotation of the constants for which the rule may fire.
+            let pairs = (0..constants.len() * constants.len()).map(|n| (n + k) % (constants.len() * constants.len()));
+            let Some((p, q)) = pairs
+                .map(|n| (Expr::Const(constants[n / constants.len()]), Expr::Const(constants[n % constants.len()])))
+                .find(|(p, q)| simplify::condition_holds_for(*condition, x, p, q))
+            else {
+                continue;
+            };
             let values = [("?x", x), ("?y", y), ("?p", &p), ("?q", &q)];
             let (before, after) = (simplify::instantiate_with(lhs, &values), simplify::instantiate_with(rhs, &values));
             for ((wb, fb), (wa, fa)) in evaluations(&before, &scene).into_iter().zip(evaluations(&after, &scene)) {
