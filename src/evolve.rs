@@ -31,8 +31,8 @@ pub struct GpuEvaluator<'g> {
     /// thread, so a queue per core compiles a generation's kernels in parallel.
     more: Vec<Gpu>,
     scenes: Vec<Scene>,
-    /// What the kernels run on: the scenes, or their fitness tiles.
-    scored: Vec<Scene>,
+    /// With fitness tiles, what the kernels run on instead of `scenes`.
+    tiles: Option<Vec<Scene>>,
     /// With fitness tiles, the scene each tile was cut from and the pixels
     /// it counts: a scene's error pools its tiles'.
     pooling: Option<Pooling>,
@@ -113,15 +113,18 @@ impl<'g> GpuEvaluator<'g> {
         for s in &scenes {
             s.reference.as_ref().with_context(|| format!("scene `{}` has no reference image", s.name))?;
         }
-        let (scored, counted, pooling): (Vec<Scene>, Vec<Option<crate::gpu::Region>>, Option<Pooling>) = match tiles {
-            None => (scenes.clone(), vec![None; scenes.len()], None),
-            Some((sampling, seed)) => {
-                let tiles = fitness_tiles::cut(&scenes, sampling, &pipeline, radius, seed);
-                let pooling = tiles.iter().map(|t| (t.scene, (t.counted.width * t.counted.height) as f64)).collect();
-                let counted = tiles.iter().map(|t| Some(t.counted)).collect();
-                (tiles.into_iter().map(|t| t.crop).collect(), counted, Some(pooling))
-            }
-        };
+        let (tiles, counted, pooling): (Option<Vec<Scene>>, Vec<Option<crate::gpu::Region>>, Option<Pooling>) =
+            match tiles {
+                None => (None, vec![None; scenes.len()], None),
+                Some((sampling, seed)) => {
+                    let tiles = fitness_tiles::cut(&scenes, sampling, &pipeline, radius, seed);
+                    let pooling =
+                        tiles.iter().map(|t| (t.scene, (t.counted.width * t.counted.height) as f64)).collect();
+                    let counted = tiles.iter().map(|t| Some(t.counted)).collect();
+                    (Some(tiles.into_iter().map(|t| t.crop).collect()), counted, Some(pooling))
+                }
+            };
+        let scored = tiles.as_deref().unwrap_or(&scenes);
         let mut more = Vec::new();
         for _ in 1..devices.max(1) {
             more.push(Gpu::open_like(gpu)?);
@@ -154,7 +157,7 @@ impl<'g> GpuEvaluator<'g> {
             gpu,
             more,
             scenes,
-            scored,
+            tiles,
             pooling,
             device_scenes,
             noisy,
@@ -235,7 +238,7 @@ impl<'g> GpuEvaluator<'g> {
         }
         let compiled = start.elapsed();
         let start = Instant::now();
-        let data: Vec<&Scene> = self.scored.iter().collect();
+        let data: Vec<&Scene> = self.tiles.as_deref().unwrap_or(&self.scenes).iter().collect();
         type DeviceResult = Result<(Duration, Vec<Vec<crate::gpu::FitnessError>>), crate::gpu::GpuError>;
         let results: Vec<DeviceResult> = std::thread::scope(|s| {
             let handles: Vec<_> = devices

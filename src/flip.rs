@@ -12,8 +12,9 @@
 //! a pixel's HDR-FLIP is its largest LDR-FLIP over the exposures. Arithmetic
 //! is f32 as in the reference, borders clamp as there, and `tests/flip.rs`
 //! compares the result with the `flip-evaluator` package's on small images.
-//! One deliberate difference: where the reference's median luminance is 0
-//! (it would divide by it), the smallest non-zero luminance stands in.
+//! Deliberate differences where the reference implementation divides by
+//! zero: a median luminance of 0 is replaced by the smallest non-zero one,
+//! and a reference with no light at all is scored at exposure 0 alone.
 
 use std::f32::consts::PI;
 
@@ -58,7 +59,12 @@ pub fn hdr_flip(reference: &[Rgb], test: &[Rgb], width: usize, height: usize) ->
     assert_eq!(reference.len(), width * height, "reference has width*height pixels");
     assert_eq!(test.len(), width * height, "test has width*height pixels");
     let ppd = default_ppd();
-    let (start, stop) = exposures(reference);
+    // A reference without light has no exposure range (the reference
+    // implementation divides by zero there): score it at exposure 0.
+    let (start, stop) = match exposures(reference) {
+        (start, stop) if start.is_finite() && stop.is_finite() && start <= stop => (start, stop),
+        _ => (0.0, 0.0),
+    };
     let count = (stop - start).ceil().max(2.0) as usize;
     let step = (stop - start) / (count - 1) as f32;
     let mut error = vec![0.0f32; width * height];
@@ -352,4 +358,20 @@ fn feature_difference_and_error(
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_black_reference_gives_finite_errors_in_range() {
+        let black = vec![[0.0f32; 3]; 12 * 10];
+        let grey: Vec<Rgb> = (0..120).map(|i| [0.01 * (i % 7) as f32; 3]).collect();
+        for (reference, test) in [(&black, &grey), (&black, &black)] {
+            let map = hdr_flip(reference, test, 12, 10);
+            assert!(map.error.iter().all(|e| e.is_finite() && (0.0..=1.0).contains(e)), "{:?}", map.error);
+        }
+        assert!(hdr_flip(&black, &grey, 12, 10).mean() > 0.0);
+    }
 }
