@@ -118,9 +118,8 @@ impl<'g> GpuEvaluator<'g> {
                 None => (None, vec![None; scenes.len()], None),
                 Some((sampling, seed)) => {
                     let tiles = fitness_tiles::cut(&scenes, sampling, &pipeline, radius, seed);
-                    let pooling =
-                        tiles.iter().map(|t| (t.scene, (t.counted.width * t.counted.height) as f64)).collect();
-                    let counted = tiles.iter().map(|t| Some(t.counted)).collect();
+                    let pooling = tiles.iter().map(|t| (t.scene, t.pixels() as f64)).collect();
+                    let counted = tiles.iter().map(|t| t.counted).collect();
                     (Some(tiles.into_iter().map(|t| t.crop).collect()), counted, Some(pooling))
                 }
             };

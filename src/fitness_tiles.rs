@@ -85,11 +85,19 @@ pub struct Tile {
     /// Index of the training scene it was cut from.
     pub scene: usize,
     pub crop: Scene,
-    pub counted: Region,
+    /// The pixels that count; `None`: all of them (a scene too small to tile).
+    pub counted: Option<Region>,
 }
 
-/// The tiles of every scene, drawn from `seed`. A scene no larger than one
-/// tile is one tile: the whole scene.
+impl Tile {
+    /// How many pixels count.
+    pub fn pixels(&self) -> usize {
+        self.counted.map_or(self.crop.pixels(), |r| (r.width * r.height) as usize)
+    }
+}
+
+/// The tiles of every scene, drawn from `seed`. A scene without two whole
+/// cells is one tile: the whole scene, every pixel counted.
 pub fn cut(scenes: &[Scene], sampling: TileSampling, pipeline: &FilterPipeline, radius: u32, seed: u64) -> Vec<Tile> {
     let halo = halo(pipeline, radius) as usize;
     let size = sampling.size as usize;
@@ -97,13 +105,7 @@ pub fn cut(scenes: &[Scene], sampling: TileSampling, pipeline: &FilterPipeline, 
     for (index, scene) in scenes.iter().enumerate() {
         let (across, down) = (scene.width / size, scene.height / size);
         if across * down <= 1 {
-            let all = Region { x: 0, y: 0, width: 0, height: 0 };
-            let whole = Region {
-                width: (scene.width as u32 / WORKGROUP[0]) * WORKGROUP[0],
-                height: (scene.height as u32 / WORKGROUP[1]) * WORKGROUP[1],
-                ..all
-            };
-            tiles.push(Tile { scene: index, crop: scene.crop(0, 0, scene.width, scene.height), counted: whole });
+            tiles.push(Tile { scene: index, crop: scene.crop(0, 0, scene.width, scene.height), counted: None });
             continue;
         }
         // A stream per scene, so that adding a scene does not move another's tiles.
@@ -122,7 +124,7 @@ pub fn cut(scenes: &[Scene], sampling: TileSampling, pipeline: &FilterPipeline, 
             let (x0, y0) = (x.saturating_sub(halo), y.saturating_sub(halo));
             let (x1, y1) = ((x + size + halo).min(scene.width), (y + size + halo).min(scene.height));
             let counted = Region { x: (x - x0) as u32, y: (y - y0) as u32, width: size as u32, height: size as u32 };
-            tiles.push(Tile { scene: index, crop: scene.crop(x0, y0, x1 - x0, y1 - y0), counted });
+            tiles.push(Tile { scene: index, crop: scene.crop(x0, y0, x1 - x0, y1 - y0), counted: Some(counted) });
         }
     }
     tiles
@@ -164,6 +166,7 @@ mod tests {
         assert_eq!(tiles.len(), 4);
         let mut origins = Vec::new();
         for t in &tiles {
+            let counted = t.counted.expect("a tiled scene's tiles count their interiors");
             let (x0, y0): (usize, usize) = t
                 .crop
                 .name
@@ -171,14 +174,11 @@ mod tests {
                 .split_once(',')
                 .map(|(a, b)| (a.parse().unwrap(), b.parse().unwrap()))
                 .unwrap();
-            let (x, y) = (x0 + t.counted.x as usize, y0 + t.counted.y as usize);
-            assert!(x % 16 == 0 && y % 16 == 0 && t.counted.width == 16, "{:?}", t.counted);
+            let (x, y) = (x0 + counted.x as usize, y0 + counted.y as usize);
+            assert!(x % 16 == 0 && y % 16 == 0 && counted.width == 16, "{counted:?}");
             // The crop holds the scene's own pixels, and a halo of 8 wherever the scene has them.
-            assert_eq!(
-                t.crop.color[t.counted.y as usize * t.crop.width + t.counted.x as usize][0],
-                (y * 96 + x) as f32
-            );
-            assert_eq!(t.counted.x, x.min(8) as u32);
+            assert_eq!(t.crop.color[counted.y as usize * t.crop.width + counted.x as usize][0], (y * 96 + x) as f32);
+            assert_eq!(counted.x, x.min(8) as u32);
             assert!(x0 + t.crop.width == (x + 16 + 8).min(96));
             origins.push((x, y));
         }
@@ -189,5 +189,14 @@ mod tests {
         assert!(tiles.iter().zip(&again).all(|(a, b)| a.crop.name == b.crop.name));
         let other = cut(std::slice::from_ref(&scene), sampling, &FilterPipeline::WINDOW, 3, 6);
         assert!(tiles.iter().zip(&other).any(|(a, b)| a.crop.name != b.crop.name), "another seed, other tiles");
+    }
+
+    #[test]
+    fn a_scene_without_two_cells_is_scored_whole() {
+        let scene = Scene::from_color("small", 20, 12, vec![[1.0; 3]; 240]);
+        let tiles =
+            cut(std::slice::from_ref(&scene), TileSampling { count: 4, size: 16 }, &FilterPipeline::WINDOW, 3, 1);
+        assert_eq!(tiles.len(), 1);
+        assert!(tiles[0].counted.is_none() && tiles[0].pixels() == 240);
     }
 }
