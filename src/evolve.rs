@@ -142,14 +142,14 @@ impl<'g> GpuEvaluator<'g> {
         }
         // The noisy input's relMSE over exactly the pixels that count, pooled as errors are (`pooled`).
         let noisy = match &pooling {
-            None => scored.iter().map(|s| noisy_relmse(s, None).max(1e-12)).collect(),
+            None => scored.iter().map(|s| noisy_relmse(s, None)).collect(),
             Some(pooling) => {
                 let mut sums = vec![(0.0f64, 0.0f64); scenes.len()];
                 for ((s, region), (owner, pixels)) in scored.iter().zip(&counted).zip(pooling) {
                     sums[*owner].0 += noisy_relmse(s, *region) * pixels;
                     sums[*owner].1 += pixels;
                 }
-                sums.iter().map(|(sum, n)| (sum / n).max(1e-12)).collect()
+                sums.iter().map(|(sum, n)| sum / n).collect()
             }
         };
         let mut evaluator = GpuEvaluator {
@@ -406,7 +406,8 @@ fn noisy_relmse(scene: &Scene, region: Option<crate::gpu::Region>) -> f64 {
 /// The thesis's fitness (section 3.2.3): the mean over scenes of relMSE /
 /// the noisy input's relMSE. Training fitness and test results both use it.
 pub fn normalised_error(per_scene: &[crate::gpu::FitnessError], noisy: &[f64]) -> f64 {
-    per_scene.iter().zip(noisy).map(|(e, n)| e.relmse / n).sum::<f64>() / per_scene.len().max(1) as f64
+    per_scene.iter().zip(noisy).map(|(e, n)| metrics::normalised(e.relmse, *n)).sum::<f64>()
+        / per_scene.len().max(1) as f64
 }
 
 /// Every domain-error bit raised on any scene.

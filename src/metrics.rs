@@ -5,6 +5,15 @@ use serde::Serialize;
 /// ε of equation 3.5.
 pub const RELMSE_EPSILON: f64 = 0.01;
 
+/// The least noisy relMSE a normalised error divides by: a scene whose noisy
+/// input is already exact (a black render) must not divide by zero.
+pub const NOISY_RELMSE_FLOOR: f64 = 1e-12;
+
+/// relMSE relative to the noisy input's (thesis 3.2.3): fitness and the report's "relMSE / noisy".
+pub fn normalised(relmse: f64, noisy_relmse: f64) -> f64 {
+    relmse / noisy_relmse.max(NOISY_RELMSE_FLOOR)
+}
+
 /// Errors of an image against a reference.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct Errors {

@@ -98,7 +98,7 @@ pub fn tune(evaluator: &mut GpuEvaluator<'_>, sweeps: usize, on_step: &mut dyn F
             for (text, result) in fresh.keys().zip(evaluator.errors(&batch)?) {
                 let fitness = match result {
                     Ok(per_scene) if per_scene.iter().all(|s| s.flags == 0 && s.relmse.is_finite()) => {
-                        per_scene.iter().zip(&noisy).map(|(s, n)| s.relmse / n).sum::<f64>() / noisy.len() as f64
+                        crate::evolve::normalised_error(&per_scene, &noisy)
                     }
                     _ => f64::INFINITY,
                 };

@@ -297,7 +297,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                     relmse_half_spp: e.relmse_half_spp,
                     mse: Some(e.mse),
                     flip: Some(flip(&denoised.color)),
-                    normalised: Some(e.relmse / noisy.relmse.max(1e-12)),
+                    normalised: Some(metrics::normalised(e.relmse, noisy.relmse)),
                     ms_per_mpx: Some(times[times.len() / 2] / mpx),
                     ms_per_mpx_range: Some((times[0] / mpx, times[times.len() - 1] / mpx)),
                     ..Cell::default()
@@ -400,7 +400,7 @@ fn measure(
         relmse_half_spp: e.relmse_half_spp,
         mse: Some(e.mse),
         flip: Some(crate::flip::hdr_flip(reference, &rgb, scene.width, scene.height).mean()),
-        normalised: Some(e.relmse / noisy_relmse.max(1e-12)),
+        normalised: Some(metrics::normalised(e.relmse, noisy_relmse)),
         ms_per_mpx: Some(per_mpx(times[times.len() / 2])),
         ms_per_mpx_range: Some((per_mpx(times[0]), per_mpx(times[times.len() - 1]))),
         flagged_pixels: first.flagged_pixels(),
