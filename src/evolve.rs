@@ -555,6 +555,12 @@ pub struct RunConfig {
     /// ([`crate::fitness_tiles`]; runs made before tiles existed: whole images).
     #[serde(default)]
     pub fitness_tiles: Option<TileSampling>,
+    /// Only these features are terminals (all the training scenes provide
+    /// when `None`): a filter meant for renders with fewer channels than the
+    /// training scenes must not learn to read the others.
+    /// By name, as written in expressions.
+    #[serde(default)]
+    pub features: Option<BTreeSet<String>>,
 }
 
 impl RunConfig {
@@ -1078,7 +1084,19 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     if !root {
         training = resolve_scenes(gpu, &config.training, &config.render, &mut *on_render)?;
     }
-    let (features, variances) = common_terminals(&training)?;
+    let (mut features, variances) = common_terminals(&training)?;
+    if let Some(names) = &config.features {
+        let mut allowed = BTreeSet::new();
+        for name in names {
+            let f =
+                Feature::from_name(name).with_context(|| format!("--features names `{name}`, which is no feature"))?;
+            if !features.contains(&f) {
+                bail!("--features names `{name}`, which the training scenes do not all provide");
+            }
+            allowed.insert(f);
+        }
+        features.retain(|f| allowed.contains(f));
+    }
     let seed_expr = crate::lang::parse_expr(&config.seed_expr).map_err(|e| anyhow::anyhow!("seed expression:\n{e}"))?;
     for f in seed_expr.features() {
         if !features.contains(&f) {

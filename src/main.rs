@@ -369,6 +369,11 @@ struct EvolveArgs {
     /// scored on whole images at the end [default: whole images].
     #[arg(long, value_name = "COUNTxSIZE")]
     fitness_tiles: Option<filterjit::fitness_tiles::TileSampling>,
+    /// The only features the search may read, e.g. `color,pixel,normal,texture,worldPosition,depth`
+    /// for filters meant for Mitsuba renders (which have no direct illumination or secondary
+    /// albedo) [default: every feature the training scenes provide]. Kept in the checkpoint.
+    #[arg(long, value_delimiter = ',', value_parser = parse_feature)]
+    features: Vec<lang::Feature>,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
     fuse: filterjit::evolve::Fusion,
@@ -722,6 +727,13 @@ fn filter(
     Ok(())
 }
 
+fn parse_feature(text: &str) -> Result<lang::Feature, String> {
+    lang::Feature::from_name(text).ok_or_else(|| {
+        let names: Vec<&str> = lang::Feature::ALL.iter().map(|f| f.name()).collect();
+        format!("`{text}` is no feature; the features are {}", names.join(", "))
+    })
+}
+
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
     let (w, h) = text.split_once('x').ok_or_else(|| format!("`{text}` is not WIDTHxHEIGHT"))?;
     let parse = |v: &str| v.trim().parse::<u32>().map_err(|_| format!("`{text}` is not WIDTHxHEIGHT"));
@@ -882,6 +894,7 @@ fn evolve_on(
             None => filterjit::cost::CostModel::table(),
         },
         fitness_tiles: args.fitness_tiles,
+        features: (!args.features.is_empty()).then(|| args.features.iter().map(|f| f.name().to_string()).collect()),
     };
     let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {

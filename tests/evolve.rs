@@ -55,6 +55,7 @@ pub(crate) fn config(training: &Path, test: &Path) -> RunConfig {
         pipeline: Default::default(),
         cost_model: Default::default(),
         fitness_tiles: None,
+        features: None,
     }
 }
 
@@ -484,4 +485,36 @@ fn a_folder_of_datasets_is_its_datasets() {
             .unwrap_err()
             .to_string();
     assert!(error.contains("c-not-a-dataset") && error.contains("folder of datasets"), "{error}");
+}
+
+/// `--features` limits the terminals: no individual reads another feature,
+/// and a feature the training scenes lack is refused by name.
+#[test]
+fn the_search_reads_only_the_features_it_is_given() {
+    let (training, test) = datasets();
+    let allowed: std::collections::BTreeSet<Feature> = [Feature::Color, Feature::Pixel, Feature::Normal].into();
+    let dir = temp_dir("features");
+    let config = RunConfig {
+        features: Some(allowed.iter().map(|f| f.name().to_string()).collect()),
+        seed_expr: "exp(-(distance2(color) / 0.5 + distance2(pixel) / 8))".into(),
+        ..config(training, test)
+    };
+    run(&dir, Settings { generations: 2, ..small() }, config.clone(), false, None).expect("finished");
+    let checkpoint = evolve::read_checkpoint(&dir).unwrap();
+    for m in checkpoint.state.islands.iter().flatten() {
+        let read = parse_expr(&m.expr).unwrap().features();
+        assert!(read.is_subset(&allowed), "`{}` reads {read:?}", m.expr);
+    }
+    // The Mitsuba sample has no direct-illumination channel.
+    let sample = mitsuba_sample();
+    let lacking = RunConfig {
+        training: vec![sample.display().to_string()],
+        test: vec![sample.display().to_string()],
+        features: Some(["color".to_string(), "directIllumination".to_string()].into()),
+        ..config
+    };
+    let (tiles, fusion) = (evolve::Tiles::Off, evolve::Fusion::Auto);
+    let error =
+        try_run(&temp_dir("features-missing"), small(), lacking, false, None, tiles, fusion).unwrap_err().to_string();
+    assert!(error.contains("--features") && error.contains("directIllumination"), "{error}");
 }
