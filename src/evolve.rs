@@ -555,9 +555,9 @@ pub struct RunConfig {
     /// ([`crate::fitness_tiles`]; runs made before tiles existed: whole images).
     #[serde(default)]
     pub fitness_tiles: Option<TileSampling>,
-    /// Only these features are terminals (all the training scenes provide
-    /// when `None`): a filter meant for renders with fewer channels than the
-    /// training scenes must not learn to read the others.
+    /// Only these features and variances are terminals (all the training
+    /// scenes provide when `None`): a filter meant for renders with fewer
+    /// channels than the training scenes must not learn to read the others.
     /// By name, as written in expressions.
     #[serde(default)]
     pub features: Option<BTreeSet<String>>,
@@ -1084,18 +1084,21 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     if !root {
         training = resolve_scenes(gpu, &config.training, &config.render, &mut *on_render)?;
     }
-    let (mut features, variances) = common_terminals(&training)?;
+    let (mut features, mut variances) = common_terminals(&training)?;
     if let Some(names) = &config.features {
-        let mut allowed = BTreeSet::new();
+        let (mut allowed, mut allowed_variances) = (BTreeSet::new(), BTreeSet::new());
         for name in names {
-            let f =
-                Feature::from_name(name).with_context(|| format!("--features names `{name}`, which is no feature"))?;
-            if !features.contains(&f) {
+            let provided = match (Feature::from_name(name), ScalarVar::from_name(name)) {
+                (Some(f), _) => features.contains(&f) && allowed.insert(f),
+                (None, Some(v)) => variances.contains(&v) && allowed_variances.insert(v),
+                (None, None) => bail!("--features names `{name}`, which is no feature or variance"),
+            };
+            if !provided {
                 bail!("--features names `{name}`, which the training scenes do not all provide");
             }
-            allowed.insert(f);
         }
         features.retain(|f| allowed.contains(f));
+        variances.retain(|v| allowed_variances.contains(v));
     }
     let seed_expr = crate::lang::parse_expr(&config.seed_expr).map_err(|e| anyhow::anyhow!("seed expression:\n{e}"))?;
     for f in seed_expr.features() {

@@ -369,11 +369,12 @@ struct EvolveArgs {
     /// scored on whole images at the end [default: whole images].
     #[arg(long, value_name = "COUNTxSIZE")]
     fitness_tiles: Option<filterjit::fitness_tiles::TileSampling>,
-    /// The only features the search may read, e.g. `color,pixel,normal,texture,worldPosition,depth`
-    /// for filters meant for Mitsuba renders (which have no direct illumination or secondary
-    /// albedo) [default: every feature the training scenes provide]. Kept in the checkpoint.
-    #[arg(long, value_delimiter = ',', value_parser = parse_feature)]
-    features: Vec<lang::Feature>,
+    /// The only features and variances the search may read, e.g.
+    /// `color,pixel,normal,texture,worldPosition,depth` for filters meant for
+    /// Mitsuba renders (no direct illumination, secondary albedo or per-feature
+    /// variances) [default: every one the training scenes provide]. Kept in the checkpoint.
+    #[arg(long, value_delimiter = ',', value_parser = parse_terminal)]
+    features: Vec<String>,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
     fuse: filterjit::evolve::Fusion,
@@ -727,11 +728,15 @@ fn filter(
     Ok(())
 }
 
-fn parse_feature(text: &str) -> Result<lang::Feature, String> {
-    lang::Feature::from_name(text).ok_or_else(|| {
-        let names: Vec<&str> = lang::Feature::ALL.iter().map(|f| f.name()).collect();
-        format!("`{text}` is no feature; the features are {}", names.join(", "))
-    })
+/// A feature's or a variance's name, as expressions write it.
+fn parse_terminal(text: &str) -> Result<String, String> {
+    if lang::Feature::from_name(text).is_some() || lang::ScalarVar::from_name(text).is_some() {
+        return Ok(text.to_string());
+    }
+    let features = lang::Feature::ALL.iter().map(|f| f.name());
+    let variances = lang::ScalarVar::ALL.iter().filter(|v| **v != lang::ScalarVar::Level).map(|v| v.name());
+    let names: Vec<&str> = features.chain(variances).collect();
+    Err(format!("`{text}` is no feature or variance; they are {}", names.join(", ")))
 }
 
 fn parse_size(text: &str) -> Result<(u32, u32), String> {
@@ -894,7 +899,7 @@ fn evolve_on(
             None => filterjit::cost::CostModel::table(),
         },
         fitness_tiles: args.fitness_tiles,
-        features: (!args.features.is_empty()).then(|| args.features.iter().map(|f| f.name().to_string()).collect()),
+        features: (!args.features.is_empty()).then(|| args.features.iter().cloned().collect()),
     };
     let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {

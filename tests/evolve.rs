@@ -502,8 +502,10 @@ fn the_search_reads_only_the_features_it_is_given() {
     run(&dir, Settings { generations: 2, ..small() }, config.clone(), false, None).expect("finished");
     let checkpoint = evolve::read_checkpoint(&dir).unwrap();
     for m in checkpoint.state.islands.iter().flatten() {
-        let read = parse_expr(&m.expr).unwrap().features();
+        let e = parse_expr(&m.expr).unwrap();
+        let read = e.features();
         assert!(read.is_subset(&allowed), "`{}` reads {read:?}", m.expr);
+        assert!(e.stored_variables().is_empty(), "`{}` reads a variance none was given", m.expr);
     }
     // The Mitsuba sample has no direct-illumination channel.
     let sample = mitsuba_sample();
