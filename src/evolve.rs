@@ -398,9 +398,16 @@ fn rescore(whole: &mut GpuEvaluator<'_>, hall: &[(usize, gp::StoredMember)]) -> 
 
 /// relMSE of a scene's noisy input against its reference, over `region` (all of it when `None`).
 fn noisy_relmse(scene: &Scene, region: Option<crate::gpu::Region>) -> f64 {
-    let inside = region.map(|r| scene.crop(r.x as usize, r.y as usize, r.width as usize, r.height as usize));
-    let scene = inside.as_ref().unwrap_or(scene);
-    metrics::errors(&scene.color, scene.reference.as_ref().expect("fitness scenes have references"), scene.spp).relmse
+    let reference = scene.reference.as_ref().expect("fitness scenes have references");
+    let Some(r) = region else { return metrics::errors(&scene.color, reference, scene.spp).relmse };
+    // Only the two images the error reads, not a crop of every feature.
+    let inside = |image: &[[f32; 3]]| -> Vec<[f32; 3]> {
+        let (x, width) = (r.x as usize, r.width as usize);
+        (r.y as usize..(r.y + r.height) as usize)
+            .flat_map(|row| image[row * scene.width + x..row * scene.width + x + width].iter().copied())
+            .collect()
+    };
+    metrics::errors(&inside(&scene.color), &inside(reference), scene.spp).relmse
 }
 
 /// The thesis's fitness (section 3.2.3): the mean over scenes of relMSE /
