@@ -9,6 +9,8 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::datasets;
+use crate::fitness_rule::{FitnessRule, Pool};
 use crate::fitness_tiles::{self, TileSampling};
 use crate::gp::transport::{InProcess, Transport};
 use crate::gp::{self, EvalTime, Evaluator, Fitness, Settings, State};
@@ -17,7 +19,7 @@ use crate::jit::{self, KernelKind};
 use crate::lang::{Expr, Feature, ScalarVar};
 use crate::pipeline::FilterPipeline;
 use crate::render::{self, RenderSettings};
-use crate::scene::{self, Request, Scene};
+use crate::scene::Scene;
 use crate::{metrics, semantics};
 
 /// For each tile, the scene it was cut from and how many pixels it counts.
@@ -41,6 +43,10 @@ pub struct GpuEvaluator<'g> {
     /// relMSE of each scene's noisy input (over its tiles' interiors, with
     /// tiles): fitness divides by it (thesis 3.2.3).
     noisy: Vec<f64>,
+    /// What each scene's relMSE is divided by before the scenes are pooled:
+    /// `noisy`, or a baseline's relMSE on the same pixels ([`FitnessRule`]).
+    divisors: Vec<f64>,
+    pool: Pool,
     radius: u32,
     /// The pipeline around every kernel; the scenes' buffers are prepared for it.
     pipeline: FilterPipeline,
@@ -141,7 +147,7 @@ impl<'g> GpuEvaluator<'g> {
             device_scenes.push(on_device);
         }
         // The noisy input's relMSE over exactly the pixels that count, pooled as errors are (`pooled`).
-        let noisy = match &pooling {
+        let noisy: Vec<f64> = match &pooling {
             None => scored.iter().map(|s| noisy_relmse(s, None)).collect(),
             Some(pooling) => {
                 let mut sums = vec![(0.0f64, 0.0f64); scenes.len()];
@@ -159,7 +165,9 @@ impl<'g> GpuEvaluator<'g> {
             tiles,
             pooling,
             device_scenes,
+            divisors: noisy.clone(),
             noisy,
+            pool: Pool::Mean,
             radius,
             pipeline,
             threads,
@@ -176,6 +184,39 @@ impl<'g> GpuEvaluator<'g> {
     /// Lower fitness kernels with workgroup tiles or without.
     pub fn set_tiles(&mut self, on: bool) {
         self.options.tile_radius = on.then_some(self.radius);
+    }
+
+    /// Score candidates by `rule`; a baseline is scored here, once, on the
+    /// same pixels and through the same pipeline as every candidate.
+    pub fn set_fitness_rule(&mut self, rule: &FitnessRule) -> Result<()> {
+        self.pool = rule.pool;
+        self.divisors = match &rule.relative_to {
+            None => self.noisy.clone(),
+            Some(text) => {
+                let baseline = crate::lang::parse_expr(text).map_err(|e| anyhow::anyhow!("fitness baseline:\n{e}"))?;
+                let scored = self.errors(std::slice::from_ref(&baseline))?.pop().expect("one result");
+                let per_scene = scored.map_err(|reason| anyhow::anyhow!("the fitness baseline `{text}` {reason}"))?;
+                let flags = domain_flags(&per_scene);
+                if flags != 0 {
+                    bail!(
+                        "the fitness baseline `{text}` raises domain errors: {}",
+                        semantics::flag::describe(flags).join("; ")
+                    );
+                }
+                if let Some((scene, _)) =
+                    self.scenes.iter().zip(&per_scene).find(|(_, e)| !e.finite || !e.relmse.is_finite())
+                {
+                    bail!("the fitness baseline `{text}` has no finite error on scene `{}`", scene.name);
+                }
+                per_scene.iter().map(|e| e.relmse).collect()
+            }
+        };
+        Ok(())
+    }
+
+    /// What each scene's relMSE is divided by in the fitness.
+    pub fn divisors(&self) -> &[f64] {
+        &self.divisors
     }
 
     /// The weights each candidate's modelled cost is computed with.
@@ -253,8 +294,10 @@ impl<'g> GpuEvaluator<'g> {
                             let primed = start.elapsed();
                             Ok((primed, device.evaluate_fitness(part, scenes, data, radius)?))
                         });
-                        // Each generation's kernels are new: the memo keeps their fitness, not their pipelines.
-                        device.prune_pipelines(|_| false);
+                        // Each generation's kernels are new: the memo keeps their fitness, not
+                        // their pipelines. Only this batch's go; what others cached on a shared device stays.
+                        let batch: BTreeSet<jit::KernelKey> = part.iter().map(|k| k.key()).collect();
+                        device.prune_pipelines(|key| !batch.contains(key));
                         out
                     })
                 })
@@ -413,8 +456,7 @@ fn noisy_relmse(scene: &Scene, region: Option<crate::gpu::Region>) -> f64 {
 /// The thesis's fitness (section 3.2.3): the mean over scenes of relMSE /
 /// the noisy input's relMSE. Training fitness and test results both use it.
 pub fn normalised_error(per_scene: &[crate::gpu::FitnessError], noisy: &[f64]) -> f64 {
-    per_scene.iter().zip(noisy).map(|(e, n)| metrics::normalised(e.relmse, *n)).sum::<f64>()
-        / per_scene.len().max(1) as f64
+    Pool::Mean.combine(per_scene.iter().map(|e| e.relmse), noisy)
 }
 
 /// Every domain-error bit raised on any scene.
@@ -458,80 +500,8 @@ impl GpuEvaluator<'_> {
         if per_scene.iter().any(|e| !e.finite || !e.relmse.is_finite()) {
             return Fitness::invalid("non-finite error");
         }
-        Fitness::valid(normalised_error(per_scene, &self.noisy))
+        Fitness::valid(self.pool.combine(per_scene.iter().map(|e| e.relmse), &self.divisors))
     }
-}
-
-/// Where scenes come from: built-in names, .toml descriptions, or dataset directories/files.
-pub fn resolve_scenes(
-    gpu: &Gpu,
-    args: &[String],
-    settings: &RenderSettings,
-    progress: render::Progress<'_>,
-) -> Result<Vec<PathBuf>> {
-    let mut out = Vec::new();
-    for arg in args {
-        let path = Path::new(arg);
-        let is_dataset = path.is_dir() || path.extension().is_some_and(|e| e == "exr");
-        if path.is_dir() && !scene::is_dataset_dir(path) {
-            // A folder of datasets: each subfolder that is one, in name order.
-            let inside = scene::datasets_in(path)?;
-            if inside.is_empty() {
-                bail!(
-                    "{} is neither a dataset (it has no {}) nor a folder of datasets (no subfolder has one)",
-                    path.display(),
-                    scene::NOISY_FILE
-                );
-            }
-            out.extend(inside);
-        } else if is_dataset {
-            out.push(path.to_path_buf());
-        } else {
-            let d = render::describe(arg)?;
-            out.push(render::cached(gpu, &render::cache_root(), &d, settings, &mut *progress)?);
-        }
-    }
-    Ok(out)
-}
-
-/// Features and variances every one of the datasets provides.
-pub fn common_terminals(datasets: &[PathBuf]) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>)> {
-    let mut features: Option<BTreeSet<Feature>> = None;
-    let mut variances: Option<BTreeSet<ScalarVar>> = None;
-    for d in datasets {
-        let (f, v) = scene::provides(d).with_context(|| format!("reading {}", d.display()))?;
-        features = Some(match features {
-            Some(all) => all.intersection(&f).copied().collect(),
-            None => f,
-        });
-        variances = Some(match variances {
-            Some(all) => all.intersection(&v).copied().collect(),
-            None => v,
-        });
-    }
-    Ok((features.unwrap_or_default(), variances.unwrap_or_default()))
-}
-
-/// Load the datasets with `features` and `variances`, and the raw albedo when `pipeline` demodulates.
-pub fn load_all(
-    datasets: &[PathBuf],
-    features: &BTreeSet<Feature>,
-    variances: &BTreeSet<ScalarVar>,
-    pipeline: &FilterPipeline,
-) -> Result<Vec<Scene>> {
-    datasets
-        .iter()
-        .map(|d| {
-            let request = Request {
-                features: features.clone(),
-                variances: variances.clone(),
-                reference: true,
-                albedo: pipeline.demodulate,
-                ..Default::default()
-            };
-            scene::load(d, &request).with_context(|| format!("loading {}", d.display()))
-        })
-        .collect()
 }
 
 /// The checkpoint file: the state after a generation, and what produced it.
@@ -568,14 +538,34 @@ pub struct RunConfig {
     /// By name, as written in expressions.
     #[serde(default)]
     pub features: Option<BTreeSet<String>>,
+    /// How per-scene errors become the training fitness (runs made before
+    /// it existed: the thesis's mean of relMSE / noisy relMSE).
+    #[serde(default)]
+    pub fitness: FitnessRule,
 }
 
 impl RunConfig {
     /// What the training fitness in the log and the hall of fame is measured on.
     pub fn scored_on(&self) -> String {
         match self.fitness_tiles {
-            None => "whole training images".into(),
-            Some(t) => format!("{} tiles of {}x{} pixels per training scene", t.count, t.size, t.size),
+            None => self.scored_on_whole_images(),
+            Some(t) => {
+                format!("{} tiles of {}x{} pixels per training scene{}", t.count, t.size, t.size, self.rule_note())
+            }
+        }
+    }
+
+    /// What the hall of fame's rescoring is measured on.
+    pub fn scored_on_whole_images(&self) -> String {
+        format!("whole training images{}", self.rule_note())
+    }
+
+    /// The fitness rule where it is not the thesis's.
+    fn rule_note(&self) -> String {
+        if self.fitness.is_thesis() {
+            String::new()
+        } else {
+            format!("; {}", self.fitness.describe())
         }
     }
 }
@@ -653,11 +643,13 @@ pub fn hall_of_fame_text(
     state: &State,
     k: usize,
     pipeline: &FilterPipeline,
+    rule: &FitnessRule,
     front: &[gp::StoredMember],
     rescored: &[Rescored],
 ) -> String {
     let mut text = String::from("# filterjit hall of fame: the best expressions of every island, best first.\n# Use one with `filterjit filter --expr @hall_of_fame.txt:NAME` (the first without :NAME);\n# it is filtered through the pipeline it was scored with:\n");
     text.push_str(&format!("{} {pipeline}\n", crate::corpus::PIPELINE_PREFIX));
+    text.push_str(&format!("# fitness: {}\n", rule.describe()));
     if !rescored.is_empty() {
         text.push_str("# The search scored fitness on tiles; `fitness` below is on the whole training images.\n");
     }
@@ -933,6 +925,8 @@ pub struct RunOptions<'a> {
     pub tiles: Tiles,
     /// How many individuals each fitness kernel scores (identical results).
     pub fusion: Fusion,
+    /// Where built-in and .toml scenes are rendered to and found again.
+    pub cache: PathBuf,
 }
 
 /// When fitness kernels get workgroup tiles.
@@ -1075,6 +1069,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         baselines,
         tiles,
         fusion,
+        cache,
     } = options;
     settings.check().map_err(anyhow::Error::msg)?;
     let root = transport.is_root();
@@ -1085,13 +1080,13 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     // find them there (or, on a node that does not share it, render their own).
     let mut training = Vec::new();
     if root {
-        training = resolve_scenes(gpu, &config.training, &config.render, &mut *on_render)?;
+        training = datasets::resolve(gpu, &config.training, &config.render, &cache, &mut *on_render)?;
     }
     transport.barrier();
     if !root {
-        training = resolve_scenes(gpu, &config.training, &config.render, &mut *on_render)?;
+        training = datasets::resolve(gpu, &config.training, &config.render, &cache, &mut *on_render)?;
     }
-    let (mut features, mut variances) = common_terminals(&training)?;
+    let (mut features, mut variances) = datasets::common_terminals(&training)?;
     if let Some(names) = &config.features {
         let (mut allowed, mut allowed_variances) = (BTreeSet::new(), BTreeSet::new());
         for name in names {
@@ -1113,7 +1108,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
             bail!("the seed expression reads `{f}`, which the training scenes do not all provide");
         }
     }
-    let scenes = load_all(&training, &features, &variances, &config.pipeline)?;
+    let scenes = datasets::load_all(&training, &features, &variances, &config.pipeline)?;
     let mut evaluator = match config.fitness_tiles {
         None => GpuEvaluator::for_pipeline(gpu, scenes, config.radius, config.pipeline, threads)?,
         Some(sampling) => {
@@ -1123,6 +1118,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     evaluator.set_cost_model(config.cost_model.clone());
     evaluator.set_tiles(tiles.enabled(gpu));
     evaluator.set_fusion(fusion);
+    evaluator.set_fitness_rule(&config.fitness)?;
     // `level` (the à-trous pass) is a terminal where there are passes: a filter may change with scale.
     let level = config.pipeline.is_atrous().then_some(ScalarVar::Level);
     let terminals = gp::operators::Terminals {
@@ -1183,12 +1179,13 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         whole.set_cost_model(config.cost_model.clone());
         whole.set_tiles(tiles.enabled(gpu));
         whole.set_fusion(fusion);
+        whole.set_fitness_rule(&config.fitness)?;
         let rescored = rescore(&mut whole, &gp::hall_of_fame(&state, settings.hall_of_fame))?;
         append_log_line(
             &output,
             &serde_json::json!({
                 "generation": state.generation,
-                "scored_on": "whole training images",
+                "scored_on": config.scored_on_whole_images(),
                 "rescored_hall_of_fame": rescored,
             }),
         )?;
@@ -1201,7 +1198,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         gp::Objectives::Error => Vec::new(),
         gp::Objectives::ErrorCost => gp::pareto_front(&state),
     };
-    let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline, &front, &rescored);
+    let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline, &config.fitness, &front, &rescored);
     crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes()).map_err(anyhow::Error::msg)?;
     let frequencies = gp::feature_frequencies(&state);
     crate::io::write_bytes_atomically(
@@ -1223,8 +1220,8 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
             .expect("a non-empty population"),
     };
 
-    let test_sets = resolve_scenes(gpu, &config.test, &config.render, &mut *on_render)?;
-    let test_scenes = load_all(&test_sets, &features, &variances, &config.pipeline)?;
+    let test_sets = datasets::resolve(gpu, &config.test, &config.render, &cache, &mut *on_render)?;
+    let test_scenes = datasets::load_all(&test_sets, &features, &variances, &config.pipeline)?;
     let names = test_scenes.iter().map(|s| s.name.clone()).collect();
     let mut tester = GpuEvaluator::for_pipeline(gpu, test_scenes, config.radius, config.pipeline, threads)?;
     let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;

@@ -8,9 +8,10 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Parser, Subcommand};
 
+use filterjit::environment::Environment;
 use filterjit::metrics::{self, Errors};
 use filterjit::scene::{self, Absent, Request};
-use filterjit::{corpus, cpu, gpu, jit, lang, preview, render, semantics};
+use filterjit::{corpus, cpu, datasets, gpu, jit, lang, preview, render, semantics};
 
 #[derive(Parser)]
 #[command(
@@ -375,6 +376,17 @@ struct EvolveArgs {
     /// variances) [default: every one the training scenes provide]. Kept in the checkpoint.
     #[arg(long, value_delimiter = ',', value_parser = parse_terminal)]
     features: Vec<String>,
+    /// Divide each training scene's relMSE by this filter's relMSE on it
+    /// (an expression, `@NAME` or `@FILE:NAME`; scored once, through the run's
+    /// pipeline, on the same pixels) instead of by the noisy input's: fitness 1
+    /// is the baseline's [default: the noisy input, the thesis's rule]. Kept in the checkpoint.
+    #[arg(long, value_name = "EXPR")]
+    fitness_relative_to: Option<String>,
+    /// Pool the per-scene ratios by their mean or by the worst scene (with
+    /// `--fitness-relative-to`, a fitness below 1 is then better than the
+    /// baseline on every training scene). Kept in the checkpoint.
+    #[arg(long, default_value = "mean", value_name = "mean|worst")]
+    fitness_pool: filterjit::fitness_rule::Pool,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
     fuse: filterjit::evolve::Fusion,
@@ -416,6 +428,7 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<()> {
+    let env = &Environment::read()?;
     match cli.command {
         Command::Compile { expr, output, pipeline } => {
             let resolved = corpus::resolve_with_pipeline(&expr)?;
@@ -520,17 +533,17 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Filter { expr, radius, scene, output, reference, spp, absent, cpu_check, pipeline } => {
-            filter(&expr, radius, &scene, &output, reference, spp, absent, cpu_check, pipeline)
+            filter(env, &expr, radius, &scene, &output, reference, spp, absent, cpu_check, pipeline)
         }
         Command::Render { scene, spp, reference_spp, size, seed, output } => {
-            render(&scene, spp, reference_spp, size, seed, output.as_deref())
+            render(env, &scene, spp, reference_spp, size, seed, output.as_deref())
         }
-        Command::Evolve(args) => evolve(*args),
-        Command::Report(args) => report(*args),
+        Command::Evolve(args) => evolve(env, *args),
+        Command::Report(args) => report(env, *args),
         Command::Tune(args) => {
-            let gpu = gpu::Gpu::open()?;
+            let gpu = gpu::Gpu::open(&env.adapter)?;
             let context = scene_context(&args.scene)?;
-            let tuned = tune_baseline(&gpu, &args.scene, &context)?;
+            let tuned = tune_baseline(&gpu, env, &args.scene, &context)?;
             println!("crossBilateralTuned = {}", tuned.expr);
             if let Some(path) = &args.output {
                 let text = format!(
@@ -570,7 +583,7 @@ fn run(cli: Cli) -> Result<()> {
                 seed: 0,
                 fusion: fuse,
             };
-            bench(size, &settings, &output)
+            bench(env, size, &settings, &output)
         }
         Command::Scenes => {
             for (name, _) in render::BUILTIN {
@@ -589,7 +602,7 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Adapters => {
-            let backends = gpu::adapter::requested_backends()?;
+            let backends = env.adapter.backends;
             let adapters = gpu::adapter::available(backends, true);
             if adapters.is_empty() {
                 bail!(gpu::GpuError::NoAdapter { backends: format!("{backends:?}") });
@@ -605,7 +618,7 @@ fn run(cli: Cli) -> Result<()> {
                     info.driver_info
                 );
             }
-            println!("* = the best; filterjit uses it unless {} names another", gpu::adapter::ADAPTER_ENV);
+            println!("* = the best; filterjit uses it unless {} names another", filterjit::environment::ADAPTER);
             Ok(())
         }
     }
@@ -618,6 +631,7 @@ fn resolve_expr(arg: &str) -> Result<lang::Expr> {
 
 #[allow(clippy::too_many_arguments)]
 fn filter(
+    env: &Environment,
     expr: &str,
     radius: Option<u32>,
     scene_path: &Path,
@@ -647,7 +661,7 @@ fn filter(
     let shape = jit::Shape::of(&pipeline);
     let kernel = jit::compile_shaped(&expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
     let lower_validate = compile_start.elapsed();
-    let gpu = gpu::Gpu::open()?;
+    let gpu = gpu::Gpu::open(&env.adapter)?;
     let prepass_start = Instant::now();
     let mut buffers = gpu::SceneBuffers::for_pipeline(&gpu, &scene, &pipeline)?;
     let prepass_time = prepass_start.elapsed();
@@ -760,10 +774,18 @@ fn sample_bar(label: &str) -> indicatif::ProgressBar {
     bar
 }
 
-fn render(scene: &str, spp: u32, reference_spp: u32, size: (u32, u32), seed: u32, output: Option<&Path>) -> Result<()> {
+fn render(
+    env: &Environment,
+    scene: &str,
+    spp: u32,
+    reference_spp: u32,
+    size: (u32, u32),
+    seed: u32,
+    output: Option<&Path>,
+) -> Result<()> {
     let d = render::describe(scene)?;
     let settings = render::RenderSettings { width: size.0, height: size.1, spp, reference_spp, seed };
-    let gpu = gpu::Gpu::open()?;
+    let gpu = gpu::Gpu::open(&env.adapter)?;
     let bar = sample_bar(&d.name);
     let mut progress = |done: u64, total: u64| {
         bar.set_length(total);
@@ -775,7 +797,7 @@ fn render(scene: &str, spp: u32, reference_spp: u32, size: (u32, u32), seed: u32
             rendered.write(dir, &d, &settings)?;
             dir.to_path_buf()
         }
-        None => render::cached(&gpu, &render::cache_root(), &d, &settings, &mut progress)?,
+        None => render::cached(&gpu, &env.cache, &d, &settings, &mut progress)?,
     };
     bar.finish_and_clear();
     let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join(scene::META_FILE))?)?;
@@ -803,7 +825,7 @@ fn launched_ranks() -> usize {
     ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"].iter().find_map(|v| std::env::var(v).ok()?.parse().ok()).unwrap_or(1)
 }
 
-fn evolve(args: EvolveArgs) -> Result<()> {
+fn evolve(env: &Environment, args: EvolveArgs) -> Result<()> {
     let launched = launched_ranks();
     if !args.mpi {
         if launched > 1 {
@@ -813,7 +835,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
             );
         }
         let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
-        return evolve_on(args, &mut filterjit::gp::transport::InProcess, 0, cores);
+        return evolve_on(env, args, &mut filterjit::gp::transport::InProcess, 0, cores);
     }
     #[cfg(feature = "mpi")]
     {
@@ -822,7 +844,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
         // Ranks on one node share its cores (software adapters compile on them) and its GPUs.
         let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
         let (node_rank, threads) = (mpi.node_rank(), (cores / mpi.node_ranks()).max(1));
-        let result = evolve_on(args, &mut mpi, node_rank, threads);
+        let result = evolve_on(env, args, &mut mpi, node_rank, threads);
         if let Err(e) = &result {
             if mpi.ranks() > 1 {
                 // The other ranks would wait for this one forever.
@@ -842,6 +864,7 @@ fn evolve(args: EvolveArgs) -> Result<()> {
 /// `evolve` as one of the processes `transport` reaches: the `node_rank`-th
 /// on its machine, with `cores` cores to itself. Only the root prints.
 fn evolve_on(
+    env: &Environment,
     args: EvolveArgs,
     transport: &mut dyn filterjit::gp::transport::Transport,
     node_rank: usize,
@@ -900,6 +923,10 @@ fn evolve_on(
         },
         fitness_tiles: args.fitness_tiles,
         features: (!args.features.is_empty()).then(|| args.features.iter().cloned().collect()),
+        fitness: filterjit::fitness_rule::FitnessRule {
+            relative_to: args.fitness_relative_to.as_deref().map(resolve_expr).transpose()?.map(|e| e.to_string()),
+            pool: args.fitness_pool,
+        },
     };
     let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {
@@ -917,7 +944,7 @@ fn evolve_on(
             dir
         }
     };
-    let gpu = gpu::Gpu::open_for(node_rank)?;
+    let gpu = gpu::Gpu::open_for(&env.adapter, node_rank)?;
     let islands = filterjit::gp::transport::share(settings.islands, transport.rank(), transport.ranks());
     if transport.ranks() > 1 {
         // One line per rank: where its islands run.
@@ -932,7 +959,7 @@ fn evolve_on(
     }
     if root {
         eprintln!(
-            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{}{}, {} per fitness kernel, on {}{}",
+            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{}{}, {} per fitness kernel, on {}{}{}",
             settings.islands,
             settings.island_size,
             settings.generations,
@@ -954,6 +981,10 @@ fn evolve_on(
             match transport.ranks() {
                 1 => String::new(),
                 n => format!(" (rank 0 of {n} MPI ranks)"),
+            },
+            match config.fitness.is_thesis() {
+                true => String::new(),
+                false => format!("\nfitness   {}", config.fitness.describe()),
             }
         );
     }
@@ -999,6 +1030,7 @@ fn evolve_on(
             baselines: args.baseline.iter().map(|b| resolve_expr(b)).collect::<Result<_>>()?,
             tiles: args.tiles,
             fusion: args.fuse,
+            cache: env.cache.clone(),
         },
         transport,
     )?;
@@ -1066,12 +1098,12 @@ fn evolve_on(
     Ok(())
 }
 
-fn bench(size: (u32, u32), settings: &filterjit::bench::BenchSettings, output: &Path) -> Result<()> {
-    let gpu = gpu::Gpu::open()?;
+fn bench(env: &Environment, size: (u32, u32), settings: &filterjit::bench::BenchSettings, output: &Path) -> Result<()> {
+    let gpu = gpu::Gpu::open(&env.adapter)?;
     let scene_at = |gpu: &gpu::Gpu, w: u32, h: u32| -> Result<filterjit::Scene> {
         let d = render::builtin("glossy-floor").expect("built in")?;
         let rs = render::RenderSettings { width: w, height: h, spp: 4, reference_spp: 64, seed: 0 };
-        let dir = render::cached(gpu, &render::cache_root(), &d, &rs, &mut |_, _| {})?;
+        let dir = render::cached(gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
         let request = scene::Request {
             features: lang::Feature::ALL.iter().copied().collect(),
             variances: lang::ScalarVar::ALL.iter().copied().collect(),
@@ -1166,11 +1198,16 @@ fn render_progress() -> impl FnMut(u64, u64) {
     }
 }
 
-fn tune_baseline(gpu: &gpu::Gpu, args: &SceneArgs, context: &SceneContext) -> Result<filterjit::tune::Tuned> {
+fn tune_baseline(
+    gpu: &gpu::Gpu,
+    env: &Environment,
+    args: &SceneArgs,
+    context: &SceneContext,
+) -> Result<filterjit::tune::Tuned> {
     use filterjit::evolve as ev;
-    let datasets = ev::resolve_scenes(gpu, &context.training, &context.render, &mut render_progress())?;
-    let (features, variances) = ev::common_terminals(&datasets)?;
-    let scenes = ev::load_all(&datasets, &features, &variances, &context.pipeline)?;
+    let datasets = datasets::resolve(gpu, &context.training, &context.render, &env.cache, &mut render_progress())?;
+    let (features, variances) = datasets::common_terminals(&datasets)?;
+    let scenes = datasets::load_all(&datasets, &features, &variances, &context.pipeline)?;
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
     let mut evaluator = ev::GpuEvaluator::for_pipeline(gpu, scenes, context.radius, context.pipeline, threads)?;
     eprintln!(
@@ -1194,10 +1231,10 @@ fn tune_baseline(gpu: &gpu::Gpu, args: &SceneArgs, context: &SceneContext) -> Re
     Ok(tuned)
 }
 
-fn report(args: ReportArgs) -> Result<()> {
+fn report(env: &Environment, args: ReportArgs) -> Result<()> {
     use filterjit::report::{self, Method, Origin};
     let context = scene_context(&args.scene)?;
-    let gpu = gpu::Gpu::open()?;
+    let gpu = gpu::Gpu::open(&env.adapter)?;
     let mut methods = Vec::new();
     // Every filter runs through the pipeline it was stored with, else the run's (or --pipeline).
     let (baseline_name, baseline_expr, baseline_pipeline, tuned) = match &args.baseline {
@@ -1207,7 +1244,7 @@ fn report(args: ReportArgs) -> Result<()> {
             (resolved.name.unwrap_or_else(|| "baseline".into()), resolved.expr, pipeline, None)
         }
         None => {
-            let tuned = tune_baseline(&gpu, &args.scene, &context)?;
+            let tuned = tune_baseline(&gpu, env, &args.scene, &context)?;
             let expr = lang::parse_expr(&tuned.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
             ("crossBilateral (tuned)".to_string(), expr, context.pipeline, Some(tuned))
         }
@@ -1277,14 +1314,14 @@ fn report(args: ReportArgs) -> Result<()> {
         }
     }
     let scene_names = if args.scenes.is_empty() { context.test.clone() } else { args.scenes.clone() };
-    let datasets = filterjit::evolve::resolve_scenes(&gpu, &scene_names, &context.render, &mut render_progress())?;
+    let datasets = datasets::resolve(&gpu, &scene_names, &context.render, &env.cache, &mut render_progress())?;
     let settings = report::Settings {
         radius: context.radius,
         repeats: args.repeats,
         crop: args.crop,
         timing_size: args.timing_size,
     };
-    let oidn = match (args.no_oidn, report::oidn::Oidn::find()) {
+    let oidn = match (args.no_oidn, report::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref())) {
         (true, _) => None,
         (false, Ok(oidn)) => {
             eprintln!("peer      Intel Open Image Denoise: {}", oidn.program.display());

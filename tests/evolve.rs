@@ -56,6 +56,7 @@ pub(crate) fn config(training: &Path, test: &Path) -> RunConfig {
         cost_model: Default::default(),
         fitness_tiles: None,
         features: None,
+        fitness: Default::default(),
     }
 }
 
@@ -94,6 +95,7 @@ fn try_run(
             baselines: Vec::new(),
             tiles,
             fusion,
+            cache: crate::common::environment().cache.clone(),
         },
     )
 }
@@ -199,7 +201,7 @@ fn the_hall_of_fame_reads_back_through_the_grammar() {
 #[test]
 fn the_terminal_set_is_what_the_training_scenes_provide() {
     let sample = mitsuba_sample();
-    let (features, variances) = evolve::common_terminals(std::slice::from_ref(&sample)).unwrap();
+    let (features, variances) = filterjit::datasets::common_terminals(std::slice::from_ref(&sample)).unwrap();
     assert!(!features.contains(&Feature::SecondaryTexture) && !features.contains(&Feature::DirectIllumination));
     assert!(features.contains(&Feature::Normal) && features.contains(&Feature::WpGradient));
     let dir = temp_dir("mitsuba");
@@ -477,13 +479,25 @@ fn a_folder_of_datasets_is_its_datasets() {
     }
     std::fs::create_dir_all(folder.join("c-not-a-dataset")).unwrap();
     let args = [folder.display().to_string(), training.display().to_string()];
-    let resolved = evolve::resolve_scenes(&gpu, &args, &RenderSettings::default(), &mut |_, _| {}).unwrap();
+    let resolved = filterjit::datasets::resolve(
+        &gpu,
+        &args,
+        &RenderSettings::default(),
+        &crate::common::environment().cache,
+        &mut |_, _| {},
+    )
+    .unwrap();
     assert_eq!(resolved, vec![folder.join("a-training"), folder.join("b-test"), training.clone()]);
     let empty = folder.join("c-not-a-dataset");
-    let error =
-        evolve::resolve_scenes(&gpu, &[empty.display().to_string()], &RenderSettings::default(), &mut |_, _| {})
-            .unwrap_err()
-            .to_string();
+    let error = filterjit::datasets::resolve(
+        &gpu,
+        &[empty.display().to_string()],
+        &RenderSettings::default(),
+        &crate::common::environment().cache,
+        &mut |_, _| {},
+    )
+    .unwrap_err()
+    .to_string();
     assert!(error.contains("c-not-a-dataset") && error.contains("folder of datasets"), "{error}");
 }
 
@@ -519,4 +533,69 @@ fn the_search_reads_only_the_features_it_is_given() {
     let error =
         try_run(&temp_dir("features-missing"), small(), lacking, false, None, tiles, fusion).unwrap_err().to_string();
     assert!(error.contains("--features") && error.contains("directIllumination"), "{error}");
+}
+
+/// `--fitness-relative-to E --fitness-pool worst`: fitness is the largest
+/// ratio over the training scenes of a candidate's relMSE to E's, so the seed
+/// scores exactly 1 when it is E, and the best's figure can be recomputed
+/// from the per-scene errors.
+#[test]
+fn fitness_relative_to_a_baseline_pools_the_worst_scene() {
+    use filterjit::fitness_rule::{FitnessRule, Pool};
+    let (training, test) = datasets();
+    let dir = temp_dir("fitness-rule");
+    let base = config(training, test);
+    let rule = FitnessRule { relative_to: Some(base.seed_expr.clone()), pool: Pool::Worst };
+    let config = RunConfig {
+        training: vec![training.display().to_string(), test.display().to_string()],
+        fitness: rule.clone(),
+        ..base.clone()
+    };
+    let summary = run(&dir, Settings { generations: 2, ..small() }, config.clone(), false, None).expect("finished");
+    assert!(summary.training_scored_on.contains("worst scene"), "{}", summary.training_scored_on);
+    let checkpoint = evolve::read_checkpoint(&dir).unwrap();
+    assert_eq!(checkpoint.run.fitness, rule, "the rule is kept for --resume");
+    let first: serde_json::Value =
+        serde_json::from_str(read(dir.join(evolve::LOG_FILE)).lines().next().unwrap()).unwrap();
+    assert!(first["best"].as_f64().unwrap() <= 1.0, "the seed is in generation 0 and scores 1: {first}");
+    let hall = read(dir.join(evolve::HALL_OF_FAME_FILE));
+    assert!(hall.contains(&format!("# fitness: relMSE / the relMSE of `{}`, worst scene", base.seed_expr)), "{hall}");
+
+    // The same figure from the per-scene errors.
+    let gpu = gpu();
+    let exprs = [parse_expr(&summary.best.expr).unwrap(), parse_expr(&base.seed_expr).unwrap()];
+    let request = scene::Request {
+        features: exprs.iter().flat_map(|e| e.features()).collect(),
+        variances: exprs.iter().flat_map(|e| e.stored_variables()).collect(),
+        reference: true,
+        ..Default::default()
+    };
+    let scenes: Vec<_> = [training, test].iter().map(|d| scene::load(d, &request).unwrap()).collect();
+    let mut evaluator = GpuEvaluator::new(&gpu, scenes, base.radius, 2).unwrap();
+    let errors = evaluator.errors(&exprs).unwrap();
+    let (best, seed) = (errors[0].as_ref().unwrap(), errors[1].as_ref().unwrap());
+    let worst = best.iter().zip(seed).map(|(b, s)| b.relmse / s.relmse).fold(0.0, f64::max);
+    assert!((summary.best.fitness.value - worst).abs() <= 1e-12 * worst, "{} vs {worst}", summary.best.fitness.value);
+    evaluator.set_fitness_rule(&rule).unwrap();
+    let seed = filterjit::gp::Candidate { expr: exprs[1].clone(), radius: None };
+    assert_eq!(evaluator.evaluate(&[seed]).unwrap()[0].value, 1.0, "the baseline itself scores 1");
+}
+
+/// Scoring drops the pipelines of the kernels it compiled (each generation's
+/// are new), not what other users of a shared device cached.
+#[test]
+fn scoring_leaves_what_others_cached_on_a_shared_device() {
+    use filterjit::{gpu::Gpu, jit, pipeline::FilterPipeline};
+    let (training, _) = datasets();
+    let turn = gpu();
+    let device = Gpu::open_like(&turn).unwrap();
+    let shape = jit::Shape::of(&FilterPipeline::WINDOW);
+    let other = jit::compile_shaped(&parse_expr("1").unwrap(), jit::KernelKind::Filter, jit::LowerOptions::ALL, shape);
+    device.pipeline(&other.unwrap()).unwrap();
+    assert_eq!(device.cached_pipelines(), 1);
+    let expr = parse_expr("exp(-distance2(color))").unwrap();
+    let scenes = vec![scene::load(training, &scene::Request::for_expr(&expr)).unwrap()];
+    let mut evaluator = GpuEvaluator::with_devices(&device, scenes, 2, FilterPipeline::WINDOW, 1, 1).unwrap();
+    assert!(evaluator.errors(&[expr]).unwrap()[0].is_ok());
+    assert_eq!(device.cached_pipelines(), 1, "the filter kernel cached before scoring is still there");
 }

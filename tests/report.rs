@@ -175,7 +175,8 @@ fn the_report_runs_oidn_as_the_peer_through_its_program() {
 /// The real OIDN where it is installed (CI installs `pyoidn`; FILTERJIT_REQUIRE_OIDN=1 makes its absence a failure).
 #[test]
 fn the_real_oidn_denoises_the_mitsuba_sample() {
-    let program = match filterjit::report::oidn::Oidn::find() {
+    let env = crate::common::environment();
+    let program = match filterjit::report::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()) {
         Ok(oidn) => oidn.program,
         Err(why) if std::env::var_os("FILTERJIT_REQUIRE_OIDN").is_some() => panic!("OIDN is required here: {why}"),
         Err(why) => {

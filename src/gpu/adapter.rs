@@ -2,31 +2,40 @@
 //!
 //! Order: a hardware GPU (discrete, then integrated, then virtual), then
 //! software: lavapipe (Vulkan), then llvmpipe (GL through EGL).
-//! `FILTERJIT_BACKEND=vulkan|gl|metal|dx12` restricts the search to one backend;
-//! `FILTERJIT_ADAPTER=text` picks the first adapter whose name contains `text`.
+//! A [`Request`] (from `FILTERJIT_BACKEND=vulkan|gl|metal|dx12` and
+//! `FILTERJIT_ADAPTER=text`, read by [`crate::environment`]) restricts the
+//! search to some backends, or picks the first adapter whose name contains `text`.
 //! MPI ranks on one node take the node's best adapters in turn ([`choose_for`]).
 
 use super::GpuError;
 
-/// Environment variable that forces a backend.
-pub const BACKEND_ENV: &str = "FILTERJIT_BACKEND";
-/// Environment variable that picks an adapter by name.
-pub const ADAPTER_ENV: &str = "FILTERJIT_ADAPTER";
+/// Which adapters the user allows: the backends to search and, optionally,
+/// text the adapter's name must contain. Read from the environment at the
+/// edge ([`crate::environment`]); the default is every native backend.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Request {
+    pub backends: wgpu::Backends,
+    pub name: Option<String>,
+}
 
-/// Backends named by `FILTERJIT_BACKEND`, or every native backend.
-pub fn requested_backends() -> Result<wgpu::Backends, GpuError> {
-    match std::env::var(BACKEND_ENV) {
-        Err(_) => Ok(wgpu::Backends::VULKAN | wgpu::Backends::GL | wgpu::Backends::METAL | wgpu::Backends::DX12),
-        Ok(value) => match value.to_ascii_lowercase().as_str() {
-            "" | "any" | "auto" => {
-                Ok(wgpu::Backends::VULKAN | wgpu::Backends::GL | wgpu::Backends::METAL | wgpu::Backends::DX12)
-            }
-            "vulkan" | "vk" => Ok(wgpu::Backends::VULKAN),
-            "gl" | "gles" | "opengl" | "egl" => Ok(wgpu::Backends::GL),
-            "metal" => Ok(wgpu::Backends::METAL),
-            "dx12" | "d3d12" => Ok(wgpu::Backends::DX12),
-            other => Err(GpuError::BadBackend(other.to_string())),
-        },
+impl Default for Request {
+    fn default() -> Self {
+        Request { backends: ALL_NATIVE, name: None }
+    }
+}
+
+const ALL_NATIVE: wgpu::Backends =
+    wgpu::Backends::VULKAN.union(wgpu::Backends::GL).union(wgpu::Backends::METAL).union(wgpu::Backends::DX12);
+
+/// The backends a backend name (`FILTERJIT_BACKEND`'s value) stands for.
+pub fn backends_named(value: &str) -> Result<wgpu::Backends, GpuError> {
+    match value.to_ascii_lowercase().as_str() {
+        "" | "any" | "auto" => Ok(ALL_NATIVE),
+        "vulkan" | "vk" => Ok(wgpu::Backends::VULKAN),
+        "gl" | "gles" | "opengl" | "egl" => Ok(wgpu::Backends::GL),
+        "metal" => Ok(wgpu::Backends::METAL),
+        "dx12" | "d3d12" => Ok(wgpu::Backends::DX12),
+        other => Err(GpuError::BadBackend(other.to_string())),
     }
 }
 
@@ -73,25 +82,25 @@ pub fn available(backends: wgpu::Backends, all: bool) -> Vec<wgpu::Adapter> {
     adapters
 }
 
-/// Choose the adapter, honouring the environment.
-pub fn choose() -> Result<wgpu::Adapter, GpuError> {
-    choose_for(0)
+/// Choose the adapter `request` allows.
+pub fn choose(request: &Request) -> Result<wgpu::Adapter, GpuError> {
+    choose_for(request, 0)
 }
 
 /// Choose the adapter for the `index`-th process on a machine (an MPI rank's
 /// place on its node): the `index mod n`-th of the n best adapters of the
-/// same kind, so that ranks spread over a node's GPUs. `FILTERJIT_ADAPTER`,
-/// when set, wins for every process.
-pub fn choose_for(index: usize) -> Result<wgpu::Adapter, GpuError> {
-    let backends = requested_backends()?;
-    match std::env::var(ADAPTER_ENV) {
-        Ok(text) if !text.is_empty() => {
+/// same kind, so that ranks spread over a node's GPUs. A name in `request`,
+/// when given, wins for every process.
+pub fn choose_for(request: &Request, index: usize) -> Result<wgpu::Adapter, GpuError> {
+    let backends = request.backends;
+    match &request.name {
+        Some(text) if !text.is_empty() => {
             let adapters = available(backends, true);
             let names: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
             adapters
                 .into_iter()
                 .find(|a| a.get_info().name.to_lowercase().contains(&text.to_lowercase()))
-                .ok_or(GpuError::NoMatchingAdapter { wanted: text, found: names })
+                .ok_or(GpuError::NoMatchingAdapter { wanted: text.clone(), found: names })
         }
         _ => {
             let mut adapters = available(backends, false);

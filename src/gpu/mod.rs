@@ -92,14 +92,14 @@ impl Gpu {
         self.gl_turns.as_ref().map(|m| m.lock().unwrap_or_else(|poisoned| poisoned.into_inner()))
     }
 
-    /// Open the adapter [`adapter::choose`] picks.
-    pub fn open() -> Result<Gpu, GpuError> {
-        Self::from_adapter(adapter::choose()?)
+    /// Open the adapter [`adapter::choose`] picks for `request`.
+    pub fn open(request: &adapter::Request) -> Result<Gpu, GpuError> {
+        Self::from_adapter(adapter::choose(request)?)
     }
 
     /// Open the adapter for the `index`-th process on this machine ([`adapter::choose_for`]).
-    pub fn open_for(index: usize) -> Result<Gpu, GpuError> {
-        Self::from_adapter(adapter::choose_for(index)?)
+    pub fn open_for(request: &adapter::Request, index: usize) -> Result<Gpu, GpuError> {
+        Self::from_adapter(adapter::choose_for(request, index)?)
     }
 
     fn from_adapter(adapter: wgpu::Adapter) -> Result<Gpu, GpuError> {

@@ -347,20 +347,6 @@ impl Rendered {
     }
 }
 
-/// Root of the dataset cache: `$FILTERJIT_CACHE`, else `$XDG_CACHE_HOME/filterjit`, else `~/.cache/filterjit`.
-pub fn cache_root() -> PathBuf {
-    if let Some(dir) = std::env::var_os("FILTERJIT_CACHE") {
-        return PathBuf::from(dir);
-    }
-    if let Some(dir) = std::env::var_os("XDG_CACHE_HOME") {
-        return PathBuf::from(dir).join("filterjit");
-    }
-    match std::env::var_os("HOME") {
-        Some(home) => PathBuf::from(home).join(".cache/filterjit"),
-        None => std::env::temp_dir().join("filterjit-cache"),
-    }
-}
-
 /// The cache directory of a scene rendered with some settings: keyed by the
 /// description's text, the settings and the renderer version.
 pub fn cache_dir(root: &Path, d: &Description, settings: &RenderSettings) -> PathBuf {
@@ -374,7 +360,7 @@ pub fn cache_dir(root: &Path, d: &Description, settings: &RenderSettings) -> Pat
 }
 
 /// The dataset of a scene, rendered now unless the cache under `root`
-/// ([`cache_root`] for the user's cache) has it.
+/// ([`crate::environment::Environment::cache`] for the user's cache) has it.
 pub fn cached(
     gpu: &Gpu,
     root: &Path,

@@ -12,7 +12,7 @@ use anyhow::{bail, Context, Result};
 use crate::scene::Scene;
 
 /// The environment variable naming the `oidnDenoise` program.
-pub const OIDN_ENV: &str = "FILTERJIT_OIDN";
+use crate::environment::OIDN as OIDN_ENV;
 
 /// A found `oidnDenoise`.
 #[derive(Clone, Debug)]
@@ -46,19 +46,19 @@ pub struct Denoised {
 }
 
 impl Oidn {
-    /// `FILTERJIT_OIDN`, else `oidnDenoise` on PATH, else the one the `pyoidn`
-    /// Python package ships (`pyoidn/oidn/bin/`). `Err` says what was tried.
-    pub fn find() -> std::result::Result<Oidn, String> {
-        if let Some(path) = std::env::var_os(OIDN_ENV) {
-            let program = PathBuf::from(path);
+    /// `explicit` (`FILTERJIT_OIDN`), else `oidnDenoise` on `path` (`PATH`),
+    /// else the one the `pyoidn` Python package ships (`pyoidn/oidn/bin/`).
+    /// `Err` says what was tried.
+    pub fn find(explicit: Option<&Path>, path: Option<&std::ffi::OsStr>) -> std::result::Result<Oidn, String> {
+        if let Some(program) = explicit {
             return if program.is_file() {
-                Ok(Oidn { program })
+                Ok(Oidn { program: program.to_path_buf() })
             } else {
                 Err(format!("{OIDN_ENV}={} is not a file", program.display()))
             };
         }
-        if let Some(paths) = std::env::var_os("PATH") {
-            if let Some(program) = std::env::split_paths(&paths).map(|d| d.join("oidnDenoise")).find(|p| p.is_file()) {
+        if let Some(paths) = path {
+            if let Some(program) = std::env::split_paths(paths).map(|d| d.join("oidnDenoise")).find(|p| p.is_file()) {
                 return Ok(Oidn { program });
             }
         }

@@ -50,8 +50,14 @@ impl std::ops::Deref for GpuTurn {
     }
 }
 
+/// The environment as the tests' edge reads it, once.
+pub fn environment() -> &'static filterjit::environment::Environment {
+    static ENV: std::sync::OnceLock<filterjit::environment::Environment> = std::sync::OnceLock::new();
+    ENV.get_or_init(|| filterjit::environment::Environment::read().expect("FILTERJIT_BACKEND names a backend"))
+}
+
 fn open() -> Gpu {
-    match Gpu::open() {
+    match Gpu::open(&environment().adapter) {
         Ok(gpu) => {
             eprintln!("GPU tests run on {}", gpu.describe());
             gpu

@@ -1,0 +1,108 @@
+//! How one candidate's relMSE on each training scene becomes its one training
+//! fitness: each scene's error is divided by a reference error on that scene
+//! and the ratios are pooled over the scenes.
+//!
+//! The thesis (section 3.2.3) divides by the noisy input's relMSE and takes the
+//! mean. A user who wants a filter that beats the one they have on *every*
+//! scene divides by that filter's relMSE instead (`--fitness-relative-to`) and
+//! pools by the worst scene (`--fitness-pool worst`): a fitness below 1 then
+//! means better than the baseline everywhere the search looked.
+
+use serde::{Deserialize, Serialize};
+
+use crate::metrics;
+
+/// How the per-scene ratios are pooled.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Pool {
+    /// Their mean (the thesis's).
+    #[default]
+    Mean,
+    /// The largest: the scene where the candidate does worst.
+    Worst,
+}
+
+impl Pool {
+    pub const NAMES: &'static str = "mean, worst";
+
+    /// Pool `relmse[i] / divisor[i]` (the divisor floored, [`metrics::normalised`]).
+    pub fn combine(self, relmse: impl IntoIterator<Item = f64>, divisors: &[f64]) -> f64 {
+        let ratios = relmse.into_iter().zip(divisors).map(|(e, d)| metrics::normalised(e, *d));
+        match self {
+            Pool::Mean => {
+                let (sum, n) = ratios.fold((0.0, 0usize), |(s, n), r| (s + r, n + 1));
+                sum / n.max(1) as f64
+            }
+            Pool::Worst => ratios.fold(0.0, f64::max),
+        }
+    }
+}
+
+impl std::fmt::Display for Pool {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Pool::Mean => "mean",
+            Pool::Worst => "worst",
+        })
+    }
+}
+
+impl std::str::FromStr for Pool {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "mean" => Ok(Pool::Mean),
+            "worst" => Ok(Pool::Worst),
+            _ => Err(format!("`{s}` is no way to pool scenes (one of: {})", Pool::NAMES)),
+        }
+    }
+}
+
+/// A run's fitness rule; kept in its checkpoint.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FitnessRule {
+    /// The canonical text of the baseline expression whose relMSE, through
+    /// the run's own pipeline and on the same pixels, divides each scene's;
+    /// the noisy input's when `None`.
+    #[serde(default)]
+    pub relative_to: Option<String>,
+    #[serde(default)]
+    pub pool: Pool,
+}
+
+impl FitnessRule {
+    /// The thesis's rule: mean of relMSE / noisy relMSE.
+    pub fn is_thesis(&self) -> bool {
+        *self == FitnessRule::default()
+    }
+
+    /// In words, for logs and the hall of fame.
+    pub fn describe(&self) -> String {
+        let against = match &self.relative_to {
+            None => "the noisy input's relMSE".to_string(),
+            Some(e) => format!("the relMSE of `{e}`"),
+        };
+        let pool = match self.pool {
+            Pool::Mean => "mean over scenes",
+            Pool::Worst => "worst scene",
+        };
+        format!("relMSE / {against}, {pool}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pools_are_the_mean_and_the_worst_ratio() {
+        let divisors = [2.0, 0.5, 1.0];
+        assert_eq!(Pool::Mean.combine([1.0, 1.0, 1.0], &divisors), (0.5 + 2.0 + 1.0) / 3.0);
+        assert_eq!(Pool::Worst.combine([1.0, 1.0, 1.0], &divisors), 2.0);
+        // The divisor is floored as everywhere else: a perfect baseline divides by the floor.
+        assert!(Pool::Worst.combine([1e-3], &[0.0]).is_finite());
+        assert_eq!("worst".parse::<Pool>(), Ok(Pool::Worst));
+        assert!("max".parse::<Pool>().unwrap_err().contains("mean, worst"));
+    }
+}

@@ -1,0 +1,63 @@
+//! ARCHITECTURE.md's invariants that a reading of the source can check.
+
+use std::path::{Path, PathBuf};
+
+/// Every `.rs` file under `src/`, with its path relative to `src/` and its text.
+fn sources() -> Vec<(String, String)> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for entry in std::fs::read_dir(dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                walk(&path, out);
+            } else if path.extension().is_some_and(|e| e == "rs") {
+                out.push(path);
+            }
+        }
+    }
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    walk(&root, &mut files);
+    files.sort();
+    files
+        .into_iter()
+        .map(|p| {
+            let text = std::fs::read_to_string(&p).unwrap();
+            (p.strip_prefix(&root).unwrap().display().to_string(), text)
+        })
+        .collect()
+}
+
+/// The files (relative to `src/`) whose code, comments aside, contains `needle`.
+fn files_with(needle: &str) -> Vec<String> {
+    sources()
+        .into_iter()
+        .filter(|(_, text)| text.lines().any(|l| !l.trim_start().starts_with("//") && l.contains(needle)))
+        .map(|(path, _)| path)
+        .collect()
+}
+
+#[test]
+fn only_the_edge_reads_or_sets_the_environment() {
+    let mut readers = files_with("env::var");
+    readers.extend(files_with("env::set_var"));
+    readers.sort();
+    readers.dedup();
+    assert_eq!(readers, ["environment.rs", "main.rs"], "the library reads no environment variable");
+}
+
+#[test]
+fn naga_validates_in_one_place_and_no_pipeline_infers_its_layout() {
+    assert_eq!(files_with("Validator::new"), ["jit/validate.rs"]);
+    // `scene/mod.rs` has a `layout: None` of its own: a scene's renderer layout, not wgpu's.
+    let inferring: Vec<String> = files_with("layout: None").into_iter().filter(|f| f.starts_with("gpu/")).collect();
+    assert!(inferring.is_empty(), "{inferring:?}");
+}
+
+#[test]
+fn lang_holds_no_wgsl() {
+    for (path, text) in sources().into_iter().filter(|(p, _)| p.starts_with("lang/")) {
+        for marker in ["fj_", "@group", "@binding", "var<", "vec3<f32>", "array<"] {
+            assert!(!text.contains(marker), "src/{path} mentions `{marker}`");
+        }
+    }
+}
