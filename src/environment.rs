@@ -30,6 +30,10 @@ pub struct Environment {
     pub oidn: Option<PathBuf>,
     /// `$PATH`, where `report` looks for `oidnDenoise` next.
     pub path: Option<OsString>,
+    /// Ranks of the MPI job this process was started in, as its launcher
+    /// says (Open MPI's mpirun and srun: `OMPI_COMM_WORLD_SIZE`; MPICH's
+    /// hydra: `PMI_SIZE`); 1 without one.
+    pub launched_ranks: usize,
 }
 
 impl Environment {
@@ -54,7 +58,9 @@ impl Environment {
             (None, None, Some(home)) => PathBuf::from(home).join(".cache/filterjit"),
             (None, None, None) => std::env::temp_dir().join("filterjit-cache"),
         };
-        Ok(Environment { adapter, cache, oidn: var(OIDN).map(PathBuf::from), path: var("PATH") })
+        let launched_ranks =
+            ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"].iter().find_map(|v| text(v)?.parse().ok()).unwrap_or(1);
+        Ok(Environment { adapter, cache, oidn: var(OIDN).map(PathBuf::from), path: var("PATH"), launched_ranks })
     }
 }
 
@@ -75,6 +81,8 @@ mod tests {
         assert_eq!(env.cache, PathBuf::from("/c"));
         assert_eq!(with(&[("XDG_CACHE_HOME", "/x")]).unwrap().cache, PathBuf::from("/x/filterjit"));
         assert_eq!(with(&[]).unwrap().adapter, Request::default());
+        assert_eq!(with(&[]).unwrap().launched_ranks, 1);
+        assert_eq!(with(&[("PMI_SIZE", "4")]).unwrap().launched_ranks, 4);
         let error = with(&[(BACKEND, "glide")]).unwrap_err().to_string();
         assert!(error.contains("glide"), "{error}");
     }

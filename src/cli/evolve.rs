@@ -1,0 +1,276 @@
+//! `filterjit evolve`: flags and presets into a run, in one process or as one MPI rank.
+
+use super::*;
+
+pub(crate) fn evolve(env: &Environment, args: EvolveArgs) -> Result<()> {
+    let launched = env.launched_ranks;
+    if !args.mpi {
+        if launched > 1 {
+            bail!(
+                "this process is one of {launched} MPI ranks, but --mpi is not given: every rank would run the \
+                 whole search into the same run directory; pass --mpi"
+            );
+        }
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        return evolve_on(env, args, &mut filterjit::gp::transport::InProcess, 0, cores);
+    }
+    #[cfg(feature = "mpi")]
+    {
+        use filterjit::gp::transport::Transport;
+        let mut mpi = filterjit::gp::mpi::Mpi::init()?;
+        // Ranks on one node share its cores (software adapters compile on them) and its GPUs.
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        let (node_rank, threads) = (mpi.node_rank(), (cores / mpi.node_ranks()).max(1));
+        let result = evolve_on(env, args, &mut mpi, node_rank, threads);
+        if let Err(e) = &result {
+            if mpi.ranks() > 1 {
+                // The other ranks would wait for this one forever.
+                eprintln!("error (rank {} of {}): {e:#}", mpi.rank(), mpi.ranks());
+                mpi.abort(1);
+            }
+        }
+        result
+    }
+    #[cfg(not(feature = "mpi"))]
+    bail!(
+        "this filterjit was built without MPI: build it with `cargo build --release --features mpi` \
+         (Debian: apt-get install openmpi-bin libopenmpi-dev libclang-dev); docs/DISTRIBUTED.md"
+    )
+}
+
+/// `evolve` as one of the processes `transport` reaches: the `node_rank`-th
+/// on its machine, with `cores` cores to itself. Only the root prints.
+pub(crate) fn evolve_on(
+    env: &Environment,
+    args: EvolveArgs,
+    transport: &mut dyn filterjit::gp::transport::Transport,
+    node_rank: usize,
+    cores: usize,
+) -> Result<()> {
+    use filterjit::evolve as ev;
+    let root = transport.is_root();
+    let base = filterjit::gp::Settings::default();
+    let (preset, size, spp, reference_spp, radius) = match args.preset {
+        Preset::Quick => {
+            (filterjit::gp::Settings { island_size: 25, generations: 15, ..base.clone() }, (32, 32), 4, 512, 3)
+        }
+        Preset::Thesis => (base.clone(), (64, 64), 4, 1024, 10),
+    };
+    let settings = filterjit::gp::Settings {
+        islands: args.islands.unwrap_or(preset.islands),
+        island_size: args.island_size.unwrap_or(preset.island_size),
+        generations: args.generations.unwrap_or(preset.generations),
+        max_length: args.max_length.unwrap_or(preset.max_length),
+        tournament: args.tournament.unwrap_or(preset.tournament),
+        replication: args.replication.unwrap_or(preset.replication),
+        crossover: args.crossover.unwrap_or(preset.crossover),
+        crossover_mutation: args.crossover_mutation.unwrap_or(preset.crossover_mutation),
+        mutation_weights: args.mutation_weights.clone().unwrap_or(preset.mutation_weights.clone()),
+        migration_interval: args.migration_interval.unwrap_or(preset.migration_interval),
+        seed_share: args.seed_share.unwrap_or(preset.seed_share),
+        hall_of_fame: args.hall_of_fame.unwrap_or(preset.hall_of_fame),
+        seed: args.seed.unwrap_or(preset.seed),
+        simplify_offspring: args.simplify_offspring,
+        objectives: args.objectives,
+        error_islands: match (args.objectives, args.error_islands) {
+            (_, Some(n)) => n,
+            (filterjit::gp::Objectives::ErrorCost, None) => args.islands.unwrap_or(preset.islands).saturating_sub(1),
+            (filterjit::gp::Objectives::Error, None) => 0,
+        },
+    };
+    let size = args.render.size.unwrap_or(size);
+    let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
+    let seed_text = resolve_expr(&args.seed_expr)?.to_string();
+    let config = ev::RunConfig {
+        training: if args.scenes.is_empty() { builtin(render::Split::Train) } else { args.scenes.clone() },
+        test: if args.test_scenes.is_empty() { builtin(render::Split::Test) } else { args.test_scenes.clone() },
+        render: render::RenderSettings {
+            width: size.0,
+            height: size.1,
+            spp: args.render.spp.unwrap_or(spp),
+            reference_spp: args.render.reference_spp.unwrap_or(reference_spp),
+            seed: settings.seed as u32,
+        },
+        radius: args.render.radius.unwrap_or(radius),
+        seed_expr: seed_text,
+        pipeline: args.render.pipeline.unwrap_or_default(),
+        cost_model: match &args.cost_model {
+            Some(path) => filterjit::cost::CostModel::read(path).map_err(anyhow::Error::msg)?,
+            None => filterjit::cost::CostModel::table(),
+        },
+        fitness_tiles: args.fitness_tiles,
+        features: (!args.features.is_empty()).then(|| args.features.iter().cloned().collect()),
+        fitness: filterjit::fitness_rule::FitnessRule {
+            relative_to: args.fitness_relative_to.as_deref().map(resolve_expr).transpose()?.map(|e| e.to_string()),
+            pool: args.fitness_pool,
+        },
+    };
+    let threads = args.threads.unwrap_or(cores);
+    let output = match &args.output {
+        Some(dir) => dir.clone(),
+        None => {
+            let base = Path::new(ev::DEFAULT_RUN_DIR);
+            let dir = ev::default_run_dir(base, args.resume);
+            if dir != base && root {
+                eprintln!(
+                    "run dir   {} ({} holds an earlier run; -o DIR names another)",
+                    dir.display(),
+                    base.display()
+                );
+            }
+            dir
+        }
+    };
+    let gpu = gpu::Gpu::open_for(&env.adapter, node_rank)?;
+    let islands = filterjit::gp::transport::share(settings.islands, transport.rank(), transport.ranks());
+    if transport.ranks() > 1 {
+        // One line per rank: where its islands run.
+        eprintln!(
+            "rank {}/{} islands {}..{} on {}, {threads} threads",
+            transport.rank(),
+            transport.ranks(),
+            islands.start,
+            islands.end,
+            gpu.describe()
+        );
+    }
+    if root {
+        eprintln!(
+            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{}{}, {} per fitness kernel, on {}{}{}",
+            settings.islands,
+            settings.island_size,
+            settings.generations,
+            settings.max_length,
+            config.radius,
+            config.pipeline,
+            size.0,
+            size.1,
+            match config.fitness_tiles {
+                Some(t) => format!(" scored on {} tiles of {}x{} each", t.count, t.size, t.size),
+                None => String::new(),
+            },
+            // A cascade's passes each read the last one's output: its kernels are never fused.
+            match if config.pipeline.is_atrous() { 1 } else { args.fuse.members(&gpu) } {
+                1 => "one individual".to_string(),
+                n => format!("up to {n} individuals"),
+            },
+            gpu.describe(),
+            match transport.ranks() {
+                1 => String::new(),
+                n => format!(" (rank 0 of {n} MPI ranks)"),
+            },
+            match config.fitness.is_thesis() {
+                true => String::new(),
+                false => format!("\nfitness   {}", config.fitness.describe()),
+            }
+        );
+    }
+    let render_bar = if root { sample_bar("rendering") } else { indicatif::ProgressBar::hidden() };
+    let mut on_render = |done: u64, total: u64| {
+        render_bar.set_length(total);
+        render_bar.set_position(done);
+        if done == total {
+            render_bar.finish_and_clear();
+        }
+    };
+    let bar =
+        if root { indicatif::ProgressBar::new(settings.generations as u64) } else { indicatif::ProgressBar::hidden() };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "generation {pos:>4}/{len} {bar:20} {elapsed} elapsed, {eta} left | {msg}",
+        )
+        .expect("valid template"),
+    );
+    let mut first_report = true;
+    let mut on_report = |r: &filterjit::gp::Report| {
+        bar.set_position(r.generation as u64);
+        if std::mem::take(&mut first_report) {
+            // A resumed run starts at its checkpoint: time left counts from here.
+            bar.reset_eta();
+        }
+        bar.set_message(format!(
+            "best {:.4} median {:.4} invalid {} | compile {:.1}s evaluate {:.1}s gp {:.2}s",
+            r.best, r.median, r.invalid, r.compile_s, r.evaluate_s, r.gp_s
+        ));
+    };
+    let summary = ev::run_with(
+        &gpu,
+        ev::RunOptions {
+            settings,
+            config,
+            output: output.clone(),
+            resume: args.resume,
+            threads,
+            stop_after: None,
+            on_report: &mut on_report,
+            on_render: &mut on_render,
+            baselines: args.baseline.iter().map(|b| resolve_expr(b)).collect::<Result<_>>()?,
+            tiles: args.tiles,
+            fusion: args.fuse,
+            cache: env.cache.clone(),
+        },
+        transport,
+    )?;
+    // Ranks other than the root end with the last generation.
+    let Some(summary) = summary else { return Ok(()) };
+    bar.finish();
+    println!("best      {}", summary.best.expr);
+    if summary.best_simplified != summary.best.expr {
+        println!("          = {} (simplified)", summary.best_simplified);
+    }
+    let length = lang::parse_expr(&summary.best.expr).map(|e| e.len()).unwrap_or(0);
+    match summary.rescored_hall_of_fame.iter().find(|r| r.expr == summary.best.expr).and_then(|r| r.fitness) {
+        Some(whole) => println!(
+            "fitness   {whole:.5} (training, whole images: mean relMSE / noisy relMSE; {:.5} on the search's {}), length {length}",
+            summary.best.fitness.value, summary.training_scored_on
+        ),
+        None => println!(
+            "fitness   {:.5} (training: mean relMSE / noisy relMSE), length {length}",
+            summary.best.fitness.value
+        ),
+    }
+    let baseline_names: Vec<String> = (0..summary.test_baselines.len()).map(|k| format!("baseline{}", k + 1)).collect();
+    println!(
+        "test      {:<16} {:>12} {:>12} {:>12}{}",
+        "relMSE",
+        "noisy",
+        "seed",
+        "best",
+        baseline_names.iter().map(|n| format!(" {n:>12}")).collect::<String>()
+    );
+    for (k, name) in summary.test_scenes.iter().enumerate() {
+        println!(
+            "          {:<16} {:>12.5} {:>12.5} {:>12.5}{}",
+            name,
+            summary.test_noisy_relmse[k],
+            summary.test_seed.relmse[k],
+            summary.test_best.relmse[k],
+            summary.test_baselines.iter().map(|b| format!(" {:>12.5}", b.relmse[k])).collect::<String>()
+        );
+    }
+    println!(
+        "          {:<16} {:>12} {:>12.5} {:>12.5}{}   (mean of relMSE / noisy relMSE)",
+        "normalised",
+        "1",
+        summary.test_seed.normalised,
+        summary.test_best.normalised,
+        summary.test_baselines.iter().map(|b| format!(" {:>12.5}", b.normalised)).collect::<String>()
+    );
+    for (name, b) in baseline_names.iter().zip(&summary.test_baselines) {
+        println!("          {name} = {}", b.expr);
+    }
+    let mut used: Vec<(&String, &usize)> = summary.feature_frequencies.iter().filter(|(_, n)| **n > 0).collect();
+    used.sort_by(|a, b| b.1.cmp(a.1));
+    println!("features  {}", used.iter().map(|(f, n)| format!("{f} {n}")).collect::<Vec<_>>().join(", "));
+    println!("time      {:.1} s", summary.seconds);
+    println!(
+        "wrote     {}/{{{},{},{},{},{}}}",
+        output.display(),
+        ev::HALL_OF_FAME_FILE,
+        ev::LOG_FILE,
+        ev::CHECKPOINT_FILE,
+        ev::FEATURES_FILE,
+        ev::SUMMARY_FILE
+    );
+    Ok(())
+}

@@ -1,0 +1,441 @@
+//! The `filterjit` command line: flags (`args`) resolved into the library's
+//! configuration types and calls; results printed. Errors are rendered by
+//! `main`, with their whole context chain.
+
+mod args;
+mod evolve;
+mod report;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+
+use filterjit::environment::Environment;
+use filterjit::metrics::{self, Errors};
+use filterjit::scene::{self, Absent, Request};
+use filterjit::{corpus, cpu, datasets, gpu, jit, lang, preview, render, semantics};
+
+use args::*;
+pub(crate) use args::{Cli, Command};
+use evolve::evolve;
+use report::{report, scene_context, tune_baseline};
+
+pub(crate) fn run(cli: Cli) -> Result<()> {
+    let env = &Environment::read()?;
+    match cli.command {
+        Command::Compile { expr, output, pipeline } => {
+            let resolved = corpus::resolve_with_pipeline(&expr)?;
+            let shape = jit::Shape::of(&pipeline.or(resolved.pipeline).unwrap_or_default());
+            let kernel = jit::compile_shaped(&resolved.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
+            match output {
+                Some(path) => filterjit::io::write_bytes_atomically(&path, kernel.wgsl().as_bytes())
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| format!("writing {}", path.display()))?,
+                None => print!("{}", kernel.wgsl()),
+            }
+            Ok(())
+        }
+        Command::Export { expr, target, format, output, pipeline, budget_ms, size } => {
+            let resolved = match budget_ms {
+                None => corpus::resolve_with_pipeline(&expr)?,
+                Some(budget) => {
+                    let front = filterjit::evolve::Front::read(Path::new(&expr))?;
+                    let (w, h) = size.expect("clap requires --size with --budget-ms");
+                    let member = front.within_budget(budget, w as f64 * h as f64)?;
+                    eprintln!(
+                        "chose     {} (radius {}, fitness {:.5}, {:.2} ms at {w}x{h} on {}) of {} members",
+                        member.name,
+                        member.radius,
+                        member.fitness,
+                        member.ms_per_mpx * (w * h) as f64 / 1e6,
+                        front.device,
+                        front.members.len()
+                    );
+                    corpus::Resolved {
+                        name: Some(member.name.clone()),
+                        expr: filterjit::parse_expr(&member.expr).map_err(|e| anyhow::anyhow!("{e}"))?,
+                        pipeline: Some(front.pipeline),
+                        radius: Some(member.radius),
+                    }
+                }
+            };
+            let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
+            if pipeline != filterjit::pipeline::FilterPipeline::WINDOW {
+                bail!(
+                    "`{expr}` is filtered through the pipeline `{pipeline}`, and export writes the window form only \
+                     (one pass, no pre-pass) so far; pass --pipeline window to export its weight as a single window pass"
+                );
+            }
+            // An engine gets the cheapest equivalent form (the same weights).
+            let expr = filterjit::simplify::simplify(&resolved.expr);
+            let mut exported = filterjit::export::export(&expr, target, format)?;
+            exported.manifest.radius = resolved.radius;
+            let manifest_path = manifest_path(&output);
+            let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
+            for (path, bytes) in [(&output, exported.code.to_bytes()), (&manifest_path, manifest.into_bytes())] {
+                filterjit::io::write_bytes_atomically(path, &bytes)
+                    .map_err(anyhow::Error::msg)
+                    .with_context(|| format!("writing {}", path.display()))?;
+            }
+            println!(
+                "wrote {} ({}) and its manifest {}",
+                output.display(),
+                exported.manifest.language,
+                manifest_path.display()
+            );
+            println!("entry point `{}`, workgroup 8x8x1; bindings:", exported.manifest.entry_point);
+            for b in &exported.manifest.bindings {
+                println!("  {:<26} {:<16} {}", b.target_slot, b.kind, b.role);
+            }
+            if exported.manifest.sampled_textures > filterjit::export::PORTABLE_SAMPLED_TEXTURES {
+                eprintln!(
+                    "warning: the shader binds {} sampled textures; WebGPU guarantees {} per stage, so it needs a device that allows more",
+                    exported.manifest.sampled_textures,
+                    filterjit::export::PORTABLE_SAMPLED_TEXTURES
+                );
+            }
+            Ok(())
+        }
+        Command::Check { expr, latex: true } => {
+            println!("{}", lang::latex(&resolve_expr(&expr)?));
+            Ok(())
+        }
+        Command::Simplify { expr } => {
+            let expr = resolve_expr(&expr)?;
+            let simplified = filterjit::simplify::simplify(&expr);
+            println!("{simplified}");
+            println!(
+                "length: {} -> {} nodes; kernel cost {:.1} -> {:.1}",
+                expr.len(),
+                simplified.len(),
+                filterjit::simplify::kernel_cost(&expr),
+                filterjit::simplify::kernel_cost(&simplified)
+            );
+            Ok(())
+        }
+        Command::Check { expr, latex: false } => {
+            let expr = resolve_expr(&expr)?;
+            println!("{expr}");
+            println!("length: {} nodes", expr.len());
+            let names: Vec<&str> =
+                expr.features().iter().map(|f| f.name()).chain(expr.variables().iter().map(|v| v.name())).collect();
+            println!(
+                "reads: {}",
+                if names.is_empty() { "nothing but the colour".to_string() } else { names.join(", ") }
+            );
+            Ok(())
+        }
+        Command::Filter { expr, radius, scene, output, reference, spp, absent, cpu_check, pipeline } => {
+            filter(env, &expr, radius, &scene, &output, reference, spp, absent, cpu_check, pipeline)
+        }
+        Command::Render { scene, spp, reference_spp, size, seed, output } => {
+            render(env, &scene, spp, reference_spp, size, seed, output.as_deref())
+        }
+        Command::Evolve(args) => evolve(env, *args),
+        Command::Report(args) => report(env, *args),
+        Command::Tune(args) => {
+            let gpu = gpu::Gpu::open(&env.adapter)?;
+            let context = scene_context(&args.scene)?;
+            let tuned = tune_baseline(&gpu, env, &args.scene, &context)?;
+            println!("crossBilateralTuned = {}", tuned.expr);
+            if let Some(path) = &args.output {
+                let text = format!(
+                    "# tuned on {} at {}x{}, radius {}: training relMSE/noisy {:.5} (hand-set {:.5})\n{} {}\ncrossBilateralTuned = {}\n",
+                    tuned.scenes.join(", "),
+                    context.render.width,
+                    context.render.height,
+                    context.radius,
+                    tuned.fitness,
+                    tuned.hand_set_fitness,
+                    corpus::PIPELINE_PREFIX,
+                    context.pipeline,
+                    tuned.expr
+                );
+                filterjit::io::write_bytes_atomically(path, text.as_bytes()).map_err(anyhow::Error::msg)?;
+            }
+            Ok(())
+        }
+        Command::Bench {
+            size,
+            radius,
+            repeats,
+            population,
+            lengths,
+            generation_sizes,
+            generation_radius,
+            fuse,
+            output,
+        } => {
+            let settings = filterjit::bench::BenchSettings {
+                radius,
+                repeats: repeats.max(1),
+                population: population.max(4),
+                lengths,
+                generation_sizes: generation_sizes.into_iter().filter(|s| *s > 0).collect(),
+                generation_radius,
+                seed: 0,
+                fusion: fuse,
+            };
+            bench(env, size, &settings, &output)
+        }
+        Command::Scenes => {
+            for (name, _) in render::BUILTIN {
+                let d = render::builtin(name).expect("listed")?;
+                println!("{name:<16} {:<6} {}", format!("{:?}", d.split).to_lowercase(), d.summary);
+            }
+            Ok(())
+        }
+        Command::List => {
+            for (name, text) in corpus::named() {
+                match corpus::pipeline_of(corpus::EXPRESSIONS, name) {
+                    Some(pipeline) => println!("@{name} (pipeline {})\n    {text}", pipeline?),
+                    None => println!("@{name}\n    {text}"),
+                }
+            }
+            Ok(())
+        }
+        Command::Adapters => {
+            let backends = env.adapter.backends;
+            let adapters = gpu::adapter::available(backends, true);
+            if adapters.is_empty() {
+                bail!(gpu::GpuError::NoAdapter { backends: format!("{backends:?}") });
+            }
+            for (k, a) in adapters.iter().enumerate() {
+                let info = a.get_info();
+                println!(
+                    "{} {} ({:?}, {:?}) {}",
+                    if k == 0 { "*" } else { " " },
+                    info.name,
+                    info.backend,
+                    info.device_type,
+                    info.driver_info
+                );
+            }
+            println!("* = the best; filterjit uses it unless {} names another", filterjit::environment::ADAPTER);
+            Ok(())
+        }
+    }
+}
+
+/// An expression from the command line: text, or @name of a shipped one.
+pub(crate) fn resolve_expr(arg: &str) -> Result<lang::Expr> {
+    Ok(corpus::resolve(arg)?.1)
+}
+
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn filter(
+    env: &Environment,
+    expr: &str,
+    radius: Option<u32>,
+    scene_path: &Path,
+    output: &Path,
+    reference: Option<PathBuf>,
+    spp: Option<u32>,
+    absent: Absent,
+    cpu_check: bool,
+    pipeline: Option<filterjit::pipeline::FilterPipeline>,
+) -> Result<()> {
+    let resolved = corpus::resolve_with_pipeline(expr)?;
+    let expr = resolved.expr;
+    let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
+    let radius = radius.or(resolved.radius).unwrap_or(5);
+    let request =
+        Request { reference_path: reference, spp, absent, albedo: pipeline.demodulate, ..Request::for_expr(&expr) };
+    let load_start = Instant::now();
+    let scene = scene::load(scene_path, &request).with_context(|| format!("loading scene {}", scene_path.display()))?;
+    let load_time = load_start.elapsed();
+    for note in &scene.notes {
+        if note.contains("absent") || note.contains("non-finite") {
+            eprintln!("note: {note}");
+        }
+    }
+
+    let compile_start = Instant::now();
+    let shape = jit::Shape::of(&pipeline);
+    let kernel = jit::compile_shaped(&expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
+    let lower_validate = compile_start.elapsed();
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let prepass_start = Instant::now();
+    let mut buffers = gpu::SceneBuffers::for_pipeline(&gpu, &scene, &pipeline)?;
+    let prepass_time = prepass_start.elapsed();
+    let first = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
+    // A second, warm run: software drivers compile the pipeline at its first dispatch.
+    let warm = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
+    let rgb = warm.rgb();
+
+    filterjit::scene::exr_io::write_rgb(output, scene.width, scene.height, &rgb)
+        .with_context(|| format!("writing {}", output.display()))?;
+    let png = output.with_extension("png");
+    preview::write_png(&png, scene.width, scene.height, &rgb)
+        .map_err(anyhow::Error::msg)
+        .with_context(|| format!("writing {}", png.display()))?;
+
+    let megapixels = scene.pixels() as f64 / 1e6;
+    println!(
+        "scene     {} ({}x{}, {}, spp {})",
+        scene.name,
+        scene.width,
+        scene.height,
+        scene.layout.unwrap_or("?"),
+        scene.spp.map_or("unknown".into(), |s| s.to_string())
+    );
+    println!("device    {}", gpu.describe());
+    println!(
+        "kernel    {} nodes, reads color{}",
+        expr.len(),
+        kernel.source().layout.inputs.iter().map(|i| format!(", {}", i.describe())).collect::<String>()
+    );
+    let form = match pipeline.form {
+        filterjit::pipeline::Form::Window => format!("radius {radius}"),
+        filterjit::pipeline::Form::Atrous { passes } => format!("{passes} a-trous passes"),
+    };
+    println!("pipeline  {pipeline}");
+    println!(
+        "time      load {:.1} ms | lower+validate {:.2} ms | pre-pass {:.1} ms (first, compile included) | pipeline {:.1} ms | first dispatch {:.1} ms | filter {:.1} ms ({:.1} ms/Mpx, {form}, {} dispatch{})",
+        ms(load_time),
+        ms(lower_validate),
+        ms(prepass_time),
+        ms(first.pipeline.create),
+        ms(first.dispatch),
+        ms(warm.dispatch),
+        ms(warm.dispatch) / megapixels,
+        warm.dispatches,
+        if warm.dispatches == 1 { "" } else { "es" }
+    );
+    if warm.flagged_pixels() > 0 {
+        println!(
+            "domain    {} of {} pixels had domain errors: {}",
+            warm.flagged_pixels(),
+            scene.pixels(),
+            semantics::flag::describe(warm.all_flags()).join("; ")
+        );
+    }
+    match &scene.reference {
+        Some(reference) => {
+            let noisy = metrics::errors(&scene.color, reference, scene.spp);
+            let filtered = metrics::errors(&rgb, reference, scene.spp);
+            let flip =
+                |image: &[[f32; 3]]| filterjit::flip::hdr_flip(reference, image, scene.width, scene.height).mean();
+            println!("error     {:<10} {:>12} {:>14} {:>12} {:>10}", "", "relMSE", "relMSE*m/2", "MSE", "HDR-FLIP");
+            print_errors("noisy", &noisy, flip(&scene.color));
+            print_errors("filtered", &filtered, flip(&rgb));
+        }
+        None => println!("error     no reference image: errors not computed"),
+    }
+    if cpu_check {
+        let reference = cpu::filter_pipeline(&expr, &scene, &pipeline, radius)?;
+        let worst = rgb
+            .iter()
+            .zip(&reference.color)
+            .flat_map(|(g, c)| (0..3).map(move |q| (g[q] as f64 - c[q]).abs() / (c[q].abs() + 1e-3)))
+            .fold(0.0f64, f64::max);
+        println!("cpu       max relative difference GPU f32 vs CPU f64: {worst:.3e}");
+    }
+    println!("wrote     {} and {}", output.display(), png.display());
+    Ok(())
+}
+
+/// A progress bar counting pixel samples, with samples per second.
+pub(crate) fn sample_bar(label: &str) -> indicatif::ProgressBar {
+    let bar = indicatif::ProgressBar::new(0);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{prefix:>14} {bar:30} {percent:>3}% {per_sec:>14} eta {eta}")
+            .expect("valid template"),
+    );
+    bar.set_prefix(label.to_string());
+    bar
+}
+
+pub(crate) fn render(
+    env: &Environment,
+    scene: &str,
+    spp: u32,
+    reference_spp: u32,
+    size: (u32, u32),
+    seed: u32,
+    output: Option<&Path>,
+) -> Result<()> {
+    let d = render::describe(scene)?;
+    let settings = render::RenderSettings { width: size.0, height: size.1, spp, reference_spp, seed };
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let bar = sample_bar(&d.name);
+    let mut progress = |done: u64, total: u64| {
+        bar.set_length(total);
+        bar.set_position(done);
+    };
+    let dir = match output {
+        Some(dir) => {
+            let rendered = render::render(&gpu, &d, &settings, &mut progress)?;
+            rendered.write(dir, &d, &settings)?;
+            dir.to_path_buf()
+        }
+        None => render::cached(&gpu, &env.cache, &d, &settings, &mut progress)?,
+    };
+    bar.finish_and_clear();
+    let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join(scene::META_FILE))?)?;
+    println!("scene     {} ({:?}) on {}", d.name, d.split, gpu.describe());
+    println!(
+        "render    {}x{}, {} spp noisy, {} spp reference: {:.2} s, {:.3} M samples/s",
+        size.0,
+        size.1,
+        spp,
+        reference_spp,
+        meta["render_seconds"].as_f64().unwrap_or(0.0),
+        meta["samples_per_second"].as_f64().unwrap_or(0.0) / 1e6
+    );
+    println!(
+        "reference estimated residual relMSE {:.3e} (from its two half-buffers)",
+        meta["reference_residual_relmse"].as_f64().unwrap_or(0.0)
+    );
+    println!("wrote     {}", dir.display());
+    Ok(())
+}
+
+pub(crate) fn bench(
+    env: &Environment,
+    size: (u32, u32),
+    settings: &filterjit::bench::BenchSettings,
+    output: &Path,
+) -> Result<()> {
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let scene_at = |gpu: &gpu::Gpu, w: u32, h: u32| -> Result<filterjit::Scene> {
+        let d = render::builtin("glossy-floor").expect("built in")?;
+        let rs = render::RenderSettings { width: w, height: h, spp: 4, reference_spp: 64, seed: 0 };
+        let dir = render::cached(gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
+        let request = scene::Request {
+            features: lang::Feature::ALL.iter().copied().collect(),
+            variances: lang::ScalarVar::ALL.iter().copied().collect(),
+            reference: true,
+            albedo: true,
+            ..Default::default()
+        };
+        Ok(scene::load(&dir, &request)?)
+    };
+    eprintln!("bench     on {}", gpu.describe());
+    let scene = scene_at(&gpu, size.0, size.1)?;
+    let mut generation_scene = |s: u32| scene_at(&gpu, s, s);
+    let mut progress = |what: &str| eprintln!("          {what}");
+    let report = filterjit::bench::run(&gpu, &scene, &mut generation_scene, settings, &mut progress)?;
+    print!("{}", filterjit::bench::table(&report));
+    filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())
+        .map_err(anyhow::Error::msg)?;
+    println!("wrote     {}", output.display());
+    Ok(())
+}
+
+pub(crate) fn print_errors(label: &str, e: &Errors, flip: f64) {
+    let m2 = e.relmse_half_spp.map_or("-".to_string(), |v| format!("{v:.6}"));
+    println!("          {label:<10} {:>12.6} {:>14} {:>12.6} {flip:>10.6}", e.relmse, m2, e.mse);
+}
+
+pub(crate) fn ms(d: std::time::Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+/// Where `export` writes the manifest of the shader at `shader`: `shader` + `.json`.
+pub(crate) fn manifest_path(shader: &Path) -> PathBuf {
+    let mut name = shader.as_os_str().to_owned();
+    name.push(".json");
+    PathBuf::from(name)
+}

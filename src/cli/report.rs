@@ -1,0 +1,218 @@
+//! `filterjit report` and `tune`: scene settings from flags or a run, the tuned baseline, the report.
+
+use super::*;
+
+/// Scene settings of `report`/`tune`: flags, else the run's checkpoint, else defaults.
+pub(crate) struct SceneContext {
+    pub(crate) render: render::RenderSettings,
+    pub(crate) radius: u32,
+    pub(crate) pipeline: filterjit::pipeline::FilterPipeline,
+    pub(crate) training: Vec<String>,
+    pub(crate) test: Vec<String>,
+}
+
+pub(crate) fn scene_context(args: &SceneArgs) -> Result<SceneContext> {
+    let run = match &args.run {
+        Some(dir) => Some(
+            filterjit::evolve::read_checkpoint(dir)
+                .with_context(|| format!("reading the run in {}", dir.display()))?
+                .run,
+        ),
+        None => None,
+    };
+    let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
+    let base = run.as_ref().map(|r| r.render).unwrap_or(render::RenderSettings {
+        width: 64,
+        height: 64,
+        spp: 4,
+        reference_spp: 1024,
+        seed: 0,
+    });
+    let size = args.render.size.unwrap_or((base.width, base.height));
+    Ok(SceneContext {
+        render: render::RenderSettings {
+            width: size.0,
+            height: size.1,
+            spp: args.render.spp.unwrap_or(base.spp),
+            reference_spp: args.render.reference_spp.unwrap_or(base.reference_spp),
+            seed: base.seed,
+        },
+        radius: args.render.radius.or(run.as_ref().map(|r| r.radius)).unwrap_or(5),
+        pipeline: args.render.pipeline.or(run.as_ref().map(|r| r.pipeline)).unwrap_or_default(),
+        training: if !args.training_scenes.is_empty() {
+            args.training_scenes.clone()
+        } else {
+            run.as_ref().map(|r| r.training.clone()).unwrap_or_else(|| builtin(render::Split::Train))
+        },
+        test: run.as_ref().map(|r| r.test.clone()).unwrap_or_else(|| builtin(render::Split::Test)),
+    })
+}
+
+pub(crate) fn render_progress() -> impl FnMut(u64, u64) {
+    let bar = sample_bar("rendering");
+    move |done: u64, total: u64| {
+        bar.set_length(total);
+        bar.set_position(done);
+        if done == total {
+            bar.finish_and_clear();
+        }
+    }
+}
+
+pub(crate) fn tune_baseline(
+    gpu: &gpu::Gpu,
+    env: &Environment,
+    args: &SceneArgs,
+    context: &SceneContext,
+) -> Result<filterjit::tune::Tuned> {
+    use filterjit::evolve as ev;
+    let datasets = datasets::resolve(gpu, &context.training, &context.render, &env.cache, &mut render_progress())?;
+    let (features, variances) = datasets::common_terminals(&datasets)?;
+    let scenes = datasets::load_all(&datasets, &features, &variances, &context.pipeline)?;
+    let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
+    let mut evaluator = ev::GpuEvaluator::for_pipeline(gpu, scenes, context.radius, context.pipeline, threads)?;
+    eprintln!(
+        "tune      cross-bilateral sigmas on {} ({}x{}, radius {}, pipeline {})",
+        context.training.join(", "),
+        context.render.width,
+        context.render.height,
+        context.radius,
+        context.pipeline
+    );
+    let tuned = filterjit::tune::tune(&mut evaluator, args.sweeps, &mut |sigmas, fitness| {
+        eprintln!(
+            "          {fitness:.5}  {}",
+            sigmas.0.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
+        );
+    })?;
+    eprintln!(
+        "tuned     training relMSE/noisy {:.5} (hand-set sigmas {:.5}), {} candidates",
+        tuned.fitness, tuned.hand_set_fitness, tuned.evaluated
+    );
+    Ok(tuned)
+}
+
+pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
+    use filterjit::report::{self, Method, Origin};
+    let context = scene_context(&args.scene)?;
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let mut methods = Vec::new();
+    // Every filter runs through the pipeline it was stored with, else the run's (or --pipeline).
+    let (baseline_name, baseline_expr, baseline_pipeline, tuned) = match &args.baseline {
+        Some(b) => {
+            let resolved = corpus::resolve_with_pipeline(b)?;
+            let pipeline = resolved.pipeline.unwrap_or(context.pipeline);
+            (resolved.name.unwrap_or_else(|| "baseline".into()), resolved.expr, pipeline, None)
+        }
+        None => {
+            let tuned = tune_baseline(&gpu, env, &args.scene, &context)?;
+            let expr = lang::parse_expr(&tuned.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
+            ("crossBilateral (tuned)".to_string(), expr, context.pipeline, Some(tuned))
+        }
+    };
+    methods.push(Method {
+        name: baseline_name,
+        origin: Origin::Baseline,
+        expr: baseline_expr,
+        pipeline: baseline_pipeline,
+        radius: None,
+    });
+    for name in ["thesis1", "thesis2", "thesis3"] {
+        // The thesis's filters as published: one window.
+        let expr = resolve_expr(&format!("@{name}"))?;
+        methods.push(Method {
+            name: name.into(),
+            origin: Origin::Thesis,
+            expr,
+            pipeline: Default::default(),
+            radius: None,
+        });
+    }
+    for (k, arg) in args.exprs.iter().enumerate() {
+        let resolved = corpus::resolve_with_pipeline(arg)?;
+        methods.push(Method {
+            name: resolved.name.unwrap_or_else(|| format!("expr{}", k + 1)),
+            origin: Origin::Given,
+            expr: resolved.expr,
+            pipeline: resolved.pipeline.unwrap_or(context.pipeline),
+            radius: resolved.radius,
+        });
+    }
+    let hall_path = args
+        .hall_of_fame
+        .clone()
+        .or_else(|| args.scene.run.as_ref().map(|d| d.join(filterjit::evolve::HALL_OF_FAME_FILE)));
+    let mut hall = Vec::new();
+    if let Some(path) = &hall_path {
+        let content = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut taken = 0;
+        for (name, text) in corpus::parse_named(&content) {
+            let expr =
+                lang::parse_expr(text).map_err(|e| anyhow::anyhow!("{}: entry `{name}`:\n{e}", path.display()))?;
+            // Reported as people read them: simplified (the same weights).
+            let expr = filterjit::simplify::simplify(&expr);
+            let pipeline = corpus::pipeline_of(&content, name)
+                .transpose()
+                .with_context(|| format!("{}: the pipeline of `{name}`", path.display()))?
+                .unwrap_or(context.pipeline);
+            let radius = corpus::radius_of(&content, name)
+                .transpose()
+                .with_context(|| format!("{}: the radius of `{name}`", path.display()))?;
+            // A multi-objective run's front is drawn whole: it is the run's answer.
+            let on_front = name.starts_with("front");
+            let known = methods.iter().any(|m| m.expr == expr && m.pipeline == pipeline && m.radius == radius);
+            if (on_front || taken < args.top) && !known {
+                taken += usize::from(!on_front);
+                methods.push(Method {
+                    name: name.to_string(),
+                    origin: Origin::Given,
+                    expr: expr.clone(),
+                    pipeline,
+                    radius,
+                });
+            }
+            hall.push(expr);
+        }
+    }
+    let scene_names = if args.scenes.is_empty() { context.test.clone() } else { args.scenes.clone() };
+    let datasets = datasets::resolve(&gpu, &scene_names, &context.render, &env.cache, &mut render_progress())?;
+    let settings = report::Settings {
+        radius: context.radius,
+        repeats: args.repeats,
+        crop: args.crop,
+        timing_size: args.timing_size,
+    };
+    let oidn = match (args.no_oidn, report::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref())) {
+        (true, _) => None,
+        (false, Ok(oidn)) => {
+            eprintln!("peer      Intel Open Image Denoise: {}", oidn.program.display());
+            Some(oidn)
+        }
+        (false, Err(why)) => {
+            eprintln!("note: the report goes on without Intel Open Image Denoise: {why}");
+            None
+        }
+    };
+    let inputs = report::Inputs {
+        scenes: &datasets,
+        methods: &methods,
+        settings,
+        baseline: tuned,
+        hall_of_fame: hall_path.as_ref().map(|_| hall.as_slice()),
+        oidn: oidn.as_ref(),
+    };
+    let results = report::run(&gpu, inputs, &args.output, &mut |what| eprintln!("measure   {what}"))?;
+    println!("{:<26} {:>14} {:>10} {:>10}", "method", "relMSE/noisy", "relMSE", "ms/Mpx");
+    for m in &results.methods {
+        let f = |v: Option<f64>, d: usize| v.map(|v| format!("{v:.d$}")).unwrap_or_else(|| "-".into());
+        println!(
+            "{:<26} {:>14} {:>10} {:>10}",
+            m.name,
+            f(m.mean_normalised, 4),
+            f(m.mean_relmse, 4),
+            f(m.mean_ms_per_mpx, 1)
+        );
+    }
+    println!("wrote     {}", args.output.join("index.html").display());
+    Ok(())
+}
