@@ -578,7 +578,7 @@ pub const SUMMARY_FILE: &str = "summary.json";
 
 pub fn write_checkpoint(dir: &Path, checkpoint: &Checkpoint) -> Result<()> {
     let text = serde_json::to_string(checkpoint)?;
-    crate::io::write_bytes_atomically(&dir.join(CHECKPOINT_FILE), text.as_bytes()).map_err(anyhow::Error::msg)
+    crate::io::write_bytes_atomically(&dir.join(CHECKPOINT_FILE), text.as_bytes()).map_err(anyhow::Error::from)
 }
 
 pub fn read_checkpoint(dir: &Path) -> Result<Checkpoint> {
@@ -607,7 +607,7 @@ pub fn log_upto(dir: &Path, generation: u32) -> Result<()> {
         })
         .map(|l| format!("{l}\n"))
         .collect();
-    crate::io::write_bytes_atomically(&path, kept.as_bytes()).map_err(anyhow::Error::msg)
+    crate::io::write_bytes_atomically(&path, kept.as_bytes()).map_err(anyhow::Error::from)
 }
 
 /// One generation's line: the report, and what its fitness was measured on.
@@ -1199,13 +1199,12 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         gp::Objectives::ErrorCost => gp::pareto_front(&state),
     };
     let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline, &config.fitness, &front, &rescored);
-    crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes()).map_err(anyhow::Error::msg)?;
+    crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes())?;
     let frequencies = gp::feature_frequencies(&state);
     crate::io::write_bytes_atomically(
         &output.join(FEATURES_FILE),
         serde_json::to_string_pretty(&frequencies)?.as_bytes(),
-    )
-    .map_err(anyhow::Error::msg)?;
+    )?;
     let best_whole = rescored.iter().filter_map(|r| r.fitness.map(|f| (f, r))).min_by(|a, b| a.0.total_cmp(&b.0));
     let best = match best_whole.map(|(_, r)| r) {
         Some(r) => gp::hall_of_fame(&state, settings.hall_of_fame)
@@ -1237,8 +1236,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let test_baselines = results.collect();
     if !front.is_empty() {
         let front = measure_front(gpu, &mut tester, &front, &config)?;
-        crate::io::write_bytes_atomically(&output.join(FRONT_FILE), serde_json::to_string_pretty(&front)?.as_bytes())
-            .map_err(anyhow::Error::msg)?;
+        crate::io::write_bytes_atomically(&output.join(FRONT_FILE), serde_json::to_string_pretty(&front)?.as_bytes())?;
     }
     let summary = Summary {
         generations: state.generation,
@@ -1254,7 +1252,6 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         feature_frequencies: frequencies,
         seconds: start.elapsed().as_secs_f64(),
     };
-    crate::io::write_bytes_atomically(&output.join(SUMMARY_FILE), serde_json::to_string_pretty(&summary)?.as_bytes())
-        .map_err(anyhow::Error::msg)?;
+    crate::io::write_bytes_atomically(&output.join(SUMMARY_FILE), serde_json::to_string_pretty(&summary)?.as_bytes())?;
     Ok(Some(summary))
 }

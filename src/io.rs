@@ -2,28 +2,41 @@
 
 use std::path::{Path, PathBuf};
 
+/// Why an output could not be written; `path` untouched in every case.
+#[derive(Debug, thiserror::Error)]
+pub enum WriteError {
+    #[error("cannot create {}: {source}", dir.display())]
+    CreateDir { dir: PathBuf, source: std::io::Error },
+    #[error("writing {}: {message}", path.display())]
+    Write { path: PathBuf, message: String },
+    #[error("cannot move {} to {}: {source}", from.display(), to.display())]
+    Rename { from: PathBuf, to: PathBuf, source: std::io::Error },
+    #[error("encoding {}: {message}", path.display())]
+    Encode { path: PathBuf, message: String },
+}
+
 /// Write through `write` into a temporary file beside `path`, then rename it
 /// over `path`. On failure the temporary file is removed and `path` is untouched.
 pub fn write_atomically<E: std::fmt::Display>(
     path: &Path,
     write: impl FnOnce(&Path) -> Result<(), E>,
-) -> Result<(), String> {
+) -> Result<(), WriteError> {
     let tmp = temporary_beside(path);
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(|source| WriteError::CreateDir { dir: dir.to_path_buf(), source })?;
     }
     if let Err(e) = write(&tmp) {
         let _ = std::fs::remove_file(&tmp);
-        return Err(e.to_string());
+        return Err(WriteError::Write { path: path.to_path_buf(), message: e.to_string() });
     }
-    std::fs::rename(&tmp, path).map_err(|e| {
+    std::fs::rename(&tmp, path).map_err(|source| {
         let _ = std::fs::remove_file(&tmp);
-        format!("cannot move {} to {}: {e}", tmp.display(), path.display())
+        WriteError::Rename { from: tmp.clone(), to: path.to_path_buf(), source }
     })
 }
 
 /// Write bytes atomically.
-pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<(), String> {
+pub fn write_bytes_atomically(path: &Path, bytes: &[u8]) -> Result<(), WriteError> {
     write_atomically(path, |tmp| std::fs::write(tmp, bytes))
 }
 

@@ -11,15 +11,17 @@ pub fn tone_map(linear: f32) -> u8 {
 }
 
 /// Write an 8-bit sRGB PNG atomically.
-pub fn write_png(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> Result<(), String> {
+pub fn write_png(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> Result<(), crate::io::WriteError> {
     let pixels: Vec<u8> = rgb.iter().flat_map(|c| c.map(tone_map)).collect();
     let mut bytes = Vec::new();
     {
         let mut encoder = png::Encoder::new(&mut bytes, width as u32, height as u32);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder.write_header().map_err(|e| e.to_string())?;
-        writer.write_image_data(&pixels).map_err(|e| e.to_string())?;
+        let encode =
+            |e: png::EncodingError| crate::io::WriteError::Encode { path: path.to_path_buf(), message: e.to_string() };
+        let mut writer = encoder.write_header().map_err(encode)?;
+        writer.write_image_data(&pixels).map_err(encode)?;
     }
     crate::io::write_bytes_atomically(path, &bytes)
 }

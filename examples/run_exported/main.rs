@@ -73,7 +73,7 @@ fn main() -> Result<(), String> {
     let (device, queue) = host::open_device()?;
     let filtered = host::filter(&device, &queue, &wgsl, &manifest, &frame, radius)?;
     let rgb: Vec<[f32; 3]> = filtered.iter().map(|c| [c[0], c[1], c[2]]).collect();
-    filterjit::preview::write_png(&PathBuf::from(out), scene.width, scene.height, &rgb)?;
+    filterjit::preview::write_png(&PathBuf::from(out), scene.width, scene.height, &rgb).map_err(|e| e.to_string())?;
     println!("filtered {}x{} with radius {radius}: wrote {out}", scene.width, scene.height);
     Ok(())
 }

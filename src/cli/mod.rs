@@ -30,7 +30,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             let kernel = jit::compile_shaped(&resolved.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
             match output {
                 Some(path) => filterjit::io::write_bytes_atomically(&path, kernel.wgsl().as_bytes())
-                    .map_err(anyhow::Error::msg)
+                    .map_err(anyhow::Error::from)
                     .with_context(|| format!("writing {}", path.display()))?,
                 None => print!("{}", kernel.wgsl()),
             }
@@ -75,7 +75,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
             for (path, bytes) in [(&output, exported.code.to_bytes()), (&manifest_path, manifest.into_bytes())] {
                 filterjit::io::write_bytes_atomically(path, &bytes)
-                    .map_err(anyhow::Error::msg)
+                    .map_err(anyhow::Error::from)
                     .with_context(|| format!("writing {}", path.display()))?;
             }
             println!(
@@ -152,7 +152,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                     context.pipeline,
                     tuned.expr
                 );
-                filterjit::io::write_bytes_atomically(path, text.as_bytes()).map_err(anyhow::Error::msg)?;
+                filterjit::io::write_bytes_atomically(path, text.as_bytes())?;
             }
             Ok(())
         }
@@ -268,7 +268,7 @@ pub(crate) fn filter(
         .with_context(|| format!("writing {}", output.display()))?;
     let png = output.with_extension("png");
     preview::write_png(&png, scene.width, scene.height, &rgb)
-        .map_err(anyhow::Error::msg)
+        .map_err(anyhow::Error::from)
         .with_context(|| format!("writing {}", png.display()))?;
 
     let megapixels = scene.pixels() as f64 / 1e6;
@@ -418,8 +418,7 @@ pub(crate) fn bench(
     let mut progress = |what: &str| eprintln!("          {what}");
     let report = filterjit::bench::run(&gpu, &scene, &mut generation_scene, settings, &mut progress)?;
     print!("{}", filterjit::bench::table(&report));
-    filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())
-        .map_err(anyhow::Error::msg)?;
+    filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())?;
     println!("wrote     {}", output.display());
     Ok(())
 }

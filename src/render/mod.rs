@@ -111,6 +111,8 @@ pub enum RenderError {
     Description(#[from] DescriptionError),
     #[error("{}: {message}", path.display())]
     Write { path: PathBuf, message: String },
+    #[error(transparent)]
+    Output(#[from] crate::io::WriteError),
     #[error("bad render settings: {0}")]
     Settings(String),
 }
@@ -341,8 +343,7 @@ impl Rendered {
             "samples_per_second": self.samples_per_second,
         });
         let meta_path = dir.join(crate::scene::META_FILE);
-        crate::io::write_bytes_atomically(&meta_path, serde_json::to_string_pretty(&meta).expect("json").as_bytes())
-            .map_err(|e| werr(&meta_path, e))?;
+        crate::io::write_bytes_atomically(&meta_path, serde_json::to_string_pretty(&meta).expect("json").as_bytes())?;
         Ok(())
     }
 }

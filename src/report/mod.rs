@@ -471,7 +471,7 @@ fn write_strip(path: &Path, crops: &[Crop]) -> Result<()> {
             }
         }
     }
-    preview::write_png(path, width, side, &pixels).map_err(anyhow::Error::msg)
+    preview::write_png(path, width, side, &pixels).map_err(anyhow::Error::from)
 }
 
 /// The crop, tone-mapped like every preview and enlarged to about 192 pixels (nearest neighbour).
@@ -484,7 +484,7 @@ fn write_crop(path: &Path, image: &[[f32; 3]], scene: &Scene, (x0, y0, side): (u
             pixels.push(image[(y0 + y / zoom) * scene.width + x0 + x / zoom]);
         }
     }
-    preview::write_png(path, out_side, out_side, &pixels).map_err(anyhow::Error::msg)?;
+    preview::write_png(path, out_side, out_side, &pixels)?;
     Ok((out_side, pixels))
 }
 

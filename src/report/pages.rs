@@ -221,7 +221,7 @@ pub(super) fn write(results: &Results, output: &Path) -> Result<()> {
             std::fs::create_dir_all(dir)?;
         }
         io::write_bytes_atomically(&path, bytes)
-            .map_err(anyhow::Error::msg)
+            .map_err(anyhow::Error::from)
             .with_context(|| format!("writing {}", path.display()))
     };
     put("results.json", (serde_json::to_string_pretty(results)? + "\n").as_bytes())?;

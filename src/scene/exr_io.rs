@@ -105,7 +105,7 @@ pub fn write_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> 
     });
     let image = Image::from_channels((width, height), channels);
     crate::io::write_atomically(path, |tmp| image.write().to_file(tmp).map_err(|e| e.to_string()))
-        .map_err(|message| SceneError::Exr { file: path.to_path_buf(), message })
+        .map_err(SceneError::from)
 }
 
 /// Write named f32 channels as one EXR layer, atomically. Each channel holds width*height values.
@@ -122,5 +122,5 @@ pub fn write_channels(
         Layer::new((width, height), LayerAttributes::default(), Encoding::FAST_LOSSLESS, AnyChannels::sort(list));
     let image = Image::from_layer(layer);
     crate::io::write_atomically(path, |tmp| image.write().to_file(tmp).map_err(|e| e.to_string()))
-        .map_err(|message| SceneError::Exr { file: path.to_path_buf(), message })
+        .map_err(SceneError::from)
 }

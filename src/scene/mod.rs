@@ -37,6 +37,8 @@ pub enum SceneError {
     Empty { file: PathBuf },
     #[error("{}: {message}", file.display())]
     Meta { file: PathBuf, message: String },
+    #[error(transparent)]
+    Write(#[from] crate::io::WriteError),
 }
 
 impl SceneError {
