@@ -9,8 +9,9 @@
 use serde::Serialize;
 
 use crate::jit::interface::{BindingInterface, Resource, UniformField};
-use crate::jit::{self, Input, KernelKind, OutputFormat, Role, ValidatedKernel, WORKGROUP};
+use crate::jit::{self, Input, KernelKind, OutputFormat, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
 use crate::lang::{Expr, Feature, ScalarVar};
+use crate::pipeline::FilterPipeline;
 
 /// Shading languages an expression can be exported to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -67,10 +68,12 @@ impl Code {
     }
 }
 
-/// An exported shader and its interface.
+/// An exported filter: the form's shader, the pre-pass's where the pipeline
+/// has one, and the manifest of both.
 #[derive(Clone, Debug)]
 pub struct Exported {
     pub code: Code,
+    pub prepass: Option<Code>,
     pub manifest: Manifest,
 }
 
@@ -98,6 +101,30 @@ pub struct Manifest {
     /// it), where the expression came with one (a front member).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radius: Option<u32>,
+    /// The filter pipeline (docs/SEMANTICS.md, "The pipeline") this shader is the form of.
+    pub pipeline: String,
+    /// How many times to dispatch this shader per frame: 1 for the window
+    /// form, K for `atrous=K` (pass k with `step` = 2^k, `level` = k, `last`
+    /// = 1 when k = K - 1, colour and carried variance ping-ponged; `order`).
+    pub passes: u32,
+    /// The pre-pass shader, dispatched once before the form, where the pipeline has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub prepass: Option<Stage>,
+    /// What runs in which order and which image each binding is, in words.
+    pub order: Vec<String>,
+}
+
+/// A shader of the pipeline besides the form's (the pre-pass).
+#[derive(Clone, Debug, Serialize)]
+pub struct Stage {
+    /// The shader's file, beside this manifest (set by whoever writes the files).
+    pub file: String,
+    pub entry_point: String,
+    pub dispatch: String,
+    pub uniform: Uniform,
+    /// Values for the uniform's fields other than width and height.
+    pub uniform_values: std::collections::BTreeMap<String, f64>,
+    pub bindings: Vec<Binding>,
 }
 
 /// Sampled textures per shader stage every WebGPU device allows.
@@ -235,42 +262,137 @@ fn binding_kind(resource: Resource) -> BindingKind {
     }
 }
 
-/// Lower, validate and translate `expr` into a standalone shader for `target`.
+/// Lower, validate and translate `expr` into a standalone shader for
+/// `target`: the window form, without pre-pass ([`export_pipeline`] for others).
 pub fn export(expr: &Expr, target: Target, format: OutputFormat) -> Result<Exported, ExportError> {
-    let kernel = jit::compile_kind(expr, KernelKind::Export(format))?;
-    let (code, entry_point) = translate(&kernel, target)?;
-    let manifest = manifest(&kernel, target, format, entry_point);
-    let code = match code {
+    export_pipeline(expr, &FilterPipeline::WINDOW, target, format)
+}
+
+/// [`export`] of `expr` in `pipeline`: the form's shader (one à-trous pass,
+/// dispatched K times, for `atrous=K`) and the pre-pass's where there is one.
+pub fn export_pipeline(
+    expr: &Expr,
+    pipeline: &FilterPipeline,
+    target: Target,
+    format: OutputFormat,
+) -> Result<Exported, ExportError> {
+    let shape = jit::Shape::of(pipeline);
+    let kernel = jit::compile_shaped(expr, KernelKind::Export(format), jit::LowerOptions::default(), shape)?;
+    let interface = &kernel.source().interface;
+    let (code, entry_point) = translate(kernel.validated(), kernel.wgsl(), interface, target)?;
+    let mut manifest = manifest(&kernel, target, format, entry_point, pipeline);
+    let prepass = match pipeline.outliers.is_some() || pipeline.demodulate {
+        false => None,
+        true => {
+            let interface = jit::BindingInterface::prepass(Some(format));
+            let module = jit::prepass_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (code, entry_point) = translate(&module, &jit::prepass_wgsl(Some(format)), &interface, target)?;
+            let params = jit::PrepassParams::of(pipeline, 0, 0);
+            manifest.prepass = Some(Stage {
+                file: String::new(),
+                entry_point,
+                dispatch: manifest.dispatch.clone(),
+                uniform: Uniform {
+                    binding: interface.slot(Role::Params),
+                    size_bytes: interface.uniform_bytes,
+                    fields: interface.uniform.clone(),
+                },
+                uniform_values: [("k".to_string(), params.k as f64), ("stages".to_string(), params.stages as f64)]
+                    .into(),
+                bindings: bindings(&interface, target, format, Stages::Prepass),
+            });
+            Some(code)
+        }
+    };
+    manifest.order = order(&manifest, pipeline);
+    let with_header = |code: Code| match code {
         Code::Text(text) if target != Target::Wgsl => Code::Text(header(&manifest, &text)),
         other => other,
     };
-    Ok(Exported { code, manifest })
+    Ok(Exported { code: with_header(code), prepass: prepass.map(with_header), manifest })
 }
 
-fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entry_point: String) -> Manifest {
-    let interface = &kernel.source().interface;
+/// Which shader a binding list is of.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Stages {
+    Form,
+    Prepass,
+}
+
+/// The steps a host takes per frame, in words.
+fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
+    let mut steps = Vec::new();
+    let mut colour = "the noisy colour";
+    if let Some(stage) = &manifest.prepass {
+        steps.push(format!(
+            "pre-pass (`prepass`, k = {}, stages = {}): colour = the noisy colour, albedo = the raw albedo (any \
+             texture when the pipeline does not demodulate); writes `prepared` and `modulation` (textures of the \
+             output format)",
+            stage.uniform_values["k"], stage.uniform_values["stages"]
+        ));
+        colour = "`prepared`";
+    }
+    if manifest.passes == 1 {
+        steps.push(format!(
+            "form (window): colour = {colour}{}; writes `output`: the filtered frame",
+            if pipeline.demodulate { ", modulation = `modulation`" } else { "" }
+        ));
+    } else {
+        steps.push(format!(
+            "form (à-trous), pass k = 0 … {}: params.step = 2^k, params.level = k, params.last = 1 when k = {} \
+             else 0; colour = {colour} in pass 0, else pass k-1's `output`; colorVariance (where bound) = the \
+             frame's in pass 0, else pass k-1's `variance_out`{}; pass {}'s `output` is the filtered frame",
+            manifest.passes - 1,
+            manifest.passes - 1,
+            if pipeline.demodulate { "; modulation = `modulation`" } else { "" },
+            manifest.passes - 1
+        ));
+    }
+    steps
+}
+
+/// The manifest's rows for `interface`'s bindings.
+fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, stage: Stages) -> Vec<Binding> {
     let mut scale_index = 0;
-    let bindings: Vec<Binding> = interface
+    interface
         .bindings
         .iter()
         .map(|b| {
-            let (role, components, content, scale) = match b.role {
-                Role::Params => ("params".into(), "", "the Params struct of the uniform section".into(), None),
-                Role::Color => {
+            let written = |what: &str| format!("{what}, written with textureStore; format {}", format.wgsl());
+            let (role, components, content, scale) = match (b.role, stage) {
+                (Role::Params, _) => ("params".into(), "", "the Params struct of the uniform section".into(), None),
+                (Role::Color, Stages::Prepass) => ("color".into(), "xyz", "noisy colour, linear RGB".into(), None),
+                (Role::Color, Stages::Form) => {
                     ("color".into(), "xyzw", "noisy colour, linear RGB; alpha is copied to the output".into(), None)
                 }
-                Role::Output => (
-                    "output".into(),
-                    "xyzw",
-                    format!("filtered colour, written with textureStore; format {}", format.wgsl()),
+                (Role::Albedo, _) => (
+                    "albedo".into(),
+                    "xyz",
+                    "raw albedo at the first hit (not normalised; clamped to [0, 1] and floored in the shader)".into(),
                     None,
                 ),
-                Role::Input(input) => {
+                (Role::Output, Stages::Prepass) => {
+                    ("prepared".into(), "xyzw", written("the colour the form filters"), None)
+                }
+                (Role::Output, Stages::Form) => ("output".into(), "xyzw", written("filtered colour"), None),
+                (Role::Modulation, Stages::Prepass) => {
+                    ("modulation".into(), "xyzw", written("the albedo divided out, 1 without demodulation"), None)
+                }
+                (Role::Modulation, Stages::Form) => {
+                    ("modulation".into(), "xyz", "the pre-pass's `modulation`, multiplied back".into(), None)
+                }
+                (Role::VarianceOut, _) => (
+                    "variance_out".into(),
+                    "x",
+                    "the colour variance carried to the next pass, written with textureStore; format r32float".into(),
+                    None,
+                ),
+                (Role::Input(input), _) => {
                     scale_index += 1;
                     let components = if input.components() == 1 { "x" } else { "xyz" };
                     (input.describe(), components, content(input), Some(scale_index - 1))
                 }
-                Role::Flags | Role::Reference | Role::Modulation | Role::VarianceOut | Role::Image => {
+                (Role::Flags | Role::Reference | Role::Image, _) => {
                     unreachable!("exported shaders bind no {:?}", b.role)
                 }
             };
@@ -286,7 +408,18 @@ fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entr
                 target_slot: target_slot(target, interface, b),
             }
         })
-        .collect();
+        .collect()
+}
+
+fn manifest(
+    kernel: &ValidatedKernel,
+    target: Target,
+    format: OutputFormat,
+    entry_point: String,
+    pipeline: &FilterPipeline,
+) -> Manifest {
+    let interface = &kernel.source().interface;
+    let bindings = bindings(interface, target, format, Stages::Form);
     Manifest {
         generator: format!("filterjit {}", env!("CARGO_PKG_VERSION")),
         expression: kernel.source().canonical.clone(),
@@ -306,6 +439,13 @@ fn manifest(kernel: &ValidatedKernel, target: Target, format: OutputFormat, entr
         normalisation: NORMALISATION,
         semantics: SEMANTICS,
         radius: None,
+        pipeline: pipeline.to_string(),
+        passes: match pipeline.form {
+            crate::pipeline::Form::Window => 1,
+            crate::pipeline::Form::Atrous { passes } => passes,
+        },
+        prepass: None,
+        order: Vec::new(),
     }
 }
 
@@ -336,14 +476,18 @@ fn backend_error(target: Target) -> impl Fn(String) -> ExportError {
     move |message| ExportError::Backend { target, message }
 }
 
-fn translate(kernel: &ValidatedKernel, target: Target) -> Result<(Code, String), ExportError> {
+fn translate(
+    validated: &ValidatedModule,
+    wgsl: &str,
+    interface: &BindingInterface,
+    target: Target,
+) -> Result<(Code, String), ExportError> {
     use naga::back;
     let err = backend_error(target);
-    let (module, info) = (kernel.module(), kernel.info());
-    let interface = &kernel.source().interface;
+    let (module, info) = (validated.module(), validated.info());
     let bindings = || interface.bindings.iter().map(|b| (naga::ResourceBinding { group: 0, binding: b.slot }, b));
     match target {
-        Target::Wgsl => Ok((Code::Text(kernel.wgsl().to_string()), "main".into())),
+        Target::Wgsl => Ok((Code::Text(wgsl.to_string()), "main".into())),
         Target::Glsl => {
             let options = back::glsl::Options {
                 version: back::glsl::Version::Desktop(450),

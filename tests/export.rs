@@ -60,7 +60,8 @@ fn compare(expr: &Expr, scene: &Scene, radius: u32, format: OutputFormat) -> f64
     let manifest = serde_json::to_value(&exported.manifest).unwrap();
     let gpu = gpu(); // first: it quiets Mesa's device-select layer for the whole process
     let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
-    let ours = host::filter(&device, &queue, wgsl, &manifest, &frame_of(scene, &manifest), radius)
+    let shaders = host::Shaders { form: wgsl.clone(), prepass: None };
+    let ours = host::filter(&device, &queue, &shaders, &manifest, &frame_of(scene, &manifest), radius)
         .unwrap_or_else(|e| panic!("the exported shader of `{expr}` fails in plain wgpu: {e}"));
 
     let kernel = jit::compile(expr).unwrap();
@@ -106,6 +107,81 @@ fn exported_wgsl_in_plain_wgpu_matches_filter() {
     let error = compare(&thesis, &sample, 5, OutputFormat::Rgba32float);
     eprintln!("Mitsuba sample, crossBilateral, radius 5: {error:.2e}");
     assert!(error < 2e-5, "{error:e}");
+}
+
+/// A whole pipeline exported: the pre-pass shader once, then the form's
+/// shader `passes` times with ping-ponged images, run by the plain host from
+/// the manifest alone, gives what `filterjit filter` gives through that pipeline.
+#[test]
+fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
+    use filterjit::export::export_pipeline;
+    use filterjit::jit::{KernelKind, LowerOptions, Shape};
+    let mut scene = unit_length(synthetic_scene(37, 29, 5));
+    // Albedo as real renders have it: black (emitters), ordinary, far above 1.
+    scene.albedo = Some(
+        (0..scene.pixels())
+            .map(|p| match p % 7 {
+                0 => [0.0, 0.0, 0.0],
+                1 => [250.0, 3.0, 0.5],
+                k => [0.1 * k as f32, 0.9 - 0.1 * k as f32, 0.02 * k as f32],
+            })
+            .collect(),
+    );
+    let carrying =
+        parse_expr("exp(-(distance2(color) / (colorVariance + 0.05) + distance2(normal) * 4 + level / 8))").unwrap();
+    let cases = [
+        (named("crossBilateral"), "outliers=2,demodulate,atrous=5"),
+        (carrying.clone(), "outliers=1.5,atrous=3"),
+        (carrying, "demodulate,window"),
+        (named("bilateral"), "atrous=2"),
+    ];
+    let gpu = gpu();
+    let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
+    for (expr, text) in cases {
+        let pipeline: filterjit::pipeline::FilterPipeline = text.parse().unwrap();
+        let exported = export_pipeline(&expr, &pipeline, Target::Wgsl, OutputFormat::Rgba32float).unwrap();
+        let manifest = serde_json::to_value(&exported.manifest).unwrap();
+        let text_of = |code: &Code| match code {
+            Code::Text(t) => t.clone(),
+            Code::SpirV(_) => panic!("WGSL is text"),
+        };
+        assert_eq!(
+            exported.prepass.is_some(),
+            text != "atrous=2",
+            "{text}: a pre-pass exactly where the pipeline has one"
+        );
+        let shaders = host::Shaders { form: text_of(&exported.code), prepass: exported.prepass.as_ref().map(text_of) };
+        let mut frame = frame_of(&scene, &manifest);
+        frame
+            .inputs
+            .insert("albedo".into(), scene.albedo.as_ref().unwrap().iter().map(|a| [a[0], a[1], a[2], 1.0]).collect());
+        let ours = host::filter(&device, &queue, &shaders, &manifest, &frame, 2)
+            .unwrap_or_else(|e| panic!("the exported `{text}` pipeline fails in plain wgpu: {e}"));
+
+        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&pipeline)).unwrap();
+        let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &pipeline).unwrap();
+        let filtered = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap().rgb();
+        let error = ours
+            .iter()
+            .zip(&filtered)
+            .flat_map(|(a, b)| (0..3).map(move |c| (a[c] as f64 - b[c] as f64).abs() / (b[c] as f64).abs().max(1.0)))
+            .fold(0.0, f64::max);
+        eprintln!("{text}: max relative difference {error:.2e} for {expr}");
+        assert!(error < 1e-4, "the exported `{text}` pipeline differs from filter by {error:e}");
+        let passes = manifest["passes"].as_u64().unwrap();
+        assert_eq!(
+            passes,
+            if text.contains("atrous=5") {
+                5
+            } else if text.contains("atrous=3") {
+                3
+            } else if text.contains("atrous=2") {
+                2
+            } else {
+                1
+            }
+        );
+    }
 }
 
 #[test]
@@ -158,25 +234,37 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
     let alphabet = Alphabet::full();
     let mut rng = Rng::seeded(11);
     exprs.extend((0..12).map(|k| alphabet.of_length(&mut rng, 5 + 10 * k)));
-    for (k, expr) in exprs.iter().enumerate() {
+    // Every expression as a window; the shipped ones also as a whole pipeline (pre-pass and à-trous pass).
+    let atrous: filterjit::pipeline::FilterPipeline = "outliers=2,demodulate,atrous=5".parse().unwrap();
+    let named = corpus::named().len();
+    let cases = exprs
+        .iter()
+        .map(|e| (e, filterjit::pipeline::FilterPipeline::WINDOW))
+        .chain(exprs[..named].iter().map(|e| (e, atrous)));
+    for (k, (expr, pipeline)) in cases.enumerate() {
         for target in [Target::Glsl, Target::Hlsl, Target::Spirv, Target::Msl] {
-            let exported = export(expr, target, OutputFormat::Rgba16float).unwrap();
-            let file = dir.join(format!("e{k}.{}", target.extension()));
-            std::fs::write(&file, exported.code.to_bytes()).unwrap();
-            match target {
-                Target::Glsl => check_with(glslang, &[], &file, expr),
-                Target::Hlsl => {
-                    let spv = dir.join(format!("e{k}.hlsl.spv"));
-                    let out = spv.to_str().unwrap();
-                    check_with(glslang, &["-V", "-D", "-e", "main", "-S", "comp", "-o", out], &file, expr);
+            let exported =
+                filterjit::export::export_pipeline(expr, &pipeline, target, OutputFormat::Rgba16float).unwrap();
+            let shaders =
+                std::iter::once(("", &exported.code)).chain(exported.prepass.as_ref().map(|p| ("prepass", p)));
+            for (stage, code) in shaders {
+                let file = dir.join(format!("e{k}{stage}.{}", target.extension()));
+                std::fs::write(&file, code.to_bytes()).unwrap();
+                match target {
+                    Target::Glsl => check_with(glslang, &[], &file, expr),
+                    Target::Hlsl => {
+                        let spv = dir.join(format!("e{k}{stage}.hlsl.spv"));
+                        let out = spv.to_str().unwrap();
+                        check_with(glslang, &["-V", "-D", "-e", "main", "-S", "comp", "-o", out], &file, expr);
+                    }
+                    Target::Spirv => check_with(spirv_val, &["--target-env", "vulkan1.0"], &file, expr),
+                    // No Metal compiler runs on Linux: MSL is only produced by naga
+                    // from the validated module, and its entry point checked.
+                    Target::Msl => assert_eq!(exported.manifest.entry_point, "main_"),
+                    Target::Wgsl => unreachable!(),
                 }
-                Target::Spirv => check_with(spirv_val, &["--target-env", "vulkan1.0"], &file, expr),
-                // No Metal compiler runs on Linux: MSL is only produced by naga
-                // from the validated module, and its entry point checked.
-                Target::Msl => assert_eq!(exported.manifest.entry_point, "main_"),
-                Target::Wgsl => unreachable!(),
             }
         }
     }
-    eprintln!("{} expressions × GLSL, HLSL, SPIR-V passed glslangValidator / spirv-val; MSL generated only (no Metal compiler on Linux)", exprs.len());
+    eprintln!("{} expressions (and {named} as a whole pipeline) × GLSL, HLSL, SPIR-V passed glslangValidator / spirv-val; MSL generated only (no Metal compiler on Linux)", exprs.len());
 }

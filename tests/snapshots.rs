@@ -39,7 +39,8 @@ fn pipeline_kernels_match_snapshots() {
     assert!(shape.atrous && shape.remodulate);
     let carrying = parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + level * distance2(normal)))").unwrap();
     settings().bind(|| {
-        insta::assert_snapshot!("pipeline__prepass", jit::prepass_wgsl());
+        insta::assert_snapshot!("pipeline__prepass", jit::prepass_wgsl(None));
+        insta::assert_snapshot!("export__prepass", jit::prepass_wgsl(Some(jit::OutputFormat::Rgba32float)));
         for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying)] {
             for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
                 let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();
@@ -83,6 +84,19 @@ fn exported_shaders_match_snapshots() {
         }
         let manifest = export(&expr, Target::Wgsl, jit::OutputFormat::Rgba16float).unwrap().manifest;
         insta::assert_snapshot!("export__thesis1.wgsl.json", serde_json::to_string_pretty(&manifest).unwrap());
+        // A whole pipeline: an à-trous pass that carries the variance and remodulates, and its manifest.
+        let carrying =
+            parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + level * distance2(normal)))").unwrap();
+        let pipeline = "outliers=2,demodulate,atrous=5".parse().unwrap();
+        let exported =
+            filterjit::export::export_pipeline(&carrying, &pipeline, Target::Wgsl, jit::OutputFormat::Rgba16float)
+                .unwrap();
+        let Code::Text(text) = exported.code else { panic!("WGSL is text") };
+        insta::assert_snapshot!("export__carrying.atrous.wgsl", text);
+        insta::assert_snapshot!(
+            "export__carrying.atrous.wgsl.json",
+            serde_json::to_string_pretty(&exported.manifest).unwrap()
+        );
     });
 }
 

@@ -1,7 +1,11 @@
-//! Runs a shader from `filterjit export --target wgsl` with plain wgpu,
+//! Runs a filter from `filterjit export --target wgsl` with plain wgpu,
 //! knowing only the documented interface: the manifest beside the shader.
 //! Nothing here uses filterjit; this is what an engine's integration does.
 //! (`tests/export.rs` runs this same file against `filterjit filter`.)
+//!
+//! Per frame, as the manifest's `order` says: the pre-pass shader once (where
+//! the pipeline has one), then the form's shader `passes` times (à-trous: pass
+//! k with step 2^k, colour and carried variance ping-ponged between textures).
 
 use std::collections::HashMap;
 
@@ -13,10 +17,17 @@ pub struct Frame {
     pub height: u32,
     /// Noisy linear RGB colour; alpha is passed through.
     pub color: Vec<[f32; 4]>,
-    /// The inputs by the manifest's `role` (`normal`, `wpVariance`, …), as the engine has them.
+    /// The inputs by the manifest's `role` (`normal`, `wpVariance`, …, and
+    /// `albedo` for a pre-pass that demodulates), as the engine has them.
     pub inputs: HashMap<String, Vec<[f32; 4]>>,
     /// Normalisation scale per role; 1 when absent (textures already normalised).
     pub scales: HashMap<String, f32>,
+}
+
+/// The exported shaders: the form's, and the pre-pass's where the manifest has one.
+pub struct Shaders {
+    pub form: String,
+    pub prepass: Option<String>,
 }
 
 /// A device on the adapter wgpu prefers (`WGPU_BACKEND` narrows the choice).
@@ -33,12 +44,214 @@ fn field<'a>(v: &'a Value, key: &str) -> Result<&'a Value, String> {
     v.get(key).ok_or_else(|| format!("manifest has no `{key}`"))
 }
 
-/// Filter `frame` with the exported shader `wgsl` described by `manifest`;
-/// returns the output texture's texels as f32 RGBA.
+fn array<'a>(v: &'a Value, key: &str) -> Result<&'a Vec<Value>, String> {
+    field(v, key)?.as_array().ok_or_else(|| format!("`{key}` is not an array"))
+}
+
+/// The textures of one frame and where each binding role finds its image.
+struct Images<'d> {
+    device: &'d wgpu::Device,
+    queue: &'d wgpu::Queue,
+    extent: wgpu::Extent3d,
+    output_format: wgpu::TextureFormat,
+    /// Images by name: `color`, the inputs, then what the stages write.
+    views: HashMap<String, (wgpu::Texture, wgpu::TextureView)>,
+}
+
+impl Images<'_> {
+    /// Upload `texels` as an RGBA32F sampled texture called `name`.
+    fn upload(&mut self, name: &str, texels: &[[f32; 4]]) {
+        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(name),
+            size: self.extent,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: wgpu::TextureFormat::Rgba32Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        });
+        self.queue.write_texture(
+            wgpu::TexelCopyTextureInfo {
+                texture: &texture,
+                mip_level: 0,
+                origin: wgpu::Origin3d::ZERO,
+                aspect: wgpu::TextureAspect::All,
+            },
+            bytemuck::cast_slice(texels),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(16 * self.extent.width),
+                rows_per_image: Some(self.extent.height),
+            },
+            self.extent,
+        );
+        let view = texture.create_view(&Default::default());
+        self.views.insert(name.to_string(), (texture, view));
+    }
+
+    /// A texture a stage writes and a later one reads, called `name`.
+    fn target(&mut self, name: &str, format: wgpu::TextureFormat) {
+        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some(name),
+            size: self.extent,
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&Default::default());
+        self.views.insert(name.to_string(), (texture, view));
+    }
+
+    fn view(&self, name: &str) -> Result<&wgpu::TextureView, String> {
+        self.views.get(name).map(|(_, v)| v).ok_or_else(|| format!("no image `{name}` (the frame lacks it?)"))
+    }
+}
+
+/// One dispatch of a shader: its uniform's values by field name, and the
+/// image each role is bound to.
+struct Dispatch<'a> {
+    values: HashMap<&'a str, f64>,
+    images: HashMap<&'a str, String>,
+}
+
+/// Build `stage`'s pipeline (its bindings from the manifest) and record one
+/// dispatch of it into `encoder`.
+#[allow(clippy::too_many_arguments)]
+fn record(
+    images: &Images<'_>,
+    encoder: &mut wgpu::CommandEncoder,
+    wgsl: &str,
+    stage: &Value,
+    workgroup: [u32; 2],
+    frame: &Frame,
+    dispatch: &Dispatch<'_>,
+) -> Result<(), String> {
+    let device = images.device;
+    let bindings = array(stage, "bindings")?;
+    // The uniform, field by field: width and height, the dispatch's values,
+    // and the normalisation scales of the inputs (`scale[k]`, k a binding's `scale_index`).
+    let uniform_info = field(stage, "uniform")?;
+    let size = field(uniform_info, "size_bytes")?.as_u64().ok_or("uniform size")? as usize;
+    let mut uniform = vec![0u8; size];
+    for f in array(uniform_info, "fields")? {
+        let name = f["name"].as_str().ok_or("field name")?;
+        let offset = f["offset"].as_u64().ok_or("field offset")? as usize;
+        let value = match name {
+            "width" => Some(frame.width as f64),
+            "height" => Some(frame.height as f64),
+            _ if name.starts_with("scale[") => {
+                let k: u64 = name[6..name.len() - 1].parse().map_err(|_| format!("bad field {name}"))?;
+                let role = bindings
+                    .iter()
+                    .find(|b| b.get("scale_index").and_then(Value::as_u64) == Some(k))
+                    .and_then(|b| b["role"].as_str())
+                    .ok_or_else(|| format!("no binding has scale index {k}"))?;
+                Some(frame.scales.get(role).copied().unwrap_or(1.0) as f64)
+            }
+            _ => dispatch.values.get(name).copied(),
+        };
+        let bytes = match (f["type"].as_str(), value) {
+            (_, None) => [0; 4],
+            (Some("u32"), Some(v)) => (v as u32).to_le_bytes(),
+            (Some("f32" | "vec4<f32>"), Some(v)) => (v as f32).to_le_bytes(),
+            (other, _) => return Err(format!("field {name} has type {other:?}")),
+        };
+        uniform[offset..offset + 4].copy_from_slice(&bytes);
+    }
+    let params = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("params"),
+        size: size as u64,
+        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    images.queue.write_buffer(&params, 0, &uniform);
+
+    // Layout and resources, binding by binding, from the manifest.
+    let mut layout_entries = Vec::new();
+    let mut resources = Vec::new();
+    for b in bindings {
+        let binding = b["binding"].as_u64().ok_or("binding number")? as u32;
+        let role = b["role"].as_str().ok_or("binding role")?;
+        let image = || -> Result<&wgpu::TextureView, String> {
+            images.view(dispatch.images.get(role).map(String::as_str).unwrap_or(role))
+        };
+        let (ty, resource) = match b["kind"].as_str() {
+            Some("uniform") => (
+                wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                params.as_entire_binding(),
+            ),
+            Some("storage_texture") => (
+                wgpu::BindingType::StorageTexture {
+                    access: wgpu::StorageTextureAccess::WriteOnly,
+                    // The carried variance is one float; images are the output format.
+                    format: if role == "variance_out" { wgpu::TextureFormat::R32Float } else { images.output_format },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                },
+                wgpu::BindingResource::TextureView(image()?),
+            ),
+            // Read with textureLoad only: 32-bit float textures need no filtering.
+            Some("sampled_texture") => (
+                wgpu::BindingType::Texture {
+                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
+                    view_dimension: wgpu::TextureViewDimension::D2,
+                    multisampled: false,
+                },
+                wgpu::BindingResource::TextureView(image()?),
+            ),
+            other => return Err(format!("unknown binding kind {other:?}")),
+        };
+        layout_entries.push(wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty,
+            count: None,
+        });
+        resources.push(wgpu::BindGroupEntry { binding, resource });
+    }
+    let layout =
+        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: None, entries: &layout_entries });
+    let bind_group =
+        device.create_bind_group(&wgpu::BindGroupDescriptor { label: None, layout: &layout, entries: &resources });
+    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+        label: None,
+        bind_group_layouts: &[Some(&layout)],
+        immediate_size: 0,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("exported filter"),
+        source: wgpu::ShaderSource::Wgsl(wgsl.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("exported filter"),
+        layout: Some(&pipeline_layout),
+        module: &module,
+        entry_point: Some(field(stage, "entry_point")?.as_str().ok_or("entry point")?),
+        compilation_options: Default::default(),
+        cache: None,
+    });
+    let mut pass = encoder.begin_compute_pass(&Default::default());
+    pass.set_pipeline(&pipeline);
+    pass.set_bind_group(0, &bind_group, &[]);
+    pass.dispatch_workgroups(frame.width.div_ceil(workgroup[0]), frame.height.div_ceil(workgroup[1]), 1);
+    Ok(())
+}
+
+/// Filter `frame` with the exported `shaders` described by `manifest`;
+/// returns the filtered frame's texels as f32 RGBA.
 pub fn filter(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
-    wgsl: &str,
+    shaders: &Shaders,
     manifest: &Value,
     frame: &Frame,
     radius: u32,
@@ -50,145 +263,67 @@ pub fn filter(
         Some("rgba32float") => wgpu::TextureFormat::Rgba32Float,
         other => return Err(format!("unknown output format {other:?}")),
     };
-    let workgroup: Vec<u32> = field(manifest, "workgroup_size")?
-        .as_array()
-        .ok_or("workgroup_size is not an array")?
-        .iter()
-        .map(|v| v.as_u64().unwrap_or(1) as u32)
-        .collect();
-
-    // The uniform: width, height, radius, pad, then one vec4 per scale_index.
-    let bindings = field(manifest, "bindings")?.as_array().ok_or("bindings is not an array")?;
-    let size = field(field(manifest, "uniform")?, "size_bytes")?.as_u64().ok_or("uniform size")? as usize;
-    let mut uniform = vec![0u8; size];
-    for (k, value) in [width, height, radius, 0].into_iter().enumerate() {
-        uniform[4 * k..4 * k + 4].copy_from_slice(&value.to_le_bytes());
+    let size: Vec<u32> = array(manifest, "workgroup_size")?.iter().map(|v| v.as_u64().unwrap_or(1) as u32).collect();
+    let workgroup = [size[0], size[1]];
+    let mut images = Images { device, queue, extent, output_format, views: HashMap::new() };
+    images.upload("color", &frame.color);
+    for (role, texels) in &frame.inputs {
+        images.upload(role, texels);
     }
-    for b in bindings {
-        if let (Some(k), Some(role)) = (b.get("scale_index").and_then(Value::as_u64), b["role"].as_str()) {
-            let scale = frame.scales.get(role).copied().unwrap_or(1.0);
-            let offset = 16 + 16 * k as usize;
-            uniform[offset..offset + 4].copy_from_slice(&scale.to_le_bytes());
-        }
-    }
-    let params = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("params"),
-        size: size as u64,
-        usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-    queue.write_buffer(&params, 0, &uniform);
-
-    let sampled = |label: &str, texels: &[[f32; 4]]| -> wgpu::TextureView {
-        let texture = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(label),
-            size: extent,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba32Float,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
-            view_formats: &[],
-        });
-        queue.write_texture(
-            wgpu::TexelCopyTextureInfo {
-                texture: &texture,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            bytemuck::cast_slice(texels),
-            wgpu::TexelCopyBufferLayout { offset: 0, bytes_per_row: Some(16 * width), rows_per_image: Some(height) },
-            extent,
-        );
-        texture.create_view(&Default::default())
-    };
-    let output = device.create_texture(&wgpu::TextureDescriptor {
-        label: Some("filtered"),
-        size: extent,
-        mip_level_count: 1,
-        sample_count: 1,
-        dimension: wgpu::TextureDimension::D2,
-        format: output_format,
-        usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::COPY_SRC,
-        view_formats: &[],
-    });
-    let output_view = output.create_view(&Default::default());
-
-    // Layout and resources, binding by binding, from the manifest.
-    let mut layout_entries = Vec::new();
-    let mut views = Vec::new();
-    for b in bindings {
-        let binding = b["binding"].as_u64().ok_or("binding number")? as u32;
-        let role = b["role"].as_str().ok_or("binding role")?;
-        let ty = match b["kind"].as_str() {
-            Some("uniform") => wgpu::BindingType::Buffer {
-                ty: wgpu::BufferBindingType::Uniform,
-                has_dynamic_offset: false,
-                min_binding_size: None,
-            },
-            Some("storage_texture") => wgpu::BindingType::StorageTexture {
-                access: wgpu::StorageTextureAccess::WriteOnly,
-                format: output_format,
-                view_dimension: wgpu::TextureViewDimension::D2,
-            },
-            Some("sampled_texture") => {
-                let texels = if role == "color" {
-                    &frame.color
-                } else {
-                    frame.inputs.get(role).ok_or_else(|| format!("the frame has no `{role}`"))?
-                };
-                views.push((binding, sampled(role, texels)));
-                // Read with textureLoad only: 32-bit float textures need no filtering.
-                wgpu::BindingType::Texture {
-                    sample_type: wgpu::TextureSampleType::Float { filterable: false },
-                    view_dimension: wgpu::TextureViewDimension::D2,
-                    multisampled: false,
-                }
-            }
-            other => return Err(format!("unknown binding kind {other:?}")),
-        };
-        layout_entries.push(wgpu::BindGroupLayoutEntry {
-            binding,
-            visibility: wgpu::ShaderStages::COMPUTE,
-            ty,
-            count: None,
-        });
-    }
-    let bind_group_layout =
-        device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor { label: None, entries: &layout_entries });
-    let mut entries = vec![
-        wgpu::BindGroupEntry { binding: 0, resource: params.as_entire_binding() },
-        wgpu::BindGroupEntry { binding: 2, resource: wgpu::BindingResource::TextureView(&output_view) },
-    ];
-    for (binding, view) in &views {
-        entries.push(wgpu::BindGroupEntry { binding: *binding, resource: wgpu::BindingResource::TextureView(view) });
-    }
-    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-        label: None,
-        layout: &bind_group_layout,
-        entries: &entries,
-    });
-    let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-        label: None,
-        bind_group_layouts: &[Some(&bind_group_layout)],
-        immediate_size: 0,
-    });
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-        label: Some("exported filter"),
-        source: wgpu::ShaderSource::Wgsl(wgsl.into()),
-    });
-    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-        label: Some("exported filter"),
-        layout: Some(&pipeline_layout),
-        module: &module,
-        entry_point: Some(field(manifest, "entry_point")?.as_str().ok_or("entry point")?),
-        compilation_options: Default::default(),
-        cache: None,
-    });
+    let mut encoder = device.create_command_encoder(&Default::default());
 
-    // Dispatch, then copy the output texture out (rows padded to 256 bytes).
+    // The pre-pass, once: it writes the colour the form filters and the modulation.
+    let mut colour = "color".to_string();
+    if let Some(stage) = manifest.get("prepass").filter(|p| !p.is_null()) {
+        let wgsl = shaders.prepass.as_deref().ok_or("the manifest has a pre-pass, and no pre-pass shader was given")?;
+        images.target("prepared", output_format);
+        images.target("modulation", output_format);
+        if !images.views.contains_key("albedo") {
+            // Not read unless the pipeline demodulates; any texture will do.
+            let any = frame.color.clone();
+            images.upload("albedo", &any);
+        }
+        let mut values = HashMap::new();
+        for (name, value) in field(stage, "uniform_values")?.as_object().ok_or("uniform_values")? {
+            values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
+        }
+        let dispatch = Dispatch { values, images: HashMap::new() };
+        record(&images, &mut encoder, wgsl, stage, workgroup, frame, &dispatch)?;
+        colour = "prepared".to_string();
+    }
+
+    // The form, `passes` times; pass k reads pass k-1's image and variance.
+    let passes = field(manifest, "passes")?.as_u64().ok_or("passes")? as u32;
+    let carries = array(manifest, "bindings")?.iter().any(|b| b["role"] == "variance_out");
+    let mut variance = "colorVariance".to_string();
+    for k in 0..passes {
+        let (out, variance_out) = (format!("image{}", k % 2), format!("variance{}", k % 2));
+        images.target(&out, output_format);
+        if carries {
+            images.target(&variance_out, wgpu::TextureFormat::R32Float);
+        }
+        let values: HashMap<&str, f64> = [
+            ("radius", radius as f64),
+            ("step", (1u64 << k) as f64),
+            ("level", k as f64),
+            ("last", if k + 1 == passes { 1.0 } else { 0.0 }),
+        ]
+        .into();
+        let roles = [
+            ("color", colour.clone()),
+            ("output", out.clone()),
+            ("colorVariance", variance.clone()),
+            ("variance_out", variance_out.clone()),
+        ];
+        let dispatch = Dispatch { values, images: roles.into() };
+        record(&images, &mut encoder, &shaders.form, manifest, workgroup, frame, &dispatch)?;
+        // Pass k+1 reads what pass k wrote and writes fresh textures (`target` replaces by name).
+        colour = out;
+        variance = variance_out;
+    }
+
+    // Copy the last image out (rows padded to 256 bytes).
     let texel_bytes = if output_format == wgpu::TextureFormat::Rgba16Float { 8 } else { 16 };
     let row_bytes = (width * texel_bytes).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
     let staging = device.create_buffer(&wgpu::BufferDescriptor {
@@ -197,16 +332,10 @@ pub fn filter(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let mut encoder = device.create_command_encoder(&Default::default());
-    {
-        let mut pass = encoder.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(width.div_ceil(workgroup[0]), height.div_ceil(workgroup[1]), 1);
-    }
+    let (last, _) = images.views.get(&colour).ok_or("no filtered image")?;
     encoder.copy_texture_to_buffer(
         wgpu::TexelCopyTextureInfo {
-            texture: &output,
+            texture: last,
             mip_level: 0,
             origin: wgpu::Origin3d::ZERO,
             aspect: wgpu::TextureAspect::All,

@@ -1,5 +1,6 @@
 //! Runs a filter exported by `filterjit export --target wgsl` in a small wgpu
-//! program, the way an engine would (see README.md beside this file).
+//! program, the way an engine would (see README.md beside this file): its
+//! pre-pass and à-trous passes too, where the filter's pipeline has them.
 //!
 //!     cargo run --release --example run_exported -- SHADER.wgsl SCENE [RADIUS] OUT.png
 //!
@@ -48,6 +49,9 @@ fn main() -> Result<(), String> {
             request.variances.insert(v);
         }
     }
+    // A pre-pass that demodulates divides by the raw albedo.
+    let prepass = manifest.get("prepass").filter(|p| !p.is_null());
+    request.albedo = prepass.is_some_and(|p| p["uniform_values"]["stages"].as_f64().unwrap_or(0.0) as u32 & 2 != 0);
     let scene = filterjit::scene::load(&PathBuf::from(scene), &request).map_err(|e| e.to_string())?;
     let rgba = |v: &[f32; 3]| [v[0], v[1], v[2], 1.0];
     let mut inputs = HashMap::new();
@@ -61,6 +65,9 @@ fn main() -> Result<(), String> {
         };
         inputs.insert(role.clone(), texels);
     }
+    if let Some(albedo) = &scene.albedo {
+        inputs.insert("albedo".to_string(), albedo.iter().map(rgba).collect());
+    }
     let frame = host::Frame {
         width: scene.width as u32,
         height: scene.height as u32,
@@ -71,7 +78,15 @@ fn main() -> Result<(), String> {
     };
 
     let (device, queue) = host::open_device()?;
-    let filtered = host::filter(&device, &queue, &wgsl, &manifest, &frame, radius)?;
+    let prepass = match prepass {
+        Some(stage) => {
+            let file = std::path::Path::new(shader).with_file_name(stage["file"].as_str().ok_or("pre-pass file")?);
+            Some(std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?)
+        }
+        None => None,
+    };
+    let shaders = host::Shaders { form: wgsl, prepass };
+    let filtered = host::filter(&device, &queue, &shaders, &manifest, &frame, radius)?;
     let rgb: Vec<[f32; 3]> = filtered.iter().map(|c| [c[0], c[1], c[2]]).collect();
     filterjit::preview::write_png(&PathBuf::from(out), scene.width, scene.height, &rgb).map_err(|e| e.to_string())?;
     println!("filtered {}x{} with radius {radius}: wrote {out}", scene.width, scene.height);

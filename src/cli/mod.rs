@@ -61,22 +61,29 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                 }
             };
             let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
-            if pipeline != filterjit::pipeline::FilterPipeline::WINDOW {
-                bail!(
-                    "`{expr}` is filtered through the pipeline `{pipeline}`, and export writes the window form only \
-                     (one pass, no pre-pass) so far; pass --pipeline window to export its weight as a single window pass"
-                );
-            }
             // An engine gets the cheapest equivalent form (the same weights).
             let expr = filterjit::simplify::simplify(&resolved.expr);
-            let mut exported = filterjit::export::export(&expr, target, format)?;
+            let mut exported = filterjit::export::export_pipeline(&expr, &pipeline, target, format)?;
             exported.manifest.radius = resolved.radius;
             let manifest_path = manifest_path(&output);
+            let mut files = vec![(output.clone(), exported.code.to_bytes())];
+            if let (Some(code), Some(stage)) = (&exported.prepass, exported.manifest.prepass.as_mut()) {
+                let path = prepass_path(&output);
+                stage.file = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                println!("wrote {} (the pre-pass)", path.display());
+                files.push((path, code.to_bytes()));
+            }
             let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
-            for (path, bytes) in [(&output, exported.code.to_bytes()), (&manifest_path, manifest.into_bytes())] {
-                filterjit::io::write_bytes_atomically(path, &bytes)
-                    .map_err(anyhow::Error::from)
+            files.push((manifest_path.clone(), manifest.into_bytes()));
+            for (path, bytes) in &files {
+                filterjit::io::write_bytes_atomically(path, bytes)
                     .with_context(|| format!("writing {}", path.display()))?;
+            }
+            if exported.manifest.passes > 1 {
+                println!(
+                    "pipeline  {pipeline}: dispatch the form's shader {} times (the manifest's `order`)",
+                    exported.manifest.passes
+                );
             }
             println!(
                 "wrote {} ({}) and its manifest {}",
@@ -430,6 +437,16 @@ pub(crate) fn print_errors(label: &str, e: &Errors, flip: f64) {
 
 pub(crate) fn ms(d: std::time::Duration) -> f64 {
     d.as_secs_f64() * 1e3
+}
+
+/// Where the pre-pass of an exported pipeline goes: `NAME.prepass.EXT` beside `NAME.EXT`.
+pub(crate) fn prepass_path(shader: &Path) -> PathBuf {
+    let stem = shader.file_stem().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "filter".into());
+    let name = match shader.extension() {
+        Some(ext) => format!("{stem}.prepass.{}", ext.to_string_lossy()),
+        None => format!("{stem}.prepass"),
+    };
+    shader.with_file_name(name)
 }
 
 /// Where `export` writes the manifest of the shader at `shader`: `shader` + `.json`.

@@ -17,6 +17,7 @@ pub use fitness::{FitnessScene, Region, SceneError as FitnessError};
 pub use raw::{RawBuffer, RawKernel};
 pub use trace::{TraceScene, PATHTRACE_WGSL};
 
+use crate::jit::interface::TexelFormat;
 use crate::jit::{Access, BindingInterface, KernelKey, OutputFormat, Role, Slot, ValidatedKernel, ValidatedModule};
 
 #[derive(Debug, thiserror::Error)]
@@ -361,8 +362,9 @@ fn layout_entry(slot: &Slot) -> wgpu::BindGroupLayoutEntry {
         Access::StorageTexture(format) => wgpu::BindingType::StorageTexture {
             access: wgpu::StorageTextureAccess::WriteOnly,
             format: match format {
-                OutputFormat::Rgba16float => wgpu::TextureFormat::Rgba16Float,
-                OutputFormat::Rgba32float => wgpu::TextureFormat::Rgba32Float,
+                TexelFormat::Color(OutputFormat::Rgba16float) => wgpu::TextureFormat::Rgba16Float,
+                TexelFormat::Color(OutputFormat::Rgba32float) => wgpu::TextureFormat::Rgba32Float,
+                TexelFormat::R32float => wgpu::TextureFormat::R32Float,
             },
             view_dimension: wgpu::TextureViewDimension::D2,
         },

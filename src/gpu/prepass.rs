@@ -6,12 +6,12 @@ use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
-use crate::jit::{PrepassParams, ValidatedModule, WORKGROUP};
+use crate::jit::{BindingInterface, PrepassParams, Role, ValidatedModule, WORKGROUP};
 use crate::pipeline::FilterPipeline;
 
 fn module() -> Result<&'static ValidatedModule, GpuError> {
     static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-    MODULE.get_or_init(|| crate::jit::prepass_module().map_err(|e| e.to_string())).as_ref().map_err(|message| {
+    MODULE.get_or_init(|| crate::jit::prepass_module(None).map_err(|e| e.to_string())).as_ref().map_err(|message| {
         GpuError::Pipeline { expression: "<pre-pass>".into(), message: message.clone(), wgsl: String::new() }
     })
 }
@@ -24,7 +24,7 @@ impl Gpu {
         let pipeline = self.create_pipeline(module()?, "filterjit pre-pass").map_err(|message| GpuError::Pipeline {
             expression: "<pre-pass>".into(),
             message,
-            wgsl: crate::jit::prepass_wgsl(),
+            wgsl: crate::jit::prepass_wgsl(None),
         })?;
         Ok(self.prepass.get_or_init(|| pipeline))
     }
@@ -67,15 +67,21 @@ impl Gpu {
         let (prepared, modulation) = (make("prepared colour"), make("modulation"));
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         // Without demodulation the albedo is never read: the colour stands in for it.
+        let interface = BindingInterface::prepass(None);
         let bind_group = self.bind_in_slot_order(
             kernel,
-            vec![
-                uniform.as_entire_binding(),
-                color.as_entire_binding(),
-                albedo.as_ref().unwrap_or(color).as_entire_binding(),
-                prepared.as_entire_binding(),
-                modulation.as_entire_binding(),
-            ],
+            interface
+                .bindings
+                .iter()
+                .map(|b| match b.role {
+                    Role::Params => uniform.as_entire_binding(),
+                    Role::Color => color.as_entire_binding(),
+                    Role::Albedo => albedo.as_ref().unwrap_or(color).as_entire_binding(),
+                    Role::Output => prepared.as_entire_binding(),
+                    Role::Modulation => modulation.as_entire_binding(),
+                    other => unreachable!("the pre-pass has no {other:?} binding"),
+                })
+                .collect(),
         );
         let mut encoder = device.create_command_encoder(&Default::default());
         {

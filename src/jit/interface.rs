@@ -32,6 +32,26 @@ pub enum Role {
     VarianceOut,
     /// The image an à-trous fitness pass hands the next pass.
     Image,
+    /// The raw albedo demodulation divides by (the pre-pass).
+    Albedo,
+}
+
+/// Texel format of a storage texture an exported shader writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum TexelFormat {
+    /// A colour image, in the format the user chose.
+    Color(OutputFormat),
+    /// One float: the colour variance an à-trous pass carries.
+    R32float,
+}
+
+impl TexelFormat {
+    pub fn wgsl(self) -> &'static str {
+        match self {
+            TexelFormat::Color(format) => format.wgsl(),
+            TexelFormat::R32float => "r32float",
+        }
+    }
 }
 
 /// Element type of a storage buffer.
@@ -79,7 +99,7 @@ pub enum Resource {
     /// `texture_2d<f32>`, read with `textureLoad` (no sampler).
     SampledTexture,
     /// `texture_storage_2d<format, write>`.
-    StorageTexture(OutputFormat),
+    StorageTexture(TexelFormat),
 }
 
 /// One binding of group 0.
@@ -151,7 +171,7 @@ pub enum Access {
     StorageRead,
     StorageReadWrite,
     SampledTexture,
-    StorageTexture(OutputFormat),
+    StorageTexture(TexelFormat),
 }
 
 /// One slot of group 0 and how it is accessed.
@@ -217,7 +237,7 @@ impl BindingInterface {
                 roles.push((Role::Flags, written(Element::U32), "buf_pixel_flags".into()));
             }
             KernelKind::Export(format) => {
-                roles.push((Role::Output, Resource::StorageTexture(format), "tex_out".into()))
+                roles.push((Role::Output, Resource::StorageTexture(TexelFormat::Color(format)), "tex_out".into()))
             }
         }
         for input in &layout.inputs {
@@ -231,7 +251,10 @@ impl BindingInterface {
             roles.push((Role::Modulation, read(Element::Vec4F32), format!("{prefix}modulation")));
         }
         if shape.atrous && layout.inputs.contains(&Input::Variance(ScalarVar::ColorVariance)) {
-            roles.push((Role::VarianceOut, written(Element::F32), "buf_variance_out".into()));
+            roles.push(match textures {
+                true => (Role::VarianceOut, Resource::StorageTexture(TexelFormat::R32float), "tex_variance_out".into()),
+                false => (Role::VarianceOut, written(Element::F32), "buf_variance_out".into()),
+            });
         }
         if shape.atrous && kind == KernelKind::Fitness {
             roles.push((Role::Image, written(Element::Vec4F32), "buf_image".into()));
@@ -249,14 +272,6 @@ impl BindingInterface {
         ];
         if textures {
             uniform.push(field("_pad", "u32", 12, "unused"));
-            for (k, input) in layout.inputs.iter().enumerate() {
-                uniform.push(UniformField {
-                    name: format!("scale[{k}]"),
-                    ty: "vec4<f32>",
-                    offset: 16 + 16 * k as u32,
-                    meaning: format!("x: normalisation scale of {}; y, z, w unused", input.describe()),
-                });
-            }
         } else {
             uniform.push(field("row_offset", "u32", 12, "first image row of this dispatch"));
         }
@@ -264,11 +279,70 @@ impl BindingInterface {
             uniform.push(field("step", "u32", 16, "pixel step between stencil taps: 2^level"));
             uniform.push(field("level", "u32", 20, "the a-trous pass, from 0"));
             uniform.push(field("last", "u32", 24, "1 in the last pass, else 0"));
-            uniform.push(field("_pad", "u32", 28, "unused"));
+            // (`_pad` is taken at offset 12 in an exported shader's header.)
+            uniform.push(field(if textures { "_pad2" } else { "_pad" }, "u32", 28, "unused"));
         }
         let header = if shape.atrous { std::mem::size_of::<AtrousParams>() } else { std::mem::size_of::<Params>() };
+        if textures {
+            // An exported shader's scales follow the header, one vec4 per input.
+            for (k, input) in layout.inputs.iter().enumerate() {
+                uniform.push(UniformField {
+                    name: format!("scale[{k}]"),
+                    ty: "vec4<f32>",
+                    offset: header as u32 + 16 * k as u32,
+                    meaning: format!("x: normalisation scale of {}; y, z, w unused", input.describe()),
+                });
+            }
+        }
         let uniform_bytes = header as u32 + if textures { 16 * layout.inputs.len() as u32 } else { 0 };
         BindingInterface { kind, bindings, uniform, uniform_bytes }
+    }
+
+    /// The interface of the pipeline's pre-pass (`jit::prepass`): the uniform
+    /// `PrepassParams`, the colour, the raw albedo, the prepared colour and
+    /// the modulation it writes. In storage buffers for filterjit (`None`),
+    /// or, for an exported pre-pass, sampled textures in and storage
+    /// textures of `format` out.
+    pub fn prepass(textures: Option<OutputFormat>) -> BindingInterface {
+        let (kind, roles) = match textures {
+            None => {
+                let read = Resource::Storage { element: Element::Vec4F32, writable: false };
+                let written = Resource::Storage { element: Element::Vec4F32, writable: true };
+                (
+                    KernelKind::Filter,
+                    vec![
+                        (Role::Color, read, "buf_color"),
+                        (Role::Albedo, read, "buf_albedo"),
+                        (Role::Output, written, "buf_prepared"),
+                        (Role::Modulation, written, "buf_modulation"),
+                    ],
+                )
+            }
+            Some(format) => {
+                let written = Resource::StorageTexture(TexelFormat::Color(format));
+                (
+                    KernelKind::Export(format),
+                    vec![
+                        (Role::Color, Resource::SampledTexture, "tex_color"),
+                        (Role::Albedo, Resource::SampledTexture, "tex_albedo"),
+                        (Role::Output, written, "tex_prepared"),
+                        (Role::Modulation, written, "tex_modulation"),
+                    ],
+                )
+            }
+        };
+        let bindings = std::iter::once((Role::Params, Resource::Uniform, "params"))
+            .chain(roles)
+            .enumerate()
+            .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident: ident.into(), resource })
+            .collect();
+        let uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("k", "f32", 8, "the outlier rule's k: luminance above mean + k * std is clamped"),
+            field("stages", "u32", 12, "bit 0: clamp outliers; bit 1: demodulate by the albedo"),
+        ];
+        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
     }
 
     /// The binding that plays `role`, if the kernel has one.

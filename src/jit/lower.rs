@@ -330,7 +330,7 @@ fn lower_members(
     for expr in exprs {
         expr.validate().map_err(LowerError::Literal)?;
     }
-    if shape != Shape::WINDOW && !matches!(kind, KernelKind::Filter | KernelKind::Fitness) {
+    if shape != Shape::WINDOW && !matches!(kind, KernelKind::Filter | KernelKind::Fitness | KernelKind::Export(_)) {
         return Err(LowerError::Shape(kind));
     }
     let fused = exprs.len() > 1;
@@ -429,7 +429,7 @@ fn lower_members(
     let carry_variance = shape.atrous && layout.inputs.contains(&carried);
     context.insert("carry_variance", &carry_variance);
     if carry_variance {
-        context.insert("variance_ident", interface.ident(Role::Input(carried)));
+        context.insert("neighbour_variance", &Loads::of(&interface).carried_variance_at_neighbour());
         context.insert("centre_variance", &var_ident(ScalarVar::ColorVariance));
     }
     context.insert("atrous_half", &crate::pipeline::ATROUS_HALF_WIDTH);
@@ -701,10 +701,29 @@ impl<'a> Loads<'a> {
             }
             Loads::Buffers(i) => format!("{}[i]", i.ident(Role::Input(input))),
             Loads::Tiled => unreachable!("variances are read at the centre pixel, never from a tile"),
+            Loads::Textures(i) if v == ScalarVar::ColorVariance && i.binding(Role::VarianceOut).is_some() => {
+                let texel = texel(i.ident(Role::Input(input)), ("x", "y"));
+                format!("fj_carried({texel}.x, {})", scale_of(i, input))
+            }
             Loads::Textures(i) => {
                 let texel = texel(i.ident(Role::Input(input)), ("x", "y"));
                 format!("fj_normalised(vec3<f32>({texel}.x, 0.0, 0.0), {}).x", scale_of(i, input))
             }
+        }
+    }
+
+    /// The colour variance carried from the last à-trous pass at neighbour j:
+    /// already normalised in filterjit's buffers; in an exported shader the
+    /// frame's (normalised here) in the first pass, the carried one after.
+    fn carried_variance_at_neighbour(&self) -> String {
+        let input = Input::Variance(ScalarVar::ColorVariance);
+        match self {
+            Loads::Buffers(i) => format!("{}[j]", i.ident(Role::Input(input))),
+            Loads::Textures(i) => {
+                let texel = texel(i.ident(Role::Input(input)), ("xj", "yj"));
+                format!("fj_carried({texel}.x, {})", scale_of(i, input))
+            }
+            Loads::Tiled => unreachable!("à-trous kernels have no tiles"),
         }
     }
 }

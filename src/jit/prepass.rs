@@ -2,11 +2,14 @@
 //! for every pipeline, its stages chosen by the uniform, rendered from
 //! `templates/prepass.wgsl.tera` with the constants `crate::pipeline` owns.
 
+use super::interface::BindingInterface;
+use super::lower::OutputFormat;
 use super::lower::{wgsl_f32, TEMPLATE_VERSION, WORKGROUP};
 use super::validate::{validate_module, ValidateError, ValidatedModule};
 use crate::pipeline::{self, FilterPipeline};
 
-/// The pre-pass's uniform (`struct PrepassParams`).
+/// The pre-pass's uniform (`struct Params` of its module; fields in
+/// [`BindingInterface::prepass`]).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct PrepassParams {
@@ -26,11 +29,10 @@ impl PrepassParams {
     }
 }
 
-/// Binding slots of the pre-pass, in order: uniform, colour, albedo, prepared colour, modulation.
-pub const PREPASS_SLOTS: usize = 5;
-
-/// The pre-pass's WGSL.
-pub fn prepass_wgsl() -> String {
+/// The pre-pass's WGSL: on storage buffers (filterjit's, `None`), or
+/// exported, on textures with outputs in `format`.
+pub fn prepass_wgsl(textures: Option<OutputFormat>) -> String {
+    let interface = BindingInterface::prepass(textures);
     let mut tera = tera::Tera::default();
     tera.add_raw_template("prepass", include_str!("../../templates/prepass.wgsl.tera"))
         .expect("built-in pre-pass template parses");
@@ -42,10 +44,20 @@ pub fn prepass_wgsl() -> String {
     context.insert("albedo_floor", &wgsl_f32(pipeline::ALBEDO_FLOOR));
     context.insert("workgroup_x", &WORKGROUP[0]);
     context.insert("workgroup_y", &WORKGROUP[1]);
+    context.insert("textures", &textures.is_some());
+    context.insert("params_struct", &interface.params_struct());
+    context.insert("declarations", &interface.declarations());
     tera.render("prepass", &context).expect("built-in pre-pass template renders")
 }
 
-/// The pre-pass, validated by naga.
-pub fn prepass_module() -> Result<ValidatedModule, ValidateError> {
-    validate_module(&prepass_wgsl(), "<pre-pass>")
+/// The pre-pass, validated by naga; its bindings are checked against its interface.
+pub fn prepass_module(textures: Option<OutputFormat>) -> Result<ValidatedModule, ValidateError> {
+    let wgsl = prepass_wgsl(textures);
+    let module = validate_module(&wgsl, "<pre-pass>")?;
+    let expected = BindingInterface::prepass(textures).slots();
+    if module.slots() != expected.as_slice() {
+        let message = format!("the pre-pass binds {:?}, its interface says {expected:?}", module.slots());
+        return Err(ValidateError::Invalid { expression: "<pre-pass>".into(), message, wgsl });
+    }
+    Ok(module)
 }

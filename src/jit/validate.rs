@@ -3,6 +3,7 @@
 
 use sha2::{Digest, Sha256};
 
+use super::interface::TexelFormat;
 use super::interface::{Access, Slot};
 use super::lower::{KernelSource, OutputFormat, TEMPLATE_VERSION, WORKGROUP};
 
@@ -140,8 +141,9 @@ fn reflect(module: &naga::Module) -> Result<Vec<Slot>, String> {
             }
             (AddressSpace::Handle, TypeInner::Image { class: ImageClass::Storage { format, .. }, .. }) => {
                 Access::StorageTexture(match format {
-                    naga::StorageFormat::Rgba16Float => OutputFormat::Rgba16float,
-                    naga::StorageFormat::Rgba32Float => OutputFormat::Rgba32float,
+                    naga::StorageFormat::Rgba16Float => TexelFormat::Color(OutputFormat::Rgba16float),
+                    naga::StorageFormat::Rgba32Float => TexelFormat::Color(OutputFormat::Rgba32float),
+                    naga::StorageFormat::R32Float => TexelFormat::R32float,
                     other => return Err(format!("storage texture format {other:?} is not one filterjit writes")),
                 })
             }
