@@ -599,3 +599,45 @@ fn scoring_leaves_what_others_cached_on_a_shared_device() {
     assert!(evaluator.errors(&[expr]).unwrap()[0].is_ok());
     assert_eq!(device.cached_pipelines(), 1, "the filter kernel cached before scoring is still there");
 }
+
+/// With `elites`, each island's best passes on unchanged: the best fitness
+/// of a generation never gets worse, and the seed's score bounds every one.
+#[test]
+fn elites_keep_the_best_filter_found() {
+    let (training, test) = datasets();
+    // Small tournaments lose the best now and then; one elite keeps it.
+    let bests = |elites: usize| -> Vec<f64> {
+        let dir = temp_dir(&format!("elites-{elites}"));
+        let settings = Settings { elites, tournament: 2, generations: 8, ..small() };
+        run(&dir, settings, config(training, test), false, None).expect("finished");
+        read(dir.join(evolve::LOG_FILE))
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap()["best"].as_f64().unwrap())
+            .collect()
+    };
+    let monotone = |b: &[f64]| b.windows(2).all(|w| w[1] <= w[0]);
+    let (without, with) = (bests(0), bests(1));
+    assert!(!monotone(&without), "this seed loses its best without elites: {without:?}");
+    assert!(monotone(&with), "with an elite the best never gets worse: {with:?}");
+    let too_many = Settings { elites: 7, ..small() };
+    let error = evolve::run(
+        &gpu(),
+        RunOptions {
+            settings: too_many,
+            config: config(training, test),
+            output: temp_dir("elites-too-many"),
+            resume: false,
+            threads: 1,
+            stop_after: None,
+            on_report: &mut |_| {},
+            on_render: &mut |_, _| {},
+            baselines: Vec::new(),
+            tiles: evolve::Tiles::Off,
+            fusion: evolve::Fusion::Auto,
+            cache: crate::common::environment().cache.clone(),
+        },
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(error.contains("--elites 7"), "{error}");
+}

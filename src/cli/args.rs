@@ -331,6 +331,11 @@ pub(crate) struct EvolveArgs {
     /// docs/BENCHMARKS.md].
     #[arg(long)]
     pub(crate) error_islands: Option<usize>,
+    /// The best N of each island pass to the next generation unchanged, so
+    /// that the best filter found is never lost to tournament chance
+    /// [default: 0, the thesis's search, which can lose it].
+    #[arg(long, default_value_t = 0)]
+    pub(crate) elites: usize,
     /// Run directory: checkpoint, log, hall of fame, summary [default: runs/evolve, or
     /// runs/evolve-2, -3, … when it holds a run already; with --resume the newest of them].
     #[arg(short, long)]

@@ -77,6 +77,7 @@ pub(crate) fn evolve_on(
             (filterjit::gp::Objectives::ErrorCost, None) => args.islands.unwrap_or(preset.islands).saturating_sub(1),
             (filterjit::gp::Objectives::Error, None) => 0,
         },
+        elites: args.elites,
     };
     let size = args.render.size.unwrap_or(size);
     let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();

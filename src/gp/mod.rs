@@ -176,6 +176,12 @@ pub struct Settings {
     /// that the front's accurate end evolves as fast as a single-objective run's.
     #[serde(default)]
     pub error_islands: usize,
+    /// The best this many of each island pass to the next generation
+    /// unchanged, before the replication share is drawn by tournament (and
+    /// count towards it): the best filter found is never lost. 0 is the
+    /// thesis's search (runs made before it existed: 0).
+    #[serde(default)]
+    pub elites: usize,
 }
 
 impl Default for Settings {
@@ -197,6 +203,7 @@ impl Default for Settings {
             simplify_offspring: false,
             objectives: Objectives::Error,
             error_islands: 0,
+            elites: 0,
         }
     }
 }
@@ -205,6 +212,9 @@ impl Settings {
     pub fn check(&self) -> Result<(), String> {
         if self.islands == 0 || self.island_size < 2 {
             return Err("need at least one island of at least two individuals".into());
+        }
+        if self.elites > self.island_size {
+            return Err(format!("--elites {} is more than an island's {} individuals", self.elites, self.island_size));
         }
         if self.tournament == 0 {
             return Err("the tournament size must be at least 1".into());
@@ -599,7 +609,10 @@ impl<'e> Engine<'e> {
             let standing = self.standing(i, island);
             let standing = &standing;
             let mut new: Vec<Member> = Vec::with_capacity(n);
-            for _ in 0..replicated {
+            let mut ranked: Vec<usize> = (0..island.len()).collect();
+            ranked.sort_by(|&a, &b| standing[a].total_cmp(&standing[b]));
+            new.extend(ranked.iter().take(self.settings.elites.min(n)).map(|&k| island[k].clone()));
+            while new.len() < replicated {
                 new.push(self.tournament(island, standing, &mut rng).clone());
             }
             while new.len() < replicated + crossed {
