@@ -89,14 +89,21 @@ fn filter_honours_a_stored_pipeline_and_the_flag() {
     assert!(plain.contains("pipeline  window"), "{plain}");
     assert!(relmse(&stored, "filtered") < relmse(&plain, "filtered"), "the pipeline helps on this render");
 
-    // Export writes the window form only: a filter stored with another pipeline is refused, not changed.
+    // Export writes the stored pipeline: the pre-pass beside the form's shader, both named in the manifest.
     let shader = out_dir.join("atrous.wgsl");
     let export = filterjit(&["export", "@crossBilateralAtrous", "-o", shader.to_str().unwrap()]);
-    assert!(!export.status.success() && !shader.exists());
-    assert!(text(&export.stderr).contains("--pipeline window"), "{}", text(&export.stderr));
-    let export =
-        filterjit(&["export", "@crossBilateralAtrous", "--pipeline", "window", "-o", shader.to_str().unwrap()]);
     assert!(export.status.success(), "{}", text(&export.stderr));
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out_dir.join("atrous.wgsl.json")).unwrap()).unwrap();
+    assert_eq!(manifest["pipeline"], "outliers=2,demodulate,atrous=5");
+    assert_eq!(manifest["passes"], 5);
+    assert_eq!(manifest["prepass"]["file"], "atrous.prepass.wgsl");
+    assert!(out_dir.join("atrous.prepass.wgsl").is_file());
+    let window = out_dir.join("window.wgsl");
+    let export =
+        filterjit(&["export", "@crossBilateralAtrous", "--pipeline", "window", "-o", window.to_str().unwrap()]);
+    assert!(export.status.success(), "{}", text(&export.stderr));
+    assert!(!out_dir.join("window.prepass.wgsl").exists(), "the window form alone has no pre-pass");
 
     let bad = filterjit(&["filter", "--expr", "1", "--pipeline", "atrous=0", sample.to_str().unwrap(), "-o", "x.exr"]);
     assert!(!bad.status.success());

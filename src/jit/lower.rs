@@ -9,9 +9,10 @@ use std::sync::OnceLock;
 
 use serde::Serialize;
 
-use super::helpers::Helper;
+use super::helpers;
 use super::interface::{BindingInterface, Element, Role};
-use crate::lang::{Expr, Feature, FeatureSource, ScalarVar, UnaryOp};
+use super::ir::{self, feature_ident, var_ident};
+use crate::lang::{Expr, Feature, FeatureSource, ScalarVar};
 use crate::semantics;
 
 /// Bumped whenever the template or the lowering changes what a kernel computes
@@ -155,6 +156,15 @@ impl KernelKind {
             KernelKind::Probe => PROBE_TEMPLATE,
             KernelKind::Fitness => FITNESS_TEMPLATE,
             KernelKind::Export(_) => EXPORT_TEMPLATE,
+        }
+    }
+
+    /// The `templates/ops.wgsl` helpers the kind's template calls itself:
+    /// the probe saturates its raw value with `fj_fin`.
+    pub(crate) fn template_helpers(self) -> &'static [&'static str] {
+        match self {
+            KernelKind::Probe => &["fj_fin"],
+            KernelKind::Filter | KernelKind::Fitness | KernelKind::Export(_) => &[],
         }
     }
 
@@ -319,6 +329,9 @@ struct MemberCode {
     /// The SSA value (or literal) of the expression; the weight clamps it.
     result: String,
     weight: String,
+    /// The `templates/ops.wgsl` helpers the member's code calls.
+    #[serde(skip)]
+    helpers: BTreeSet<String>,
 }
 
 fn lower_members(
@@ -343,16 +356,18 @@ fn lower_members(
         .enumerate()
         .map(|(index, expr)| {
             let prefix = if fused { format!("_m{index}e") } else { "_e".to_string() };
-            let mut body = Body { options, prefix, ..Body::default() };
-            let result = body.emit(expr);
+            let body = ir::Body::of(expr, options);
+            let (centre_lines, neighbour_lines, result) = body.print(&prefix);
+            let mut helpers = body.helpers();
             // Folding never turns a non-variance into a variance or back, so the unfolded root tells.
             let weight = if options.skip_redundant_checks && in_range(expr) {
                 format!("max({result}, 0.0)")
             } else {
+                helpers.insert("fj_weight".into());
                 format!("fj_weight({result})")
             };
             let suffix = if fused { format!("_m{index}") } else { String::new() };
-            MemberCode { index, suffix, centre_lines: body.centre, neighbour_lines: body.lines, result, weight }
+            MemberCode { index, suffix, centre_lines, neighbour_lines, result, weight, helpers }
         })
         .collect();
 
@@ -398,12 +413,11 @@ fn lower_members(
     context.insert("expression", &canonical);
     context.insert("expressions", &canonicals);
     context.insert("length", &exprs.iter().map(|e| e.len()).sum::<usize>());
-    let code: Vec<String> = members
+    let needs = members
         .iter()
-        .flat_map(|m| m.centre_lines.iter().chain(&m.neighbour_lines).chain(std::iter::once(&m.weight)))
-        .cloned()
-        .collect();
-    context.insert("ops", &helpers_for(&wgsl_body_text(&shared_centre_lines, &shared_neighbour_lines, &code)));
+        .flat_map(|m| m.helpers.iter().cloned())
+        .chain(kind.template_helpers().iter().map(|h| h.to_string()));
+    context.insert("ops", &helpers::link(needs));
     context.insert("weight", &weight);
     context.insert("result", &first.result);
     context.insert("members", &members);
@@ -490,60 +504,7 @@ fn tile_ident(f: Feature) -> String {
     format!("tile_{}", f.name().to_ascii_lowercase())
 }
 
-/// The operator helpers, verbatim.
-pub const OPS_WGSL: &str = include_str!("../../templates/ops.wgsl");
-
-/// `templates/ops.wgsl` cut into its prelude (comments, constants, the flag
-/// variable) and its functions, in file order.
-fn helper_items() -> &'static (String, Vec<(String, String)>) {
-    static ITEMS: OnceLock<(String, Vec<(String, String)>)> = OnceLock::new();
-    ITEMS.get_or_init(|| {
-        let mut prelude = String::new();
-        let mut functions: Vec<(String, String)> = Vec::new();
-        for line in OPS_WGSL.lines() {
-            if let Some(rest) = line.strip_prefix("fn ") {
-                let name = rest.split('(').next().unwrap_or_default().trim().to_string();
-                functions.push((name, String::new()));
-            } else if line.starts_with("//") && functions.last().is_some_and(|(_, body)| body.trim_end().ends_with('}'))
-            {
-                // A comment between functions belongs to the next one.
-                functions.push((String::new(), String::new()));
-            }
-            match functions.last_mut() {
-                Some((_, body)) => {
-                    body.push_str(line);
-                    body.push('\n');
-                }
-                None => {
-                    prelude.push_str(line);
-                    prelude.push('\n');
-                }
-            }
-        }
-        // Attach leading comments (items without a name) to the function after them.
-        let mut merged: Vec<(String, String)> = Vec::new();
-        let mut pending = String::new();
-        for (name, body) in functions {
-            if name.is_empty() {
-                pending.push_str(&body);
-            } else {
-                merged.push((name, std::mem::take(&mut pending) + &body));
-            }
-        }
-        (prelude, merged)
-    })
-}
-
-fn wgsl_body_text(centre: &[String], neighbour: &[String], members: &[String]) -> String {
-    let mut text = centre.join("\n");
-    text.push('\n');
-    text.push_str(&neighbour.join("\n"));
-    text.push('\n');
-    text.push_str(&members.join("\n"));
-    // The probe kernel saturates its raw value with fj_fin.
-    text.push_str("\nfj_fin(");
-    text
-}
+pub use super::helpers::OPS_WGSL;
 
 /// Whether the value of `e` (constants already folded) is in range by
 /// construction: every operator's helper ends in `fj_fin` and literals are
@@ -552,41 +513,6 @@ fn in_range(e: &Expr) -> bool {
     !matches!(e, Expr::Var(_))
 }
 
-/// The f32 value of a literal or a negated literal, as the kernel holds it.
-fn literal_value(e: &Expr) -> Option<f64> {
-    match e {
-        Expr::Const(c) => Some(semantics::literal(*c) as f32 as f64),
-        Expr::Unary(UnaryOp::Neg, a) => match **a {
-            Expr::Const(c) => Some(-(semantics::literal(c) as f32 as f64)),
-            _ => None,
-        },
-        _ => None,
-    }
-}
-
-/// The prelude and exactly the helper functions `code` calls, directly or
-/// through other helpers: a smaller module compiles faster, and a kernel
-/// reads as what it computes.
-pub fn helpers_for(code: &str) -> String {
-    let (prelude, functions) = helper_items();
-    let mut used = vec![false; functions.len()];
-    let mut frontier = vec![code.to_string()];
-    while let Some(text) = frontier.pop() {
-        for (k, (name, body)) in functions.iter().enumerate() {
-            if !used[k] && text.contains(&format!("{name}(")) {
-                used[k] = true;
-                frontier.push(body.clone());
-            }
-        }
-    }
-    let mut out = prelude.clone();
-    for (k, (_, body)) in functions.iter().enumerate() {
-        if used[k] {
-            out.push_str(body);
-        }
-    }
-    out
-}
 const FILTER_TEMPLATE: &str = "filter.wgsl";
 const PROBE_TEMPLATE: &str = "probe.wgsl";
 const FITNESS_TEMPLATE: &str = "fitness.wgsl";
@@ -619,14 +545,6 @@ fn templates() -> &'static tera::Tera {
 /// WGSL spelling of an f32 literal (always with a `.` or an exponent).
 pub fn wgsl_f32(value: f64) -> String {
     format!("{:?}", value as f32)
-}
-
-fn feature_ident(side: char, f: Feature) -> String {
-    format!("feat_{side}_{}", f.name().to_ascii_lowercase())
-}
-
-fn var_ident(v: ScalarVar) -> String {
-    format!("var_{}", v.name().to_ascii_lowercase())
 }
 
 /// How loads are spelled in a kernel of one kind; names come from its interface.
@@ -771,168 +689,41 @@ fn neighbour_loads(exprs: &[Expr], loads: &Loads<'_>) -> Vec<String> {
         .collect()
 }
 
-/// Straight-line SSA for the expression body.
-#[derive(Default)]
-struct Body {
-    options: LowerOptions,
-    /// What the SSA names start with (`_e`, or `_m3e` for member 3 of a fused kernel).
-    prefix: String,
-    /// Values computed once per pixel, before the neighbour loop.
-    centre: Vec<String>,
-    /// Values computed for every neighbour.
-    lines: Vec<String>,
-    /// Canonical text of a subexpression → the value that holds it.
-    known: std::collections::HashMap<String, String>,
-    temps: usize,
-}
-
-/// Whether a subexpression reads the neighbour j (only feature pairs do).
-fn reads_neighbour(e: &Expr) -> bool {
-    let mut found = false;
-    e.visit(&mut |n| found |= matches!(n, Expr::Pair(..)));
-    found
-}
-
-impl Body {
-    fn temp(&mut self, value: String, per_pixel: bool) -> String {
-        let name = format!("{}{}", self.prefix, self.temps);
-        self.temps += 1;
-        let line = format!("let {name} = {value};");
-        if per_pixel {
-            self.centre.push(line);
-        } else {
-            self.lines.push(line);
-        }
-        name
-    }
-
-    /// The literal a constant subexpression folds to, unless folding is off
-    /// or the operation raises a domain error (the flag must stay).
-    fn fold(&self, e: &Expr) -> Option<f64> {
-        if !self.options.fold_constants {
-            return None;
-        }
-        // A literal, or the negation of one (how folded negative values are stored).
-        fn constant(e: &Expr) -> Option<f64> {
-            match e {
-                Expr::Const(c) => Some(semantics::literal(*c)),
-                Expr::Unary(crate::lang::UnaryOp::Neg, a) => match **a {
-                    Expr::Const(c) => Some(-semantics::literal(c)),
-                    _ => None,
-                },
-                _ => None,
-            }
-        }
-        let mut flags = 0;
-        let value = match e {
-            Expr::Unary(op, a) => op.eval(constant(a)?, &mut flags),
-            Expr::Binary(op, a, b) => op.eval(constant(a)?, constant(b)?, &mut flags),
-            _ => return None,
-        };
-        (flags == 0).then_some(value)
-    }
-
-    fn emit(&mut self, e: &Expr) -> String {
-        let key = self.options.common_subexpressions.then(|| e.to_string());
-        if let Some(name) = key.as_ref().and_then(|k| self.known.get(k)) {
-            return name.clone();
-        }
-        let per_pixel = self.options.hoist_centre_terms && !reads_neighbour(e);
-        let value = match e {
-            Expr::Const(c) => return wgsl_f32(semantics::literal(*c)),
-            Expr::Var(v) => return var_ident(*v),
-            Expr::Unary(op, a) => {
-                let folded_child = self.folded(a);
-                if let Some(v) = self.fold(&Expr::unary(*op, folded_child.clone())) {
-                    return wgsl_f32(semantics::fin(v));
-                }
-                let a = self.emit(&folded_child);
-                match op {
-                    // `0.0 - a` rather than `-a`: a zero stays +0, as fj_fin leaves it.
-                    UnaryOp::Neg if self.options.skip_redundant_checks && in_range(&folded_child) => {
-                        format!("(0.0 - {a})")
-                    }
-                    UnaryOp::Abs if self.options.skip_redundant_checks && in_range(&folded_child) => {
-                        format!("abs({a})")
-                    }
-                    _ => format!("{}({a})", op.helper()),
-                }
-            }
-            Expr::Binary(op, a, b) => {
-                let (fa, fb) = (self.folded(a), self.folded(b));
-                if let Some(v) = self.fold(&Expr::binary(*op, fa.clone(), fb.clone())) {
-                    return wgsl_f32(semantics::fin(v));
-                }
-                let square = self.options.strength_reduction
-                    && *op == crate::lang::BinaryOp::Pow
-                    && matches!(fb, Expr::Const(c) if semantics::literal(c) == 2.0);
-                if square {
-                    let value = match fa {
-                        Expr::Pair(crate::lang::PairOp::Distance2, i, j) => {
-                            format!("fj_distance2sq({}, {})", feature_ident('i', i), feature_ident('j', j))
-                        }
-                        _ => {
-                            let a = self.emit(&fa);
-                            format!("fj_mul({a}, {a})")
-                        }
-                    };
-                    let name = self.temp(value, per_pixel);
-                    if let Some(k) = key {
-                        self.known.insert(k, name.clone());
-                    }
-                    return name;
-                }
-                if let (true, crate::lang::BinaryOp::Div, Some(divisor)) =
-                    (self.options.strength_reduction, op, literal_value(&fb))
-                {
-                    // The zero guard only changes divisors below FJ_DIV_EPS.
-                    if divisor.abs() >= semantics::DIV_EPS {
-                        let a = self.emit(&fa);
-                        format!("fj_fin({a} * {})", wgsl_f32(1.0 / divisor))
-                    } else {
-                        let (a, b) = (self.emit(&fa), self.emit(&fb));
-                        format!("{}({a}, {b})", op.helper())
-                    }
-                } else {
-                    let a = self.emit(&fa);
-                    let b = self.emit(&fb);
-                    format!("{}({a}, {b})", op.helper())
-                }
-            }
-            Expr::Pair(op, i, j) => {
-                format!("{}({}, {})", op.helper(), feature_ident('i', *i), feature_ident('j', *j))
-            }
-        };
-        let name = self.temp(value, per_pixel);
-        if let Some(k) = key {
-            self.known.insert(k, name.clone());
-        }
-        name
-    }
-
-    /// `e` with its constant subexpressions folded into literals (when folding is on).
-    fn folded(&self, e: &Expr) -> Expr {
-        if !self.options.fold_constants {
-            return e.clone();
-        }
-        let e = match e {
-            Expr::Unary(op, a) => Expr::unary(*op, self.folded(a)),
-            Expr::Binary(op, a, b) => Expr::binary(*op, self.folded(a), self.folded(b)),
-            other => return other.clone(),
-        };
-        match self.fold(&e) {
-            // Folded values are stored as literals; the emitter rounds them to f32 like any literal.
-            Some(v) if v >= 0.0 => Expr::Const(semantics::fin(v)),
-            Some(v) => Expr::unary(crate::lang::UnaryOp::Neg, Expr::Const(semantics::fin(-v))),
-            None => e,
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
-    use super::OPS_WGSL;
+    use super::{KernelKind, OutputFormat, OPS_WGSL};
     use crate::semantics;
+
+    /// A template calls only the library helpers its kind declares
+    /// (`template_helpers`); the partials every kernel includes call none.
+    #[test]
+    fn templates_declare_the_helpers_they_call() {
+        let called = |text: &str| -> Vec<String> {
+            super::helpers::names().into_iter().filter(|name| text.contains(&format!("{name}("))).collect()
+        };
+        let kinds = [
+            (include_str!("../../templates/filter.wgsl.tera"), KernelKind::Filter),
+            (include_str!("../../templates/fitness.wgsl.tera"), KernelKind::Fitness),
+            (include_str!("../../templates/probe.wgsl.tera"), KernelKind::Probe),
+            (include_str!("../../templates/export.wgsl.tera"), KernelKind::Export(OutputFormat::Rgba16float)),
+        ];
+        for (text, kind) in kinds {
+            let declared: Vec<String> = kind.template_helpers().iter().map(|h| h.to_string()).collect();
+            assert_eq!(called(text), declared, "{kind:?}");
+        }
+        for partial in [
+            include_str!("../../templates/window.wgsl.tera"),
+            include_str!("../../templates/atrous.wgsl.tera"),
+            include_str!("../../templates/tile_decl.wgsl.tera"),
+            include_str!("../../templates/tile_load.wgsl.tera"),
+        ] {
+            assert!(called(partial).is_empty(), "a partial calls {:?}", called(partial));
+        }
+        // Linking follows the library's own calls.
+        let linked = super::helpers::link(["fj_weight".to_string()]);
+        assert!(linked.contains("fn fj_weight(") && linked.contains("fn fj_fin("), "{linked}");
+        assert!(!linked.contains("fn fj_pow("));
+    }
 
     /// `templates/ops.wgsl` restates the semantics' constants in WGSL: they must agree.
     #[test]

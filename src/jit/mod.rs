@@ -3,6 +3,7 @@
 
 pub mod helpers;
 pub mod interface;
+pub mod ir;
 pub mod lower;
 pub mod prepass;
 pub mod reduce;

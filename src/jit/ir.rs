@@ -1,0 +1,326 @@
+//! A kernel body as data: a flat, hash-consed list of instructions, each on
+//! the centre side (computed once per pixel) or the neighbour side (once per
+//! neighbour), built from an [`Expr`] by [`Builder`] and printed as WGSL by
+//! [`Body::print`].
+//!
+//! Opcodes are the operator table's (`UnaryOp`, `BinaryOp`, `PairOp`) plus
+//! the cheaper forms strength reduction and check skipping lower some of them
+//! to. The [`LowerOptions`] switches are rewrites the builder applies as it
+//! adds an instruction, each on its own:
+//! * constant folding: an operator on literals becomes a literal (unless it
+//!   raises a domain flag, which must stay);
+//! * common subexpressions: an instruction equal to an earlier one is that one
+//!   (hash-consing; operands are already shared, so equal means the same
+//!   computation);
+//! * hoisting: an instruction that reads nothing of the neighbour goes to the
+//!   centre side;
+//! * strength reduction: `pow(x, 2)` is a product (`distance2` squared
+//!   without its square root), `x / c` a multiplication by 1/c;
+//! * skipping checks: `-x` and `abs(x)` of an in-range value need no saturation.
+
+use std::collections::{BTreeSet, HashMap};
+
+use super::helpers::Helper;
+use super::lower::LowerOptions;
+use crate::lang::{BinaryOp, Expr, Feature, PairOp, ScalarVar, UnaryOp};
+use crate::semantics;
+
+/// What an instruction reads: a literal (the f32 the kernel holds), a
+/// variance loaded at the centre, or an earlier instruction's value.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Operand {
+    /// The bits of an f32.
+    Literal(u32),
+    Var(ScalarVar),
+    Value(usize),
+}
+
+impl Operand {
+    fn literal(value: f64) -> Operand {
+        Operand::Literal((value as f32).to_bits())
+    }
+
+    fn literal_value(self) -> Option<f64> {
+        match self {
+            Operand::Literal(bits) => Some(f32::from_bits(bits) as f64),
+            _ => None,
+        }
+    }
+
+    /// Whether the value is in range by construction: every helper ends in
+    /// `fj_fin` and literals are saturated and flushed; only variances are read raw.
+    fn in_range(self) -> bool {
+        !matches!(self, Operand::Var(_))
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Op {
+    Unary(UnaryOp, Operand),
+    Binary(BinaryOp, Operand, Operand),
+    Pair(PairOp, Feature, Feature),
+    /// `-x` of an in-range x: `0.0 - x` (a zero stays +0, as `fj_fin` leaves it).
+    NegInRange(Operand),
+    /// `abs(x)` of an in-range x.
+    AbsInRange(Operand),
+    /// `pow(x, 2)`: `x * x`, saturated.
+    Square(Operand),
+    /// `pow(distance2(f_i, f_j), 2)`: the squared distance, no square root.
+    Distance2Squared(Feature, Feature),
+    /// `x / c` for a literal c: `x * (1/c)` (bits of the f32 1/c), saturated.
+    Scale(Operand, u32),
+}
+
+impl Op {
+    fn operands(&self) -> impl Iterator<Item = Operand> {
+        let (a, b) = match *self {
+            Op::Unary(_, a) | Op::NegInRange(a) | Op::AbsInRange(a) | Op::Square(a) | Op::Scale(a, _) => {
+                (Some(a), None)
+            }
+            Op::Binary(_, a, b) => (Some(a), Some(b)),
+            Op::Pair(..) | Op::Distance2Squared(..) => (None, None),
+        };
+        a.into_iter().chain(b)
+    }
+
+    /// The `templates/ops.wgsl` helper the instruction calls, if any.
+    fn helper(&self) -> Option<String> {
+        match self {
+            Op::Unary(op, _) => Some(op.helper()),
+            Op::Binary(op, ..) => Some(op.helper()),
+            Op::Pair(op, ..) => Some(op.helper()),
+            Op::NegInRange(_) | Op::AbsInRange(_) => None,
+            Op::Square(_) => Some(BinaryOp::Mul.helper()),
+            Op::Distance2Squared(..) => Some("fj_distance2sq".into()),
+            Op::Scale(..) => Some("fj_fin".into()),
+        }
+    }
+}
+
+/// Where an instruction runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Side {
+    /// Once per pixel, before the neighbour loop.
+    Centre,
+    /// For every neighbour.
+    Neighbour,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Inst {
+    pub op: Op,
+    pub side: Side,
+}
+
+/// One expression's body: its instructions, in order, and its value.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Body {
+    pub insts: Vec<Inst>,
+    pub result: Operand,
+}
+
+impl Body {
+    /// Lower `expr` with `options`.
+    pub fn of(expr: &Expr, options: LowerOptions) -> Body {
+        let mut builder = Builder { options, insts: Vec::new(), known: HashMap::new() };
+        let result = builder.build(expr);
+        Body { insts: builder.insts, result }
+    }
+
+    /// The helpers the instructions call (their dependencies aside).
+    pub fn helpers(&self) -> BTreeSet<String> {
+        self.insts.iter().filter_map(|i| i.op.helper()).collect()
+    }
+
+    /// The body as WGSL: `let` lines for the centre side and the neighbour
+    /// side, names `prefix` + instruction index, and the result's spelling.
+    pub fn print(&self, prefix: &str) -> (Vec<String>, Vec<String>, String) {
+        let operand = |o: Operand| match o {
+            Operand::Literal(bits) => format!("{:?}", f32::from_bits(bits)),
+            Operand::Var(v) => var_ident(v),
+            Operand::Value(k) => format!("{prefix}{k}"),
+        };
+        let (mut centre, mut neighbour) = (Vec::new(), Vec::new());
+        for (k, inst) in self.insts.iter().enumerate() {
+            let value = match inst.op {
+                Op::Unary(op, a) => format!("{}({})", op.helper(), operand(a)),
+                Op::Binary(op, a, b) => format!("{}({}, {})", op.helper(), operand(a), operand(b)),
+                Op::Pair(op, i, j) => format!("{}({}, {})", op.helper(), feature_ident('i', i), feature_ident('j', j)),
+                Op::NegInRange(a) => format!("(0.0 - {})", operand(a)),
+                Op::AbsInRange(a) => format!("abs({})", operand(a)),
+                Op::Square(a) => format!("fj_mul({0}, {0})", operand(a)),
+                Op::Distance2Squared(i, j) => {
+                    format!("fj_distance2sq({}, {})", feature_ident('i', i), feature_ident('j', j))
+                }
+                Op::Scale(a, r) => format!("fj_fin({} * {:?})", operand(a), f32::from_bits(r)),
+            };
+            let line = format!("let {prefix}{k} = {value};");
+            match inst.side {
+                Side::Centre => centre.push(line),
+                Side::Neighbour => neighbour.push(line),
+            }
+        }
+        (centre, neighbour, operand(self.result))
+    }
+}
+
+/// The WGSL name of feature `f` loaded at the centre (`side` = 'i') or the neighbour ('j').
+pub fn feature_ident(side: char, f: Feature) -> String {
+    format!("feat_{side}_{}", f.name().to_ascii_lowercase())
+}
+
+/// The WGSL name of variance `v` loaded at the centre.
+pub fn var_ident(v: ScalarVar) -> String {
+    format!("var_{}", v.name().to_ascii_lowercase())
+}
+
+/// Adds instructions, applying the rewrites `options` switch on.
+struct Builder {
+    options: LowerOptions,
+    insts: Vec<Inst>,
+    /// Each instruction's index, for hash-consing.
+    known: HashMap<Op, usize>,
+}
+
+impl Builder {
+    fn build(&mut self, e: &Expr) -> Operand {
+        match e {
+            Expr::Const(c) => Operand::literal(semantics::literal(*c)),
+            Expr::Var(v) => Operand::Var(*v),
+            Expr::Pair(op, i, j) => self.add(Op::Pair(*op, *i, *j)),
+            Expr::Unary(op, a) => {
+                let a = self.build(a);
+                if let Some(value) = self.fold(|flags| Some(op.eval(a.literal_value()?, flags))) {
+                    return value;
+                }
+                let skip = self.options.skip_redundant_checks && a.in_range();
+                self.add(match op {
+                    UnaryOp::Neg if skip => Op::NegInRange(a),
+                    UnaryOp::Abs if skip => Op::AbsInRange(a),
+                    _ => Op::Unary(*op, a),
+                })
+            }
+            Expr::Binary(op, a_expr, b_expr) => {
+                let strength = self.options.strength_reduction;
+                // `pow(distance2(f), 2)` needs no square root, nor the distance itself.
+                if strength && *op == BinaryOp::Pow && self.is_two(b_expr) {
+                    if let Expr::Pair(PairOp::Distance2, i, j) = **a_expr {
+                        return self.add(Op::Distance2Squared(i, j));
+                    }
+                }
+                // A divisor that is a literal, or the negation of one, before it becomes an instruction.
+                let divisor = (strength && *op == BinaryOp::Div).then(|| self.literal_of(b_expr)).flatten();
+                let a = self.build(a_expr);
+                if let Some(d) = divisor.filter(|d| d.abs() >= semantics::DIV_EPS) {
+                    if let Some(value) = self.fold(|flags| Some(op.eval(a.literal_value()?, d, flags))) {
+                        return value;
+                    }
+                    // The zero guard only changes divisors below FJ_DIV_EPS.
+                    return self.add(Op::Scale(a, ((1.0 / d) as f32).to_bits()));
+                }
+                let b = self.build(b_expr);
+                if let Some(value) = self.fold(|flags| Some(op.eval(a.literal_value()?, b.literal_value()?, flags))) {
+                    return value;
+                }
+                if strength && *op == BinaryOp::Pow && b.literal_value() == Some(2.0) {
+                    return self.add(Op::Square(a));
+                }
+                self.add(Op::Binary(*op, a, b))
+            }
+        }
+    }
+
+    /// The literal `compute` gives when folding is on, the operands are
+    /// literals and no domain flag is raised (a flag must stay in the kernel).
+    fn fold(&self, compute: impl FnOnce(&mut u32) -> Option<f64>) -> Option<Operand> {
+        if !self.options.fold_constants {
+            return None;
+        }
+        let mut flags = 0;
+        let value = compute(&mut flags)?;
+        (flags == 0).then(|| Operand::literal(semantics::fin(value)))
+    }
+
+    /// Whether `e` is the literal 2 as the kernel holds it (folded first when folding is on).
+    fn is_two(&self, e: &Expr) -> bool {
+        self.literal_of(e) == Some(2.0)
+    }
+
+    /// The f32 value of `e` if it is a literal or the negation of one, or
+    /// (folding on) folds to a literal; no instruction is added.
+    fn literal_of(&self, e: &Expr) -> Option<f64> {
+        match e {
+            Expr::Const(c) => Some(semantics::literal(*c) as f32 as f64),
+            Expr::Unary(UnaryOp::Neg, a) if matches!(**a, Expr::Const(_)) => {
+                let Expr::Const(c) = **a else { unreachable!() };
+                Some(-(semantics::literal(c) as f32 as f64))
+            }
+            _ if self.options.fold_constants => {
+                let mut probe = Builder { options: self.options, insts: Vec::new(), known: HashMap::new() };
+                match probe.build(e) {
+                    Operand::Literal(bits) if probe.insts.is_empty() => Some(f32::from_bits(bits) as f64),
+                    _ => None,
+                }
+            }
+            _ => None,
+        }
+    }
+
+    /// Add `op` (or find it, with common subexpressions on), on the centre
+    /// side when hoisting is on and it reads nothing of the neighbour.
+    fn add(&mut self, op: Op) -> Operand {
+        if self.options.common_subexpressions {
+            if let Some(&k) = self.known.get(&op) {
+                return Operand::Value(k);
+            }
+        }
+        let reads_neighbour = matches!(op, Op::Pair(..) | Op::Distance2Squared(..))
+            || op.operands().any(|o| matches!(o, Operand::Value(k) if self.insts[k].side == Side::Neighbour));
+        let side = if self.options.hoist_centre_terms && !reads_neighbour { Side::Centre } else { Side::Neighbour };
+        self.insts.push(Inst { op, side });
+        let k = self.insts.len() - 1;
+        if self.options.common_subexpressions {
+            self.known.insert(op, k);
+        }
+        Operand::Value(k)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::parse_expr;
+
+    fn body(text: &str, options: LowerOptions) -> Body {
+        Body::of(&parse_expr(text).unwrap(), options)
+    }
+
+    #[test]
+    fn equal_subexpressions_are_one_instruction_and_centre_terms_are_hoisted() {
+        let b = body("exp(-distance2(normal)) * exp(-distance2(normal)) + sqrt(colorVariance)", LowerOptions::ALL);
+        let pairs = b.insts.iter().filter(|i| matches!(i.op, Op::Pair(..))).count();
+        assert_eq!(pairs, 1, "{b:?}");
+        let sqrt = b.insts.iter().find(|i| matches!(i.op, Op::Unary(UnaryOp::Sqrt, _))).unwrap();
+        assert_eq!(sqrt.side, Side::Centre, "sqrt(colorVariance) reads nothing of the neighbour");
+        let plain = LowerOptions { common_subexpressions: false, hoist_centre_terms: false, ..LowerOptions::ALL };
+        let b = body("exp(-distance2(normal)) * exp(-distance2(normal)) + sqrt(colorVariance)", plain);
+        assert_eq!(b.insts.iter().filter(|i| matches!(i.op, Op::Pair(..))).count(), 2);
+        assert!(b.insts.iter().all(|i| i.side == Side::Neighbour));
+    }
+
+    #[test]
+    fn constants_fold_unless_they_raise_a_flag_and_strength_is_reduced() {
+        let b = body("distance2(color) * (2 + 3)", LowerOptions::ALL);
+        assert_eq!(b.insts.last().unwrap().op, Op::Binary(BinaryOp::Mul, Operand::Value(0), Operand::literal(5.0)));
+        // sqrt of a negative value raises a domain flag at run time: it stays an instruction.
+        let b = body("sqrt(0 - 1)", LowerOptions::ALL);
+        assert!(matches!(b.insts[0].op, Op::Unary(UnaryOp::Sqrt, Operand::Literal(_))), "{b:?}");
+        let b = body("pow(distance2(normal), 2) + distance1(color) / 4", LowerOptions::ALL);
+        assert_eq!(b.insts[0].op, Op::Distance2Squared(Feature::Normal, Feature::Normal));
+        assert!(b.insts.iter().any(|i| i.op == Op::Scale(Operand::Value(1), 0.25f32.to_bits())), "{b:?}");
+        let (_, neighbour, result) = b.print("_e");
+        assert_eq!(neighbour[0], "let _e0 = fj_distance2sq(feat_i_normal, feat_j_normal);");
+        assert_eq!(result, "_e3");
+        assert_eq!(b.helpers(), ["fj_add", "fj_distance1", "fj_distance2sq", "fj_fin"].map(String::from).into());
+    }
+}
