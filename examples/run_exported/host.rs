@@ -59,18 +59,24 @@ struct Images<'d> {
 }
 
 impl Images<'_> {
-    /// Upload `texels` as an RGBA32F sampled texture called `name`.
-    fn upload(&mut self, name: &str, texels: &[[f32; 4]]) {
-        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+    /// A `format` texture of the frame's size for `usage`.
+    fn texture(&self, name: &str, format: wgpu::TextureFormat, usage: wgpu::TextureUsages) -> wgpu::Texture {
+        self.device.create_texture(&wgpu::TextureDescriptor {
             label: Some(name),
             size: self.extent,
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba32Float,
-            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            format,
+            usage,
             view_formats: &[],
-        });
+        })
+    }
+
+    /// Upload `texels` as an RGBA32F sampled texture called `name`.
+    fn upload(&mut self, name: &str, texels: &[[f32; 4]]) {
+        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        let texture = self.texture(name, wgpu::TextureFormat::Rgba32Float, usage);
         self.queue.write_texture(
             wgpu::TexelCopyTextureInfo {
                 texture: &texture,
@@ -92,18 +98,9 @@ impl Images<'_> {
 
     /// A texture a stage writes and a later one reads, called `name`.
     fn target(&mut self, name: &str, format: wgpu::TextureFormat) {
-        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
-            label: Some(name),
-            size: self.extent,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format,
-            usage: wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
-            view_formats: &[],
-        });
+        let usage =
+            wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_SRC;
+        let texture = self.texture(name, format, usage);
         let view = texture.create_view(&Default::default());
         self.views.insert(name.to_string(), (texture, view));
     }
