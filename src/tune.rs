@@ -79,16 +79,79 @@ const FACTORS: [f64; 6] = [0.35, 0.5, 0.7, 1.4, 2.0, 2.8];
 /// Tune the sigmas of the terms the evaluator's scenes provide, starting from
 /// the hand-set values; `sweeps` passes over the five sigmas.
 pub fn tune(evaluator: &mut GpuEvaluator<'_>, sweeps: usize, on_step: &mut dyn FnMut(&Sigmas, f64)) -> Result<Tuned> {
-    let available: BTreeSet<Feature> = TERMS
+    let available: Vec<Feature> = TERMS
         .iter()
         .copied()
         .filter(|f| {
             matches!(f, Feature::Pixel | Feature::Color) || evaluator.scenes().iter().all(|s| s.feature(*f).is_some())
         })
         .collect();
+    let start = Sigmas::hand_set(&available.iter().copied().collect());
+    let names: Vec<String> = available.iter().map(|f| f.name().to_string()).collect();
+    let values: Vec<f64> = names.iter().map(|n| start.0[n]).collect();
+    let sigmas = |values: &[f64]| Sigmas(names.iter().cloned().zip(values.iter().copied()).collect());
+    descend(evaluator, &values, &|v| sigmas(v).expr(), &sigmas, sweeps, on_step)
+}
+
+/// Tune every literal of `start` the same way (its structure kept): a
+/// hand-set filter of any form, such as the SVGF-style `@svgfAtrous`. The
+/// literals are named `c1`, `c2`, … in pre-order.
+pub fn tune_literals(
+    evaluator: &mut GpuEvaluator<'_>,
+    start: &Expr,
+    sweeps: usize,
+    on_step: &mut dyn FnMut(&Sigmas, f64),
+) -> Result<Tuned> {
+    let values = literals(start);
+    let named = |values: &[f64]| Sigmas(values.iter().enumerate().map(|(k, v)| (format!("c{}", k + 1), *v)).collect());
+    descend(evaluator, &values, &|v| with_literals(start, &mut v.iter().copied()), &named, sweeps, on_step)
+}
+
+/// The literals of `e`, in pre-order.
+pub fn literals(e: &Expr) -> Vec<f64> {
+    fn walk(e: &Expr, out: &mut Vec<f64>) {
+        match e {
+            Expr::Const(c) => out.push(*c),
+            Expr::Unary(_, a) => walk(a, out),
+            Expr::Binary(_, a, b) => {
+                walk(a, out);
+                walk(b, out);
+            }
+            Expr::Var(_) | Expr::Pair(..) => {}
+        }
+    }
+    let mut out = Vec::new();
+    walk(e, &mut out);
+    out
+}
+
+/// `e` with its literals, in pre-order, replaced by `values`.
+pub fn with_literals(e: &Expr, values: &mut impl Iterator<Item = f64>) -> Expr {
+    match e {
+        Expr::Const(c) => Expr::Const(values.next().unwrap_or(*c)),
+        Expr::Unary(op, a) => Expr::unary(*op, with_literals(a, values)),
+        Expr::Binary(op, a, b) => {
+            let a = with_literals(a, values);
+            Expr::binary(*op, a, with_literals(b, values))
+        }
+        other => other.clone(),
+    }
+}
+
+/// Coordinate descent from `start`: each step tries one value times each of
+/// [`FACTORS`] (three significant digits), all of a step's candidates
+/// compiled and scored as one batch; `sweeps` passes, or until one gains nothing.
+fn descend(
+    evaluator: &mut GpuEvaluator<'_>,
+    start: &[f64],
+    build: &dyn Fn(&[f64]) -> Expr,
+    named: &dyn Fn(&[f64]) -> Sigmas,
+    sweeps: usize,
+    on_step: &mut dyn FnMut(&Sigmas, f64),
+) -> Result<Tuned> {
     let mut memo: BTreeMap<String, f64> = BTreeMap::new();
-    let mut score = |evaluator: &mut GpuEvaluator<'_>, candidates: &[Sigmas]| -> Result<Vec<f64>> {
-        let exprs: Vec<Expr> = candidates.iter().map(Sigmas::expr).collect();
+    let mut score = |evaluator: &mut GpuEvaluator<'_>, candidates: &[Vec<f64>]| -> Result<Vec<f64>> {
+        let exprs: Vec<Expr> = candidates.iter().map(|c| build(c)).collect();
         let texts: Vec<String> = exprs.iter().map(Expr::to_string).collect();
         let fresh: BTreeMap<&String, &Expr> =
             texts.iter().zip(&exprs).filter(|(t, _)| !memo.contains_key(*t)).collect();
@@ -107,20 +170,18 @@ pub fn tune(evaluator: &mut GpuEvaluator<'_>, sweeps: usize, on_step: &mut dyn F
         }
         Ok(texts.iter().map(|t| memo[t]).collect())
     };
-    let start = Sigmas::hand_set(&available);
-    let hand_set_fitness = score(evaluator, std::slice::from_ref(&start))?[0];
-    let (mut best, mut best_fitness) = (start, hand_set_fitness);
-    on_step(&best, best_fitness);
+    let hand_set_fitness = score(evaluator, &[start.to_vec()])?[0];
+    let (mut best, mut best_fitness) = (start.to_vec(), hand_set_fitness);
+    on_step(&named(&best), best_fitness);
     for _ in 0..sweeps {
         let before = best_fitness;
-        for term in TERMS.iter().filter(|f| available.contains(f)) {
-            let name = term.name().to_string();
-            let candidates: Vec<Sigmas> = FACTORS
+        for k in 0..best.len() {
+            let candidates: Vec<Vec<f64>> = FACTORS
                 .iter()
                 .map(|factor| {
-                    let mut s = best.clone();
-                    s.0.insert(name.clone(), round3(best.0[&name] * factor));
-                    s
+                    let mut c = best.clone();
+                    c[k] = round3(best[k] * factor);
+                    c
                 })
                 .collect();
             for (candidate, fitness) in candidates.iter().zip(score(evaluator, &candidates)?) {
@@ -128,15 +189,15 @@ pub fn tune(evaluator: &mut GpuEvaluator<'_>, sweeps: usize, on_step: &mut dyn F
                     (best, best_fitness) = (candidate.clone(), fitness);
                 }
             }
-            on_step(&best, best_fitness);
+            on_step(&named(&best), best_fitness);
         }
         if best_fitness >= before {
             break;
         }
     }
     Ok(Tuned {
-        expr: best.expr().to_string(),
-        sigmas: best,
+        expr: build(&best).to_string(),
+        sigmas: named(&best),
         fitness: best_fitness,
         hand_set_fitness,
         evaluated: memo.len(),
@@ -153,6 +214,15 @@ mod tests {
         let all: BTreeSet<Feature> = TERMS.into_iter().collect();
         let shipped = parse_expr(crate::corpus::lookup("crossBilateral").unwrap()).unwrap();
         assert_eq!(Sigmas::hand_set(&all).expr(), shipped);
+    }
+
+    #[test]
+    fn literals_are_read_and_replaced_in_pre_order() {
+        let e = parse_expr("exp(-(distance2(normal) / 0.1 + distance1(depth) / (2 * 0.5)))").unwrap();
+        assert_eq!(literals(&e), [0.1, 2.0, 0.5]);
+        let changed = with_literals(&e, &mut [0.2, 3.0, 0.25].into_iter());
+        assert_eq!(changed.to_string(), "exp(-(distance2(normal) / 0.2 + distance1(depth) / (3 * 0.25)))");
+        assert_eq!(with_literals(&e, &mut literals(&e).into_iter()), e);
     }
 
     #[test]

@@ -76,7 +76,7 @@ fn a_report_on_the_mitsuba_sample_writes_a_complete_folder() {
     assert!(reason.contains("directIllumination"), "{reason}");
     let noisy_flip = cell("noisy")["flip"].as_f64().unwrap();
     assert!(noisy_flip > 0.0 && noisy_flip < 1.0, "HDR-FLIP lies in (0, 1): {noisy_flip}");
-    for method in ["crossBilateralTuned", "bilateral", "island0_rank1", "island1_rank1"] {
+    for method in ["crossBilateralTuned", "svgfAtrous", "bilateral", "island0_rank1", "island1_rank1"] {
         let c = cell(method);
         let relmse = c["relmse"].as_f64().unwrap();
         assert!(relmse < noisy, "{method} filters: {relmse} vs noisy {noisy}");
@@ -102,7 +102,7 @@ fn a_report_on_the_mitsuba_sample_writes_a_complete_folder() {
     assert!(csv.lines().next().unwrap().contains(",hdr_flip,"));
     // The crops: one per method that ran, plus noisy and reference, and the strip.
     let crops = out.join("crops").join("mitsuba-cornell-64");
-    assert_eq!(std::fs::read_dir(&crops).unwrap().count(), 2 + 4);
+    assert_eq!(std::fs::read_dir(&crops).unwrap().count(), 2 + 5);
     assert!(out.join("crops/mitsuba-cornell-64.png").is_file());
 }
 

@@ -258,6 +258,10 @@ pub(crate) struct TuneArgs {
     /// Also write the result as a `name = expression` file (readable with @FILE).
     #[arg(short, long)]
     pub(crate) output: Option<PathBuf>,
+    /// Tune every literal of this expression (its form kept; `@NAME` of a
+    /// shipped one, e.g. `@svgfAtrous`) instead of the cross-bilateral's sigmas.
+    #[arg(long, value_name = "EXPR")]
+    pub(crate) expr: Option<String>,
 }
 
 /// Raw `evolve` flags; unset ones take the preset's values.

@@ -19,7 +19,7 @@ use filterjit::{corpus, cpu, datasets, gpu, jit, lang, preview, render, semantic
 use args::*;
 pub(crate) use args::{Cli, Command};
 use evolve::evolve;
-use report::{report, scene_context, tune_baseline};
+use report::{report, scene_context};
 
 pub(crate) fn run(cli: Cli) -> Result<()> {
     let env = &Environment::read()?;
@@ -144,11 +144,17 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Tune(args) => {
             let gpu = gpu::Gpu::open(&env.adapter)?;
             let context = scene_context(&args.scene)?;
-            let tuned = tune_baseline(&gpu, env, &args.scene, &context)?;
-            println!("crossBilateralTuned = {}", tuned.expr);
+            let start = args.expr.as_deref().map(corpus::resolve).transpose()?;
+            let tuned = report::tune_on_training(&gpu, env, &args.scene, &context, start.as_ref().map(|(_, e)| e))?;
+            let name = match &start {
+                None => "crossBilateralTuned".to_string(),
+                Some((Some(name), _)) => format!("{name}Tuned"),
+                Some((None, _)) => "tuned".to_string(),
+            };
+            println!("{name} = {}", tuned.expr);
             if let Some(path) = &args.output {
                 let text = format!(
-                    "# tuned on {} at {}x{}, radius {}: training relMSE/noisy {:.5} (hand-set {:.5})\n{} {}\ncrossBilateralTuned = {}\n",
+                    "# tuned on {} at {}x{}, radius {}: training relMSE/noisy {:.5} (hand-set {:.5})\n{} {}\n{name} = {}\n",
                     tuned.scenes.join(", "),
                     context.render.width,
                     context.render.height,

@@ -65,6 +65,17 @@ pub(crate) fn tune_baseline(
     args: &SceneArgs,
     context: &SceneContext,
 ) -> Result<filterjit::tune::Tuned> {
+    tune_on_training(gpu, env, args, context, None)
+}
+
+/// Tune the cross-bilateral's sigmas, or every literal of `start`, on the training scenes.
+pub(crate) fn tune_on_training(
+    gpu: &gpu::Gpu,
+    env: &Environment,
+    args: &SceneArgs,
+    context: &SceneContext,
+    start: Option<&lang::Expr>,
+) -> Result<filterjit::tune::Tuned> {
     use filterjit::evolve as ev;
     let datasets = datasets::resolve(gpu, &context.training, &context.render, &env.cache, &mut render_progress())?;
     let (features, variances) = datasets::common_terminals(&datasets)?;
@@ -72,21 +83,29 @@ pub(crate) fn tune_baseline(
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
     let mut evaluator = ev::GpuEvaluator::for_pipeline(gpu, scenes, context.radius, context.pipeline, threads)?;
     eprintln!(
-        "tune      cross-bilateral sigmas on {} ({}x{}, radius {}, pipeline {})",
+        "tune      {} on {} ({}x{}, radius {}, pipeline {})",
+        match start {
+            None => "cross-bilateral sigmas".to_string(),
+            Some(e) => format!("the literals of `{e}`"),
+        },
         context.training.join(", "),
         context.render.width,
         context.render.height,
         context.radius,
         context.pipeline
     );
-    let tuned = filterjit::tune::tune(&mut evaluator, args.sweeps, &mut |sigmas, fitness| {
+    let mut on_step = |sigmas: &filterjit::tune::Sigmas, fitness: f64| {
         eprintln!(
             "          {fitness:.5}  {}",
             sigmas.0.iter().map(|(k, v)| format!("{k} {v}")).collect::<Vec<_>>().join(", ")
         );
-    })?;
+    };
+    let tuned = match start {
+        None => filterjit::tune::tune(&mut evaluator, args.sweeps, &mut on_step)?,
+        Some(e) => filterjit::tune::tune_literals(&mut evaluator, e, args.sweeps, &mut on_step)?,
+    };
     eprintln!(
-        "tuned     training relMSE/noisy {:.5} (hand-set sigmas {:.5}), {} candidates",
+        "tuned     training relMSE/noisy {:.5} (hand-set {:.5}), {} candidates",
         tuned.fitness, tuned.hand_set_fitness, tuned.evaluated
     );
     Ok(tuned)
@@ -115,6 +134,15 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
         origin: Origin::Baseline,
         expr: baseline_expr,
         pipeline: baseline_pipeline,
+        radius: None,
+    });
+    // The SVGF-style à-trous filter, tuned on training scenes, in its own pipeline.
+    let svgf = corpus::resolve_with_pipeline("@svgfAtrous")?;
+    methods.push(Method {
+        name: "svgfAtrous".into(),
+        origin: Origin::Baseline,
+        expr: svgf.expr,
+        pipeline: svgf.pipeline.unwrap_or(context.pipeline),
         radius: None,
     });
     for name in ["thesis1", "thesis2", "thesis3"] {
