@@ -392,7 +392,7 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     let components = if input.components() == 1 { "x" } else { "xyz" };
                     (input.describe(), components, content(input), Some(scale_index - 1))
                 }
-                (Role::Flags | Role::Reference | Role::Image, _) => {
+                (Role::Flags | Role::Reference | Role::Image | Role::Terms | Role::PixelFlags, _) => {
                     unreachable!("exported shaders bind no {:?}", b.role)
                 }
             };

@@ -210,6 +210,7 @@ impl Gpu {
             pipelines.push(self.pipeline(k)?.0);
         }
         let reduce = self.reduce_pipeline()?;
+        let reduce_interface = crate::jit::BindingInterface::reduce();
         let _turn = self.gl_turn();
         let members: Vec<u32> = kernels.iter().map(|k| k.source().exprs.len() as u32).collect();
         let most = members.iter().copied().max().unwrap_or(1);
@@ -321,13 +322,18 @@ impl Gpu {
                     let partial = |buffer| wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size });
                     let bind_group = self.bind_in_slot_order(
                         reduce,
-                        vec![
-                            reduce_params[s][member].as_entire_binding(),
-                            terms.as_entire_binding(),
-                            pixel_flags.as_entire_binding(),
-                            partial(&partials),
-                            partial(&partial_flags),
-                        ],
+                        reduce_interface
+                            .bindings
+                            .iter()
+                            .map(|b| match b.role {
+                                Role::Params => reduce_params[s][member].as_entire_binding(),
+                                Role::Terms => terms.as_entire_binding(),
+                                Role::PixelFlags => pixel_flags.as_entire_binding(),
+                                Role::Output => partial(&partials),
+                                Role::Flags => partial(&partial_flags),
+                                other => unreachable!("the reduction has no {other:?} binding"),
+                            })
+                            .collect(),
                     );
                     let groups = match run {
                         Pass::Prime => (1, 1),

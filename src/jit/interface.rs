@@ -34,6 +34,10 @@ pub enum Role {
     Image,
     /// The raw albedo demodulation divides by (the pre-pass).
     Albedo,
+    /// A fitness kernel's per-pixel relMSE terms, which the reduction reads.
+    Terms,
+    /// A fitness kernel's per-pixel domain-error bits, which the reduction reads.
+    PixelFlags,
 }
 
 /// Texel format of a storage texture an exported shader writes.
@@ -343,6 +347,33 @@ impl BindingInterface {
             field("stages", "u32", 12, "bit 0: clamp outliers; bit 1: demodulate by the albedo"),
         ];
         BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+    }
+
+    /// The interface of the fitness reduction (`jit::reduce`): the uniform
+    /// `ReduceParams`, a member's per-pixel terms and flags, and the
+    /// per-workgroup partial sums and flags it writes (`Output`, `Flags`).
+    pub fn reduce() -> BindingInterface {
+        let read = |element| Resource::Storage { element, writable: false };
+        let written = |element| Resource::Storage { element, writable: true };
+        let roles = [
+            (Role::Params, Resource::Uniform, "params"),
+            (Role::Terms, read(Element::F32), "buf_terms"),
+            (Role::PixelFlags, read(Element::U32), "buf_pixel_flags"),
+            (Role::Output, written(Element::F32), "buf_partials"),
+            (Role::Flags, written(Element::U32), "buf_partial_flags"),
+        ];
+        let bindings = roles
+            .into_iter()
+            .enumerate()
+            .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident: ident.into(), resource })
+            .collect();
+        let uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("member", "u32", 8, "which member's terms: from member * width * height"),
+            field("_pad", "u32", 12, "unused"),
+        ];
+        BindingInterface { kind: KernelKind::Fitness, bindings, uniform, uniform_bytes: 16 }
     }
 
     /// The binding that plays `role`, if the kernel has one.

@@ -16,7 +16,7 @@ pub use lower::{
     LowerError, LowerOptions, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP,
 };
 pub use prepass::{prepass_module, prepass_wgsl, PrepassParams};
-pub use reduce::{reduce_module, reduce_wgsl, ReduceParams, REDUCE_SLOTS};
+pub use reduce::{reduce_module, reduce_wgsl, ReduceParams};
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 
 /// Lower and validate in one step.

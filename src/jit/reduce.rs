@@ -4,10 +4,11 @@
 //! out of the generated kernels is what makes them cheap to compile on
 //! software drivers, and the tree is the same for every member, fused or not.
 
+use super::interface::BindingInterface;
 use super::lower::{TEMPLATE_VERSION, WORKGROUP};
 use super::validate::{validate_module, ValidateError, ValidatedModule};
 
-/// The reduction's uniform (`struct ReduceParams`).
+/// The reduction's uniform (`struct Params` of its module; fields in [`BindingInterface::reduce`]).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct ReduceParams {
@@ -17,9 +18,6 @@ pub struct ReduceParams {
     pub member: u32,
     pub _pad: u32,
 }
-
-/// Binding slots of the reduction, in order: uniform, terms, pixel flags, partials, partial flags.
-pub const REDUCE_SLOTS: usize = 5;
 
 /// The reduction's WGSL.
 pub fn reduce_wgsl() -> String {
@@ -31,19 +29,28 @@ pub fn reduce_wgsl() -> String {
     context.insert("template_version", &TEMPLATE_VERSION);
     context.insert("workgroup_x", &WORKGROUP[0]);
     context.insert("workgroup_y", &WORKGROUP[1]);
+    let interface = BindingInterface::reduce();
+    context.insert("params_struct", &interface.params_struct());
+    context.insert("declarations", &interface.declarations());
     tera.render("reduce", &context).expect("built-in reduction template renders")
 }
 
-/// The reduction, validated by naga.
+/// The reduction, validated by naga; its bindings are checked against its interface.
 pub fn reduce_module() -> Result<ValidatedModule, ValidateError> {
-    validate_module(&reduce_wgsl(), "<fitness reduction>")
+    let wgsl = reduce_wgsl();
+    let module = validate_module(&wgsl, "<fitness reduction>")?;
+    let expected = BindingInterface::reduce().slots();
+    if module.slots() != expected.as_slice() {
+        let message = format!("the reduction binds {:?}, its interface says {expected:?}", module.slots());
+        return Err(ValidateError::Invalid { expression: "<fitness reduction>".into(), message, wgsl });
+    }
+    Ok(module)
 }
 
 #[cfg(test)]
 mod tests {
     #[test]
-    fn the_reduction_validates_with_its_slots() {
-        let module = super::reduce_module().expect("the reduction validates");
-        assert_eq!(module.slots().len(), super::REDUCE_SLOTS);
+    fn the_reduction_validates_with_its_interface() {
+        super::reduce_module().expect("the reduction validates with the slots its interface gives");
     }
 }
