@@ -70,7 +70,6 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             if let (Some(code), Some(stage)) = (&exported.prepass, exported.manifest.prepass.as_mut()) {
                 let path = prepass_path(&output);
                 stage.file = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-                println!("wrote {} (the pre-pass)", path.display());
                 files.push((path, code.to_bytes()));
             }
             let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
@@ -78,6 +77,9 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             for (path, bytes) in &files {
                 filterjit::io::write_bytes_atomically(path, bytes)
                     .with_context(|| format!("writing {}", path.display()))?;
+            }
+            if let Some(stage) = &exported.manifest.prepass {
+                println!("wrote {} (the pre-pass)", output.with_file_name(&stage.file).display());
             }
             if exported.manifest.passes > 1 {
                 println!(
