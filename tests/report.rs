@@ -170,6 +170,14 @@ fn the_report_runs_oidn_as_the_peer_through_its_program() {
     let peers: Vec<&serde_json::Value> =
         results["methods"].as_array().unwrap().iter().filter(|m| m["origin"] == "peer").collect();
     assert_eq!(peers.len(), 2);
+    // Every error against the peer's, scene by scene and on the mean.
+    let peer = cell("OIDN colour+albedo+normal")["relmse"].as_f64().unwrap();
+    for c in cells.iter().filter(|c| c["relmse"].is_f64()) {
+        let ratio = c["vs_peer"].as_f64().unwrap();
+        assert!((ratio - c["relmse"].as_f64().unwrap() / peer).abs() < 1e-9, "{c}");
+    }
+    let oidn = peers.iter().find(|m| m["name"] == "OIDN colour+albedo+normal").unwrap();
+    assert!((oidn["mean_vs_peer"].as_f64().unwrap() - 1.0).abs() < 1e-12);
 }
 
 /// The real OIDN where it is installed (CI installs `pyoidn`; FILTERJIT_REQUIRE_OIDN=1 makes its absence a failure).

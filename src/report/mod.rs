@@ -80,6 +80,8 @@ pub struct Cell {
     pub flip: Option<f64>,
     /// relMSE / the noisy input's relMSE.
     pub normalised: Option<f64>,
+    /// relMSE / the peer's (OIDN colour+albedo+normal) on the same scene, where OIDN ran.
+    pub vs_peer: Option<f64>,
     /// Median device time per megapixel, milliseconds; none for the noisy input.
     pub ms_per_mpx: Option<f64>,
     /// Fastest and slowest of the timed repeats.
@@ -100,6 +102,8 @@ pub struct MethodInfo {
     pub mean_relmse: Option<f64>,
     pub mean_flip: Option<f64>,
     pub mean_normalised: Option<f64>,
+    /// Mean relMSE / the peer's mean relMSE over the same scenes, where OIDN ran on all of them.
+    pub mean_vs_peer: Option<f64>,
     pub mean_ms_per_mpx: Option<f64>,
     pub scenes_run: usize,
 }
@@ -318,23 +322,45 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         });
     }
     let peers = oidn.map_or(&[][..], |_| &[oidn::Auxiliary::ColorOnly, oidn::Auxiliary::AlbedoNormal][..]);
+    // Every error against the peer a user would pick instead, scene by scene.
+    let peer = oidn::Auxiliary::AlbedoNormal.method_name();
+    let peer_relmse: BTreeMap<String, f64> =
+        results.cells.iter().filter(|c| c.method == peer).filter_map(|c| Some((c.scene.clone(), c.relmse?))).collect();
+    for c in &mut results.cells {
+        c.vs_peer = c.relmse.zip(peer_relmse.get(&c.scene)).map(|(e, p)| e / p.max(metrics::NOISY_RELMSE_FLOOR));
+    }
     results.methods = std::iter::once((NOISY.to_string(), Origin::Noisy, None))
         .chain(methods.iter().map(|m| (m.name.clone(), m.origin, Some(m))))
         .chain(peers.iter().map(|aux| (aux.method_name().to_string(), Origin::Peer, None)))
-        .map(|(name, origin, method)| summarise(&results.cells, name, origin, method))
+        .map(|(name, origin, method)| summarise(&results.cells, name, origin, method, &peer_relmse))
         .collect();
     pages::write(&results, output)?;
     Ok(results)
 }
 
-fn summarise(cells: &[Cell], name: String, origin: Origin, method: Option<&Method>) -> MethodInfo {
+fn summarise(
+    cells: &[Cell],
+    name: String,
+    origin: Origin,
+    method: Option<&Method>,
+    peer_relmse: &BTreeMap<String, f64>,
+) -> MethodInfo {
     let expr = method.map(|m| &m.expr);
     let ran: Vec<&Cell> = cells.iter().filter(|c| c.method == name && c.relmse.is_some()).collect();
     let mean = |f: &dyn Fn(&Cell) -> Option<f64>| -> Option<f64> {
         let values: Vec<f64> = ran.iter().filter_map(|c| f(c)).collect();
         (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64)
     };
+    // The peer's mean over exactly the scenes this method ran on.
+    let peer_mean = ran.iter().map(|c| peer_relmse.get(&c.scene).copied()).collect::<Option<Vec<f64>>>();
+    let mean_vs_peer = match (mean(&|c| c.relmse), peer_mean) {
+        (Some(m), Some(p)) if !p.is_empty() => {
+            Some(m / (p.iter().sum::<f64>() / p.len() as f64).max(metrics::NOISY_RELMSE_FLOOR))
+        }
+        _ => None,
+    };
     MethodInfo {
+        mean_vs_peer,
         mean_relmse: mean(&|c| c.relmse),
         mean_flip: mean(&|c| c.flip),
         mean_normalised: mean(&|c| c.normalised),

@@ -53,6 +53,7 @@ struct MethodRow {
     name: String,
     normalised: String,
     relmse: String,
+    vs_peer: String,
     flip: String,
     ms_per_mpx: String,
     scenes_run: usize,
@@ -84,6 +85,7 @@ struct CellRow {
     mse: String,
     flip: String,
     normalised: String,
+    vs_peer: String,
     ms_per_mpx: String,
     /// ` (fastest–slowest)`, or empty.
     ms_range: String,
@@ -127,6 +129,7 @@ impl<'a> Page<'a> {
                     name: m.name.clone(),
                     normalised: fmt(m.mean_normalised, 4),
                     relmse: fmt(m.mean_relmse, 4),
+                    vs_peer: fmt(m.mean_vs_peer, 2),
                     flip: fmt(m.mean_flip, 4),
                     ms_per_mpx: fmt(m.mean_ms_per_mpx, 1),
                     scenes_run: m.scenes_run,
@@ -165,6 +168,7 @@ impl<'a> Page<'a> {
                                 mse: fmt(c.mse, 5),
                                 flip: fmt(c.flip, 4),
                                 normalised: fmt(c.normalised, 4),
+                                vs_peer: fmt(c.vs_peer, 2),
                                 ms_per_mpx: fmt(c.ms_per_mpx, 1),
                                 ms_range: c
                                     .ms_per_mpx_range
@@ -239,12 +243,12 @@ pub(super) fn write(results: &Results, output: &Path) -> Result<()> {
 }
 
 fn csv(results: &Results) -> String {
-    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,hdr_flip,normalised,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable\n");
+    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,hdr_flip,normalised,relmse_vs_oidn,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable\n");
     let opt = |v: Option<f64>| v.map(|v| format!("{v:e}")).unwrap_or_default();
     for c in &results.cells {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
             c.scene,
             c.method,
             opt(c.relmse),
@@ -252,6 +256,7 @@ fn csv(results: &Results) -> String {
             opt(c.mse),
             opt(c.flip),
             opt(c.normalised),
+            opt(c.vs_peer),
             opt(c.ms_per_mpx),
             opt(c.ms_per_mpx_range.map(|r| r.0)),
             opt(c.ms_per_mpx_range.map(|r| r.1)),
@@ -330,6 +335,7 @@ mod tests {
                 mean_relmse: Some(0.5),
                 mean_flip: None,
                 mean_normalised: Some(1.0),
+                mean_vs_peer: None,
                 mean_ms_per_mpx: None,
                 scenes_run: 1,
             }],
