@@ -79,7 +79,10 @@ pub fn check_inputs(expr: &Expr, scene: &Scene) -> Result<(), MissingData> {
             return Err(missing(f.name()));
         }
     }
-    for v in expr.stored_variables() {
+    for v in expr.bound_variables() {
+        if scene.variance(v).is_none() && v.from_prepass() {
+            return Err(missing(&format!("{v} (what the outlier pre-pass measures: a pipeline with outliers=k)")));
+        }
         if scene.variance(v).is_none() {
             return Err(missing(v.name()));
         }
@@ -155,6 +158,8 @@ pub struct Prepared {
     /// Stored as f32, as on the device.
     pub color: Vec<[f32; 3]>,
     pub modulation: Option<Vec<[f32; 3]>>,
+    /// With outliers: what the rule measured (`ScalarVar::FROM_PREPASS`, in that order), as f32.
+    pub local: Option<[Vec<f32>; 3]>,
 }
 
 /// The pre-pass of `pipeline` (outliers, then demodulation) on `scene`'s colour.
@@ -168,10 +173,12 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
     };
     let r = pipeline::OUTLIER_RADIUS as i64;
     let mut color = Vec::with_capacity(scene.pixels());
+    let mut local: [Vec<f32>; 3] = Default::default();
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
             let mut c = f64s(scene.color[i]);
+            let mut measured = [0.0f64; 3];
             if let Some(pipeline::Outliers { k }) = pipeline.outliers {
                 let neighbours: Vec<f64> = (y - r..=y + r)
                     .flat_map(|yj| (x - r..=x + r).map(move |xj| (xj, yj)))
@@ -184,10 +191,15 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
                     let std = (neighbours.iter().map(|l| (l - mean) * (l - mean)).sum::<f64>() / n).sqrt();
                     let limit = mean + k as f64 * std;
                     let l = pipeline::luminance(c);
+                    measured = [mean, std, 0.0];
                     if l > limit {
                         c = c.map(|v| v * (limit / l));
+                        measured[2] = (l - limit) / l;
                     }
                 }
+            }
+            for (out, value) in local.iter_mut().zip(measured) {
+                out.push(value as f32);
             }
             if let Some(m) = &modulation {
                 c = [c[0] / m[i][0], c[1] / m[i][1], c[2] / m[i][2]];
@@ -196,7 +208,7 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
         }
     }
     let modulation = modulation.map(|m| m.into_iter().map(|v| v.map(|x| x as f32)).collect());
-    Ok(Prepared { color, modulation })
+    Ok(Prepared { color, modulation, local: pipeline.outliers.map(|_| local) })
 }
 
 /// Filter `scene` with `expr` through the whole `pipeline` (docs/SEMANTICS.md,
@@ -208,10 +220,16 @@ pub fn filter_pipeline(
     pipeline: &FilterPipeline,
     radius: u32,
 ) -> Result<CpuFiltered, MissingData> {
-    check_inputs(expr, scene)?;
     let prepared = prepass(scene, pipeline)?;
     let mut working = scene.clone();
     working.color = prepared.color;
+    // What the outlier rule measured is read like a variance, at the centre.
+    if let Some(local) = prepared.local {
+        for (v, values) in ScalarVar::FROM_PREPASS.into_iter().zip(local) {
+            working.variances.insert(v, values);
+        }
+    }
+    check_inputs(expr, &working)?;
     let mut out = match pipeline.form {
         Form::Window => filter(expr, &working, radius)?,
         Form::Atrous { passes } => {

@@ -1121,9 +1121,11 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     evaluator.set_fitness_rule(&config.fitness)?;
     // `level` (the à-trous pass) is a terminal where there are passes: a filter may change with scale.
     let level = config.pipeline.is_atrous().then_some(ScalarVar::Level);
+    // What the outlier rule measured, where the pipeline has it: a weight may adapt to fireflies.
+    let measures = config.pipeline.outliers.map(|_| ScalarVar::FROM_PREPASS).into_iter().flatten();
     let terminals = gp::operators::Terminals {
         features: features.iter().copied().collect(),
-        variables: variances.iter().copied().chain(level).collect(),
+        variables: variances.iter().copied().chain(level).chain(measures).collect(),
         constants: crate::lang::ops::THESIS_CONSTANTS.to_vec(),
     };
     let mut engine = gp::Engine::with_transport(

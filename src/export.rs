@@ -169,9 +169,16 @@ pub struct Binding {
     pub components: &'static str,
     /// What the texture must hold.
     pub content: String,
-    /// Index into `params.scale` (features and variances only).
+    /// Index into `params.scale` (normalised features and variances only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scale_index: Option<usize>,
+    /// A storage texture's texel format.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub format: Option<&'static str>,
+    /// The image to bind when it is not the one named by `role` (what the
+    /// outlier rule measured: the pre-pass's `local`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub image: Option<&'static str>,
     /// Where this binding is in the target's own terms (GLSL binding, HLSL register, Metal slot),
     /// derived from `binding` and `kind`.
     pub target_slot: String,
@@ -218,6 +225,9 @@ fn content(input: Input) -> String {
                 ScalarVar::DiVariance => "direct-light visibility",
                 ScalarVar::ColorVariance => "colour",
                 ScalarVar::Level => unreachable!("`level` is never a bound input"),
+                ScalarVar::LocalMean | ScalarVar::LocalStd | ScalarVar::ClampedShare => {
+                    return format!("the pre-pass's `local` texture, which holds `{v}` (not normalised)")
+                }
             };
             format!("per-pixel sample variance of the {of}, mean over channels")
         }
@@ -387,12 +397,25 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     "the colour variance carried to the next pass, written with textureStore; format r32float".into(),
                     None,
                 ),
-                (Role::Input(input), _) => {
+                (Role::Local, _) => (
+                    "local".into(),
+                    "xyz",
+                    "what the outlier rule measured: x localMean, y localStd, z clampedShare (0 without outliers), \
+                     written with textureStore; format rgba32float"
+                        .into(),
+                    None,
+                ),
+                (Role::Input(input), Stages::Form) if !input.is_normalised() => {
+                    let Input::Variance(v) = input else { unreachable!("only measures are not normalised") };
+                    let k = ScalarVar::FROM_PREPASS.iter().position(|w| *w == v).expect("a measure");
+                    (input.describe(), ["x", "y", "z"][k], content(input), None)
+                }
+                (Role::Input(input), Stages::Form) => {
                     scale_index += 1;
                     let components = if input.components() == 1 { "x" } else { "xyz" };
                     (input.describe(), components, content(input), Some(scale_index - 1))
                 }
-                (Role::Flags | Role::Reference | Role::Image | Role::Terms | Role::PixelFlags, _) => {
+                (Role::Flags | Role::Reference | Role::Image | Role::Terms | Role::PixelFlags | Role::Input(_), _) => {
                     unreachable!("exported shaders bind no {:?}", b.role)
                 }
             };
@@ -405,6 +428,11 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                 components,
                 content,
                 scale_index: scale,
+                format: match b.resource {
+                    Resource::StorageTexture(format) => Some(format.wgsl()),
+                    _ => None,
+                },
+                image: matches!(b.role, Role::Input(Input::Variance(v)) if v.from_prepass()).then_some("local"),
                 target_slot: target_slot(target, interface, b),
             }
         })

@@ -134,6 +134,11 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         (carrying.clone(), "outliers=1.5,atrous=3"),
         (carrying, "demodulate,window"),
         (named("bilateral"), "atrous=2"),
+        // What the outlier rule measured, from the exported pre-pass's packed `local` texture.
+        (
+            parse_expr("exp(-(distance2(normal) * 4 + clampedShare * 8 + localStd / (localMean + 0.1)))").unwrap(),
+            "outliers=2,atrous=3",
+        ),
     ];
     let gpu = gpu();
     let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
@@ -150,6 +155,10 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
             text != "atrous=2",
             "{text}: a pre-pass exactly where the pipeline has one"
         );
+        let measures = ["localMean", "localStd", "clampedShare"];
+        for b in exported.manifest.bindings.iter().filter(|b| measures.contains(&b.role.as_str())) {
+            assert_eq!((b.image, b.scale_index), (Some("local"), None), "{b:?}: read raw from the pre-pass's `local`");
+        }
         let shaders = host::Shaders { form: text_of(&exported.code), prepass: exported.prepass.as_ref().map(text_of) };
         let mut frame = frame_of(&scene, &manifest);
         frame
@@ -169,6 +178,8 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         eprintln!("{text}: max relative difference {error:.2e} for {expr}");
         assert!(error < 1e-4, "the exported `{text}` pipeline differs from filter by {error:e}");
         let passes = manifest["passes"].as_u64().unwrap();
+        let stated: u64 = text.split("atrous=").nth(1).map_or(1, |k| k.parse().unwrap());
+        assert_eq!(passes, stated);
         assert_eq!(
             passes,
             if text.contains("atrous=5") {

@@ -5,7 +5,7 @@
 use filterjit::cpu;
 use filterjit::gpu::{FitnessScene, SceneBuffers};
 use filterjit::jit::{self, KernelKind, LowerOptions, Shape};
-use filterjit::lang::parse_expr;
+use filterjit::lang::{parse_expr, ScalarVar};
 use filterjit::pipeline::FilterPipeline;
 use filterjit::{metrics, Expr, Scene};
 
@@ -101,6 +101,8 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         // `level` is the pass: 0 in the window form (the weight is then 0 and the colour kept).
         "level",
         "exp(-(distance2(normal) / 0.3 + distance2(pixel) / (1 + 3 * level)))",
+        // What the outlier rule measured (the synthetic scene's own values where the pipeline has no outliers).
+        "exp(-(distance2(normal) / 0.3 + clampedShare * 4 + localStd / (localMean + 0.1)))",
     ];
     for text in [
         "atrous=1",
@@ -108,6 +110,7 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "demodulate,atrous=3",
         "outliers=2,demodulate,atrous=5",
         "outliers=2,demodulate,window",
+        "outliers=0.5,atrous=2",
     ] {
         let p = pipeline(text);
         for e in exprs {
@@ -307,4 +310,47 @@ fn fitness_tiles_covering_a_scene_give_its_whole_image_error() {
         let s = sampled.errors(&exprs[..1]).unwrap();
         assert_ne!(s[0].as_ref().unwrap()[0].relmse, w[0].as_ref().unwrap()[0].relmse, "{text}: three tiles of thirty");
     }
+}
+
+/// `localMean`, `localStd` and `clampedShare` are what the outlier rule
+/// measured: a firefly's clamped share is most of it, a flat image measures
+/// its own luminance and no spread, and a pipeline without outliers has none
+/// of them (an error that says so, on the device and on the CPU).
+#[test]
+fn the_outlier_rule_s_measures_are_terminals() {
+    let gpu = gpu();
+    let (w, h) = (9, 9);
+    let mut scene = synthetic_scene(w, h, 2);
+    for v in ScalarVar::FROM_PREPASS {
+        scene.variances.remove(&v);
+    }
+    scene.color = vec![[0.5, 0.5, 0.5]; w * h];
+    scene.color[4 * w + 4] = [50.0, 50.0, 50.0];
+    let p = pipeline("outliers=2,window");
+    let probe = |text: &str| {
+        let expr = parse_expr(text).unwrap();
+        // A weight of 1 at the centre only (radius 0): the filtered colour is
+        // the prepared colour, and the measure times 0 keeps the weight 1.
+        let cpu = cpu::filter_pipeline(&expr, &scene, &p, 0).unwrap();
+        let gpu = gpu_filter(&gpu, &expr, &scene, &p, 0);
+        (cpu, gpu)
+    };
+    let (cpu, gpu_out) = probe("1 + 0 * (localMean + localStd + clampedShare)");
+    assert!((cpu.color[4 * w + 4][0] - 0.5).abs() < 1e-6 && (gpu_out[4 * w + 4][0] - 0.5).abs() < 1e-6);
+    // The measures themselves, through the CPU reference's prepass.
+    let prepared = cpu::prepass(&scene, &p).unwrap();
+    let local = prepared.local.expect("outliers measure");
+    let l = filterjit::pipeline::luminance([50.0, 50.0, 50.0]);
+    assert!((local[2][4 * w + 4] as f64 - (l - 0.5) / l).abs() < 1e-6, "the firefly's clamped share");
+    assert!((local[0][0] - 0.5).abs() < 1e-6 && local[1][0] == 0.0 && local[2][0] == 0.0, "a flat corner");
+    assert!(local[1][4 * w + 3] > 1.0, "next to the firefly the spread is large");
+    // Without outliers there is nothing to read.
+    let plain = pipeline("atrous=2");
+    let expr = parse_expr("exp(-clampedShare)").unwrap();
+    let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&plain)).unwrap();
+    let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &plain).unwrap();
+    let error = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap_err().to_string();
+    assert!(error.contains("clampedShare") && error.contains("outliers=k"), "{error}");
+    let error = cpu::filter_pipeline(&expr, &scene, &plain, 2).unwrap_err().to_string();
+    assert!(error.contains("clampedShare") && error.contains("outlier pre-pass"), "{error}");
 }

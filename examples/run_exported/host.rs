@@ -53,7 +53,6 @@ struct Images<'d> {
     device: &'d wgpu::Device,
     queue: &'d wgpu::Queue,
     extent: wgpu::Extent3d,
-    output_format: wgpu::TextureFormat,
     /// Images by name: `color`, the inputs, then what the stages write.
     views: HashMap<String, (wgpu::Texture, wgpu::TextureView)>,
 }
@@ -107,6 +106,16 @@ impl Images<'_> {
 
     fn view(&self, name: &str) -> Result<&wgpu::TextureView, String> {
         self.views.get(name).map(|(_, v)| v).ok_or_else(|| format!("no image `{name}` (the frame lacks it?)"))
+    }
+}
+
+/// A storage texture's format, as the manifest gives it.
+fn texel_format(binding: &Value) -> Result<wgpu::TextureFormat, String> {
+    match binding["format"].as_str() {
+        Some("rgba16float") => Ok(wgpu::TextureFormat::Rgba16Float),
+        Some("rgba32float") => Ok(wgpu::TextureFormat::Rgba32Float),
+        Some("r32float") => Ok(wgpu::TextureFormat::R32Float),
+        other => Err(format!("unknown texel format {other:?} of `{}`", binding["role"])),
     }
 }
 
@@ -175,8 +184,9 @@ fn record(
     for b in bindings {
         let binding = b["binding"].as_u64().ok_or("binding number")? as u32;
         let role = b["role"].as_str().ok_or("binding role")?;
+        // The image a binding reads or writes: the dispatch's choice, else the manifest's `image`, else its role.
         let image = || -> Result<&wgpu::TextureView, String> {
-            images.view(dispatch.images.get(role).map(String::as_str).unwrap_or(role))
+            images.view(dispatch.images.get(role).map(String::as_str).or(b["image"].as_str()).unwrap_or(role))
         };
         let (ty, resource) = match b["kind"].as_str() {
             Some("uniform") => (
@@ -190,8 +200,7 @@ fn record(
             Some("storage_texture") => (
                 wgpu::BindingType::StorageTexture {
                     access: wgpu::StorageTextureAccess::WriteOnly,
-                    // The carried variance is one float; images are the output format.
-                    format: if role == "variance_out" { wgpu::TextureFormat::R32Float } else { images.output_format },
+                    format: texel_format(b)?,
                     view_dimension: wgpu::TextureViewDimension::D2,
                 },
                 wgpu::BindingResource::TextureView(image()?),
@@ -262,7 +271,7 @@ pub fn filter(
     };
     let size: Vec<u32> = array(manifest, "workgroup_size")?.iter().map(|v| v.as_u64().unwrap_or(1) as u32).collect();
     let workgroup = [size[0], size[1]];
-    let mut images = Images { device, queue, extent, output_format, views: HashMap::new() };
+    let mut images = Images { device, queue, extent, views: HashMap::new() };
     images.upload("color", &frame.color);
     for (role, texels) in &frame.inputs {
         images.upload(role, texels);
@@ -274,8 +283,10 @@ pub fn filter(
     let mut colour = "color".to_string();
     if let Some(stage) = manifest.get("prepass").filter(|p| !p.is_null()) {
         let wgsl = shaders.prepass.as_deref().ok_or("the manifest has a pre-pass, and no pre-pass shader was given")?;
-        images.target("prepared", output_format);
-        images.target("modulation", output_format);
+        // Everything it writes (`prepared`, `modulation`, what the outlier rule measured) is read later by role.
+        for b in array(stage, "bindings")?.iter().filter(|b| b["kind"] == "storage_texture") {
+            images.target(b["role"].as_str().ok_or("binding role")?, texel_format(b)?);
+        }
         if !images.views.contains_key("albedo") {
             // Not read unless the pipeline demodulates; any texture will do.
             let any = frame.color.clone();

@@ -402,7 +402,7 @@ pub(crate) fn parse_terminal(text: &str) -> Result<String, String> {
         return Ok(text.to_string());
     }
     let features = lang::Feature::ALL.iter().map(|f| f.name());
-    let variances = lang::ScalarVar::ALL.iter().filter(|v| **v != lang::ScalarVar::Level).map(|v| v.name());
+    let variances = lang::ScalarVar::ALL.iter().filter(|v| v.is_stored()).map(|v| v.name());
     let names: Vec<&str> = features.chain(variances).collect();
     Err(format!("`{text}` is no feature or variance; they are {}", names.join(", ")))
 }

@@ -104,6 +104,7 @@ impl SceneBuffers {
             usage: wgpu::BufferUsages::STORAGE,
         });
         let (width, height) = (scene.width as u32, scene.height as u32);
+        let mut inputs = HashMap::new();
         let (color, modulation) = if pipeline.has_prepass() {
             let albedo = match (&scene.albedo, pipeline.demodulate) {
                 (Some(albedo), true) => Some(rgba(albedo)),
@@ -115,8 +116,14 @@ impl SceneBuffers {
                 }
                 (_, false) => None,
             };
-            let (prepared, modulation) = gpu.prepass(pipeline, &color, albedo.as_deref(), width, height)?;
-            (prepared, pipeline.demodulate.then_some(modulation))
+            let prepared = gpu.prepass(pipeline, &color, albedo.as_deref(), width, height)?;
+            if pipeline.outliers.is_some() {
+                // What the outlier rule measured is an input like any other, already on the device.
+                for (v, buffer) in ScalarVar::FROM_PREPASS.into_iter().zip(prepared.local) {
+                    inputs.insert(Input::Variance(v), buffer);
+                }
+            }
+            (prepared.color, pipeline.demodulate.then_some(prepared.modulation))
         } else {
             (color, None)
         };
@@ -134,7 +141,7 @@ impl SceneBuffers {
                 variances: [make("a-trous variance", 4), make("a-trous variance", 4)],
             }
         });
-        Ok(SceneBuffers { width, height, color, inputs: HashMap::new(), pipeline: *pipeline, modulation, scratch })
+        Ok(SceneBuffers { width, height, color, inputs, pipeline: *pipeline, modulation, scratch })
     }
 
     /// The pipeline these buffers were prepared for.
@@ -162,9 +169,17 @@ impl SceneBuffers {
         if self.inputs.contains_key(&input) {
             return Ok(());
         }
-        let missing = || GpuError::Runtime {
+        let missing = || {
+            GpuError::Runtime {
             during: "binding inputs",
-            message: format!("scene `{}` has no `{}`", scene.name, input.describe()),
+            message: match input {
+                Input::Variance(v) if v.from_prepass() => format!(
+                    "`{v}` is what the outlier pre-pass measures: filter through a pipeline with `outliers=k` (this one is `{}`)",
+                    self.pipeline
+                ),
+                _ => format!("scene `{}` has no `{}`", scene.name, input.describe()),
+            },
+        }
         };
         let data: Vec<f32> = match input {
             Input::Feature(f) => {

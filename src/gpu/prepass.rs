@@ -6,7 +6,8 @@ use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
-use crate::jit::{BindingInterface, PrepassParams, Role, ValidatedModule, WORKGROUP};
+use crate::jit::{BindingInterface, Input, PrepassParams, Role, ValidatedModule, WORKGROUP};
+use crate::lang::ScalarVar;
 use crate::pipeline::FilterPipeline;
 
 fn module() -> Result<&'static ValidatedModule, GpuError> {
@@ -30,8 +31,9 @@ impl Gpu {
     }
 
     /// Run `pipeline`'s pre-pass on `color` (RGBA per pixel; `albedo` the raw
-    /// albedo when demodulating): the colour the form filters, and the
-    /// modulation (1 without demodulation). Both stay on the device.
+    /// albedo when demodulating): the colour the form filters, the
+    /// modulation (1 without demodulation), and what the outlier rule
+    /// measured (`ScalarVar::FROM_PREPASS`, in that order; 0 without it). All stay on the device.
     pub(super) fn prepass(
         &self,
         pipeline: &FilterPipeline,
@@ -39,7 +41,7 @@ impl Gpu {
         albedo: Option<&[[f32; 4]]>,
         width: u32,
         height: u32,
-    ) -> Result<(wgpu::Buffer, wgpu::Buffer), GpuError> {
+    ) -> Result<Prepared, GpuError> {
         let kernel = self.prepass_pipeline()?;
         let _turn = self.gl_turn();
         let device = self.device();
@@ -65,6 +67,14 @@ impl Gpu {
             })
         };
         let (prepared, modulation) = (make("prepared colour"), make("modulation"));
+        let local = ScalarVar::FROM_PREPASS.map(|_| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("pre-pass measure"),
+                size: (width * height) as u64 * 4,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        });
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         // Without demodulation the albedo is never read: the colour stands in for it.
         let interface = BindingInterface::prepass(None);
@@ -79,6 +89,10 @@ impl Gpu {
                     Role::Albedo => albedo.as_ref().unwrap_or(color).as_entire_binding(),
                     Role::Output => prepared.as_entire_binding(),
                     Role::Modulation => modulation.as_entire_binding(),
+                    Role::Input(Input::Variance(v)) if v.from_prepass() => {
+                        let k = ScalarVar::FROM_PREPASS.iter().position(|w| *w == v).expect("a pre-pass measure");
+                        local[k].as_entire_binding()
+                    }
                     other => unreachable!("the pre-pass has no {other:?} binding"),
                 })
                 .collect(),
@@ -95,6 +109,14 @@ impl Gpu {
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "running the pre-pass", message: error.to_string() });
         }
-        Ok((prepared, modulation))
+        Ok(Prepared { color: prepared, modulation, local })
     }
+}
+
+/// What the pre-pass leaves on the device.
+pub(super) struct Prepared {
+    pub color: wgpu::Buffer,
+    pub modulation: wgpu::Buffer,
+    /// `ScalarVar::FROM_PREPASS`, in that order.
+    pub local: [wgpu::Buffer; 3],
 }

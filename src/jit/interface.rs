@@ -34,6 +34,10 @@ pub enum Role {
     Image,
     /// The raw albedo demodulation divides by (the pre-pass).
     Albedo,
+    /// What the outlier rule measured, packed (x `localMean`, y `localStd`,
+    /// z `clampedShare`): the exported pre-pass writes it as one texture, since
+    /// WebGPU guarantees only four storage textures per stage.
+    Local,
     /// A fitness kernel's per-pixel relMSE terms, which the reduction reads.
     Terms,
     /// A fitness kernel's per-pixel domain-error bits, which the reduction reads.
@@ -289,7 +293,7 @@ impl BindingInterface {
         let header = if shape.atrous { std::mem::size_of::<AtrousParams>() } else { std::mem::size_of::<Params>() };
         if textures {
             // An exported shader's scales follow the header, one vec4 per input.
-            for (k, input) in layout.inputs.iter().enumerate() {
+            for (k, input) in layout.inputs.iter().filter(|i| i.is_normalised()).enumerate() {
                 uniform.push(UniformField {
                     name: format!("scale[{k}]"),
                     ty: "vec4<f32>",
@@ -298,7 +302,8 @@ impl BindingInterface {
                 });
             }
         }
-        let uniform_bytes = header as u32 + if textures { 16 * layout.inputs.len() as u32 } else { 0 };
+        let scales = layout.inputs.iter().filter(|i| i.is_normalised()).count() as u32;
+        let uniform_bytes = header as u32 + if textures { 16 * scales } else { 0 };
         BindingInterface { kind, bindings, uniform, uniform_bytes }
     }
 
@@ -315,11 +320,17 @@ impl BindingInterface {
                 (
                     KernelKind::Filter,
                     vec![
-                        (Role::Color, read, "buf_color"),
-                        (Role::Albedo, read, "buf_albedo"),
-                        (Role::Output, written, "buf_prepared"),
-                        (Role::Modulation, written, "buf_modulation"),
-                    ],
+                        (Role::Color, read, "buf_color".to_string()),
+                        (Role::Albedo, read, "buf_albedo".into()),
+                        (Role::Output, written, "buf_prepared".into()),
+                        (Role::Modulation, written, "buf_modulation".into()),
+                    ]
+                    .into_iter()
+                    .chain(ScalarVar::FROM_PREPASS.map(|v| {
+                        let scalar = Resource::Storage { element: Element::F32, writable: true };
+                        (Role::Input(Input::Variance(v)), scalar, format!("buf_{}", v.name().to_ascii_lowercase()))
+                    }))
+                    .collect::<Vec<_>>(),
                 )
             }
             Some(format) => {
@@ -327,18 +338,25 @@ impl BindingInterface {
                 (
                     KernelKind::Export(format),
                     vec![
-                        (Role::Color, Resource::SampledTexture, "tex_color"),
-                        (Role::Albedo, Resource::SampledTexture, "tex_albedo"),
-                        (Role::Output, written, "tex_prepared"),
-                        (Role::Modulation, written, "tex_modulation"),
-                    ],
+                        (Role::Color, Resource::SampledTexture, "tex_color".to_string()),
+                        (Role::Albedo, Resource::SampledTexture, "tex_albedo".into()),
+                        (Role::Output, written, "tex_prepared".into()),
+                        (Role::Modulation, written, "tex_modulation".into()),
+                    ]
+                    .into_iter()
+                    .chain([(
+                        Role::Local,
+                        Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float)),
+                        "tex_local".to_string(),
+                    )])
+                    .collect::<Vec<_>>(),
                 )
             }
         };
-        let bindings = std::iter::once((Role::Params, Resource::Uniform, "params"))
+        let bindings = std::iter::once((Role::Params, Resource::Uniform, "params".to_string()))
             .chain(roles)
             .enumerate()
-            .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident: ident.into(), resource })
+            .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident, resource })
             .collect();
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),

@@ -47,6 +47,13 @@ impl Input {
             Input::Variance(v) => v.name().to_string(),
         }
     }
+
+    /// Whether the input is normalised (features and variances, scaled by
+    /// their 99.9th percentile); what the outlier pre-pass measures is in the
+    /// colour's own units, like the colour.
+    pub fn is_normalised(self) -> bool {
+        !matches!(self, Input::Variance(v) if v.from_prepass())
+    }
 }
 
 /// The per-pixel inputs a kernel reads besides the colour, in a canonical
@@ -71,7 +78,7 @@ impl KernelLayout {
                     inputs.insert(Input::Feature(f));
                 }
             }
-            for v in expr.stored_variables() {
+            for v in expr.bound_variables() {
                 inputs.insert(Input::Variance(v));
             }
         }
@@ -391,17 +398,17 @@ fn lower_members(
         index: u32,
         element: &'static str,
         describes: String,
-        /// Index into the exported shader's `params.scale`.
-        scale_index: usize,
+        /// Index into the exported shader's `params.scale` (normalised inputs only).
+        scale_index: Option<usize>,
     }
+    let mut scales = 0..;
     let bindings: Vec<BindingView> = interface
         .inputs()
-        .enumerate()
-        .map(|(k, (binding, input))| BindingView {
+        .map(|(binding, input)| BindingView {
             index: binding.slot,
             element: Element::of_input(input).wgsl(),
             describes: input.describe(),
-            scale_index: k,
+            scale_index: input.is_normalised().then(|| scales.next().expect("unbounded")),
         })
         .collect();
 
@@ -424,6 +431,7 @@ fn lower_members(
     context.insert("fused", &fused);
     context.insert("shared_centre_lines", &shared_centre_lines);
     context.insert("shared_neighbour_lines", &shared_neighbour_lines);
+    context.insert("scales", &bindings.iter().filter(|b| b.scale_index.is_some()).count());
     context.insert("bindings", &bindings);
     context.insert("declarations", &interface.declarations());
     context.insert("relmse_epsilon", &format!("{:?}", crate::metrics::RELMSE_EPSILON as f32));
@@ -619,6 +627,12 @@ impl<'a> Loads<'a> {
             }
             Loads::Buffers(i) => format!("{}[i]", i.ident(Role::Input(input))),
             Loads::Tiled => unreachable!("variances are read at the centre pixel, never from a tile"),
+            // Bound to the pre-pass's packed `local` texture: x, y, z in `FROM_PREPASS` order.
+            Loads::Textures(i) if v.from_prepass() => {
+                let component =
+                    ["x", "y", "z"][ScalarVar::FROM_PREPASS.iter().position(|w| *w == v).expect("measured")];
+                format!("{}.{component}", texel(i.ident(Role::Input(input)), ("x", "y")))
+            }
             Loads::Textures(i) if v == ScalarVar::ColorVariance && i.binding(Role::VarianceOut).is_some() => {
                 let texel = texel(i.ident(Role::Input(input)), ("x", "y"));
                 format!("fj_carried({texel}.x, {})", scale_of(i, input))
@@ -651,7 +665,11 @@ fn texel(texture: &str, coords: (&str, &str)) -> String {
 }
 
 fn scale_of(interface: &BindingInterface, input: Input) -> String {
-    let k = interface.inputs().position(|(_, i)| i == input).expect("every input of the expression is bound");
+    let k = interface
+        .inputs()
+        .filter(|(_, i)| i.is_normalised())
+        .position(|(_, i)| i == input)
+        .expect("every normalised input of the expression is bound");
     format!("params.scale[{k}].x")
 }
 

@@ -68,6 +68,12 @@ impl Expr {
         self.variables().into_iter().filter(|v| v.is_stored()).collect()
     }
 
+    /// The scalars a kernel reads from per-pixel buffers: the stored ones
+    /// and what the outlier pre-pass measures (everything but `level`).
+    pub fn bound_variables(&self) -> BTreeSet<ScalarVar> {
+        self.variables().into_iter().filter(|v| v.is_bound()).collect()
+    }
+
     pub fn variables(&self) -> BTreeSet<ScalarVar> {
         let mut out = BTreeSet::new();
         self.visit(&mut |e| {

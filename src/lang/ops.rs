@@ -112,8 +112,11 @@ name_table! {
 }
 
 name_table! {
-    /// Scalar terminals: per-pixel sample variances, read at the centre pixel i,
-    /// and `level`, the à-trous pass (0 in the window form; never stored).
+    /// Scalar terminals, read at the centre pixel i: per-pixel sample
+    /// variances; `level`, the à-trous pass (0 in the window form); and what
+    /// the outlier pre-pass measured (docs/SEMANTICS.md, "The pipeline"): the
+    /// mean and standard deviation of the luminance around i, and the share
+    /// of i's luminance the clamp removed. Only the variances are stored.
     pub enum ScalarVar {
         WpVariance => "wpVariance",
         NVariance => "nVariance",
@@ -123,6 +126,9 @@ name_table! {
         DiVariance => "diVariance",
         ColorVariance => "colorVariance",
         Level => "level",
+        LocalMean => "localMean",
+        LocalStd => "localStd",
+        ClampedShare => "clampedShare",
     }
 }
 
@@ -311,13 +317,28 @@ impl ScalarVar {
             ScalarVar::DovVariance => Some(Feature::Depth),
             ScalarVar::DiVariance => Some(Feature::DirectIllumination),
             ScalarVar::ColorVariance | ScalarVar::Level => None,
+            ScalarVar::LocalMean | ScalarVar::LocalStd | ScalarVar::ClampedShare => None,
         }
     }
 
-    /// Whether a scene stores it (every scalar but `level`, which the pipeline's form supplies).
+    /// Whether a scene stores it: the variances; `level` comes from the
+    /// form's uniform and the rest from the outlier pre-pass.
     pub fn is_stored(self) -> bool {
+        !matches!(self, ScalarVar::Level) && !self.from_prepass()
+    }
+
+    /// Whether a kernel reads it from a per-pixel buffer (everything but `level`).
+    pub fn is_bound(self) -> bool {
         self != ScalarVar::Level
     }
+
+    /// Whether the outlier pre-pass measures it (`outliers=k` in the pipeline).
+    pub fn from_prepass(self) -> bool {
+        matches!(self, ScalarVar::LocalMean | ScalarVar::LocalStd | ScalarVar::ClampedShare)
+    }
+
+    /// The terminals the outlier pre-pass supplies.
+    pub const FROM_PREPASS: [ScalarVar; 3] = [ScalarVar::LocalMean, ScalarVar::LocalStd, ScalarVar::ClampedShare];
 }
 
 /// The thesis's constants (Figure 3.2); any other literal may be written too.
