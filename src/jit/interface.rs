@@ -267,11 +267,7 @@ impl BindingInterface {
         if shape.atrous && kind == KernelKind::Fitness {
             roles.push((Role::Image, written(Element::Vec4F32), "buf_image".into()));
         }
-        let bindings = roles
-            .into_iter()
-            .enumerate()
-            .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident, resource })
-            .collect();
+        let bindings = dense(roles);
 
         let mut uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
@@ -353,11 +349,7 @@ impl BindingInterface {
                 )
             }
         };
-        let bindings = std::iter::once((Role::Params, Resource::Uniform, "params".to_string()))
-            .chain(roles)
-            .enumerate()
-            .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident, resource })
-            .collect();
+        let bindings = dense(std::iter::once((Role::Params, Resource::Uniform, "params".to_string())).chain(roles));
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
             field("height", "u32", 4, "image height in pixels"),
@@ -373,18 +365,16 @@ impl BindingInterface {
     pub fn reduce() -> BindingInterface {
         let read = |element| Resource::Storage { element, writable: false };
         let written = |element| Resource::Storage { element, writable: true };
-        let roles = [
-            (Role::Params, Resource::Uniform, "params"),
-            (Role::Terms, read(Element::F32), "buf_terms"),
-            (Role::PixelFlags, read(Element::U32), "buf_pixel_flags"),
-            (Role::Output, written(Element::F32), "buf_partials"),
-            (Role::Flags, written(Element::U32), "buf_partial_flags"),
-        ];
-        let bindings = roles
-            .into_iter()
-            .enumerate()
-            .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident: ident.into(), resource })
-            .collect();
+        let bindings = dense(
+            [
+                (Role::Params, Resource::Uniform, "params"),
+                (Role::Terms, read(Element::F32), "buf_terms"),
+                (Role::PixelFlags, read(Element::U32), "buf_pixel_flags"),
+                (Role::Output, written(Element::F32), "buf_partials"),
+                (Role::Flags, written(Element::U32), "buf_partial_flags"),
+            ]
+            .map(|(role, resource, ident)| (role, resource, ident.to_string())),
+        );
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
             field("height", "u32", 4, "image height in pixels"),
@@ -460,6 +450,15 @@ impl BindingInterface {
             .collect::<Vec<_>>()
             .join("\n")
     }
+}
+
+/// Group 0's bindings from `roles` in order: slots dense from 0.
+fn dense(roles: impl IntoIterator<Item = (Role, Resource, String)>) -> Vec<Binding> {
+    roles
+        .into_iter()
+        .enumerate()
+        .map(|(slot, (role, resource, ident))| Binding { slot: slot as u32, role, ident, resource })
+        .collect()
 }
 
 fn field(name: &str, ty: &'static str, offset: u32, meaning: &str) -> UniformField {
