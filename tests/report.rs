@@ -43,6 +43,8 @@ fn a_report_on_the_mitsuba_sample_writes_a_complete_folder() {
     let o = filterjit(&[
         "report",
         "@bilateral",
+        // Also a default baseline: listed once.
+        "@svgfAtrous",
         "--scenes",
         sample.to_str().unwrap(),
         "--hall-of-fame",
@@ -88,6 +90,8 @@ fn a_report_on_the_mitsuba_sample_writes_a_complete_folder() {
     // input; the plain bilateral blurs them and looks worse, for all its lower relMSE.
     assert!(cell("crossBilateralTuned")["flip"].as_f64().unwrap() < noisy_flip);
     assert!(cell("bilateral")["flip"].as_f64().unwrap() > noisy_flip);
+    let named = |name: &str| results["methods"].as_array().unwrap().iter().filter(|m| m["name"] == name).count();
+    assert_eq!(named("svgfAtrous"), 1, "a method given twice is listed once");
     // Duplicates in the hall of fame are reported once.
     assert!(cells.iter().all(|c| c["method"] != "island2_rank1"));
     // Feature usage counts both hall-of-fame entries' features.

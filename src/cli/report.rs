@@ -202,6 +202,16 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
             hall.push(expr);
         }
     }
+    // A method is its name in every table: one of each, the first given (a
+    // named expression also passed by hand, a hall-of-fame entry also given as @FILE:NAME).
+    let mut names = std::collections::BTreeSet::new();
+    methods.retain(|m| {
+        let first = names.insert(m.name.clone());
+        if !first {
+            eprintln!("note: `{}` is listed once (it was given twice)", m.name);
+        }
+        first
+    });
     let scene_names = if args.scenes.is_empty() { context.test.clone() } else { args.scenes.clone() };
     let datasets = datasets::resolve(&gpu, &scene_names, &context.render, &env.cache, &mut render_progress())?;
     let settings = report::Settings {
