@@ -214,11 +214,6 @@ impl<'g> GpuEvaluator<'g> {
         Ok(())
     }
 
-    /// What each scene's relMSE is divided by in the fitness.
-    pub fn divisors(&self) -> &[f64] {
-        &self.divisors
-    }
-
     /// The weights each candidate's modelled cost is computed with.
     pub fn set_cost_model(&mut self, model: crate::cost::CostModel) {
         self.cost_model = model;

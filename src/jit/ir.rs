@@ -174,6 +174,18 @@ pub fn var_ident(v: ScalarVar) -> String {
     format!("var_{}", v.name().to_ascii_lowercase())
 }
 
+/// The f32 value of a literal or of the negation of one, as the kernel holds it.
+fn literal_syntax(e: &Expr) -> Option<f64> {
+    match e {
+        Expr::Const(c) => Some(semantics::literal(*c) as f32 as f64),
+        Expr::Unary(UnaryOp::Neg, a) => match **a {
+            Expr::Const(c) => Some(-(semantics::literal(c) as f32 as f64)),
+            _ => None,
+        },
+        _ => None,
+    }
+}
+
 /// Adds instructions, applying the rewrites `options` switch on.
 struct Builder {
     options: LowerOptions,
@@ -203,22 +215,29 @@ impl Builder {
             Expr::Binary(op, a_expr, b_expr) => {
                 let strength = self.options.strength_reduction;
                 // `pow(distance2(f), 2)` needs no square root, nor the distance itself.
-                if strength && *op == BinaryOp::Pow && self.is_two(b_expr) {
-                    if let Expr::Pair(PairOp::Distance2, i, j) = **a_expr {
-                        return self.add(Op::Distance2Squared(i, j));
+                if let (true, BinaryOp::Pow, Expr::Pair(PairOp::Distance2, i, j)) = (strength, op, &**a_expr) {
+                    if self.literal_of(b_expr) == Some(2.0) {
+                        return self.add(Op::Distance2Squared(*i, *j));
                     }
                 }
-                // A divisor that is a literal, or the negation of one, before it becomes an instruction.
-                let divisor = (strength && *op == BinaryOp::Div).then(|| self.literal_of(b_expr)).flatten();
                 let a = self.build(a_expr);
-                if let Some(d) = divisor.filter(|d| d.abs() >= semantics::DIV_EPS) {
+                // Without folding, `-c` would become an instruction: a divisor is read off the syntax.
+                let (b, syntactic) = match (self.options.fold_constants, literal_syntax(b_expr)) {
+                    (false, Some(c)) if strength && *op == BinaryOp::Div => (None, Some(c)),
+                    _ => (Some(self.build(b_expr)), None),
+                };
+                let divisor = syntactic.or_else(|| b.and_then(Operand::literal_value)).filter(|_| *op == BinaryOp::Div);
+                if let Some(d) = divisor.filter(|d| strength && d.abs() >= semantics::DIV_EPS) {
                     if let Some(value) = self.fold(|flags| Some(op.eval(a.literal_value()?, d, flags))) {
                         return value;
                     }
                     // The zero guard only changes divisors below FJ_DIV_EPS.
                     return self.add(Op::Scale(a, ((1.0 / d) as f32).to_bits()));
                 }
-                let b = self.build(b_expr);
+                let b = match b {
+                    Some(b) => b,
+                    None => self.build(b_expr),
+                };
                 if let Some(value) = self.fold(|flags| Some(op.eval(a.literal_value()?, b.literal_value()?, flags))) {
                     return value;
                 }
@@ -241,27 +260,19 @@ impl Builder {
         (flags == 0).then(|| Operand::literal(semantics::fin(value)))
     }
 
-    /// Whether `e` is the literal 2 as the kernel holds it (folded first when folding is on).
-    fn is_two(&self, e: &Expr) -> bool {
-        self.literal_of(e) == Some(2.0)
-    }
-
     /// The f32 value of `e` if it is a literal or the negation of one, or
-    /// (folding on) folds to a literal; no instruction is added.
+    /// (folding on) folds to a literal; no instruction is added. Only
+    /// `pow(distance2(f), 2)` needs to know before its operands are built.
     fn literal_of(&self, e: &Expr) -> Option<f64> {
-        match e {
-            Expr::Const(c) => Some(semantics::literal(*c) as f32 as f64),
-            Expr::Unary(UnaryOp::Neg, a) if matches!(**a, Expr::Const(_)) => {
-                let Expr::Const(c) = **a else { unreachable!() };
-                Some(-(semantics::literal(c) as f32 as f64))
-            }
-            _ if self.options.fold_constants => {
-                let mut probe = Builder { options: self.options, insts: Vec::new(), known: HashMap::new() };
-                match probe.build(e) {
-                    Operand::Literal(bits) if probe.insts.is_empty() => Some(f32::from_bits(bits) as f64),
-                    _ => None,
-                }
-            }
+        if let Some(c) = literal_syntax(e) {
+            return Some(c);
+        }
+        if !self.options.fold_constants {
+            return None;
+        }
+        let mut probe = Builder { options: self.options, insts: Vec::new(), known: HashMap::new() };
+        match probe.build(e) {
+            Operand::Literal(bits) if probe.insts.is_empty() => Some(f32::from_bits(bits) as f64),
             _ => None,
         }
     }

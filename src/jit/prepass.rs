@@ -5,7 +5,7 @@
 use super::interface::BindingInterface;
 use super::lower::OutputFormat;
 use super::lower::{wgsl_f32, TEMPLATE_VERSION, WORKGROUP};
-use super::validate::{validate_module, ValidateError, ValidatedModule};
+use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 use crate::pipeline::{self, FilterPipeline};
 
 /// The pre-pass's uniform (`struct Params` of its module; fields in
@@ -52,12 +52,5 @@ pub fn prepass_wgsl(textures: Option<OutputFormat>) -> String {
 
 /// The pre-pass, validated by naga; its bindings are checked against its interface.
 pub fn prepass_module(textures: Option<OutputFormat>) -> Result<ValidatedModule, ValidateError> {
-    let wgsl = prepass_wgsl(textures);
-    let module = validate_module(&wgsl, "<pre-pass>")?;
-    let expected = BindingInterface::prepass(textures).slots();
-    if module.slots() != expected.as_slice() {
-        let message = format!("the pre-pass binds {:?}, its interface says {expected:?}", module.slots());
-        return Err(ValidateError::Invalid { expression: "<pre-pass>".into(), message, wgsl });
-    }
-    Ok(module)
+    validate_with_interface(&prepass_wgsl(textures), "<pre-pass>", &BindingInterface::prepass(textures))
 }

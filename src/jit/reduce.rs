@@ -6,7 +6,7 @@
 
 use super::interface::BindingInterface;
 use super::lower::{TEMPLATE_VERSION, WORKGROUP};
-use super::validate::{validate_module, ValidateError, ValidatedModule};
+use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 
 /// The reduction's uniform (`struct Params` of its module; fields in [`BindingInterface::reduce`]).
 #[repr(C)]
@@ -37,14 +37,7 @@ pub fn reduce_wgsl() -> String {
 
 /// The reduction, validated by naga; its bindings are checked against its interface.
 pub fn reduce_module() -> Result<ValidatedModule, ValidateError> {
-    let wgsl = reduce_wgsl();
-    let module = validate_module(&wgsl, "<fitness reduction>")?;
-    let expected = BindingInterface::reduce().slots();
-    if module.slots() != expected.as_slice() {
-        let message = format!("the reduction binds {:?}, its interface says {expected:?}", module.slots());
-        return Err(ValidateError::Invalid { expression: "<fitness reduction>".into(), message, wgsl });
-    }
-    Ok(module)
+    validate_with_interface(&reduce_wgsl(), "<fitness reduction>", &BindingInterface::reduce())
 }
 
 #[cfg(test)]

@@ -97,6 +97,23 @@ impl ValidatedModule {
     }
 }
 
+/// [`validate_module`], then a check that the module binds exactly what
+/// `interface` assigns: for the generated modules that are not expression
+/// kernels (the pre-pass, the fitness reduction).
+pub fn validate_with_interface(
+    wgsl: &str,
+    what: &str,
+    interface: &super::interface::BindingInterface,
+) -> Result<ValidatedModule, ValidateError> {
+    let module = validate_module(wgsl, what)?;
+    let expected = interface.slots();
+    if module.slots() != expected.as_slice() {
+        let message = format!("{what} binds {:?}, its interface says {expected:?}", module.slots());
+        return Err(ValidateError::Invalid { expression: what.into(), message, wgsl: wgsl.to_string() });
+    }
+    Ok(module)
+}
+
 /// Parse and validate any WGSL module; `what` names it in errors.
 pub fn validate_module(wgsl: &str, what: &str) -> Result<ValidatedModule, ValidateError> {
     let module = naga::front::wgsl::parse_str(wgsl).map_err(|e| ValidateError::Parse {
