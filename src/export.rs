@@ -244,12 +244,14 @@ fn target_slot(target: Target, interface: &BindingInterface, binding: &jit::inte
             let register = match binding.resource {
                 Resource::Uniform => 'b',
                 Resource::StorageTexture(_) | Resource::Storage { writable: true, .. } => 'u',
-                Resource::SampledTexture | Resource::Storage { writable: false, .. } => 't',
+                Resource::SampledTexture | Resource::ParamsStorage | Resource::Storage { writable: false, .. } => 't',
             };
             format!("register({register}{slot}, space0)")
         }
         Target::Msl => match binding.resource {
-            Resource::Uniform | Resource::Storage { .. } => format!("[[buffer({})]]", msl_index(interface, binding)),
+            Resource::Uniform | Resource::ParamsStorage | Resource::Storage { .. } => {
+                format!("[[buffer({})]]", msl_index(interface, binding))
+            }
             _ => format!("[[texture({})]]", msl_index(interface, binding)),
         },
     }
@@ -258,7 +260,9 @@ fn target_slot(target: Target, interface: &BindingInterface, binding: &jit::inte
 /// Metal numbers buffers and textures separately: a binding's index among
 /// the bindings of its own class, in slot order.
 fn msl_index(interface: &BindingInterface, binding: &jit::interface::Binding) -> u8 {
-    let is_buffer = |b: &jit::interface::Binding| matches!(b.resource, Resource::Uniform | Resource::Storage { .. });
+    let is_buffer = |b: &jit::interface::Binding| {
+        matches!(b.resource, Resource::Uniform | Resource::ParamsStorage | Resource::Storage { .. })
+    };
     interface.bindings.iter().filter(|b| b.slot < binding.slot && is_buffer(b) == is_buffer(binding)).count() as u8
 }
 
@@ -268,7 +272,7 @@ fn binding_kind(resource: Resource) -> BindingKind {
         Resource::Uniform => BindingKind::Uniform,
         Resource::SampledTexture => BindingKind::SampledTexture,
         Resource::StorageTexture(_) => BindingKind::StorageTexture,
-        Resource::Storage { .. } => unreachable!("exported shaders bind no storage buffers"),
+        Resource::ParamsStorage | Resource::Storage { .. } => unreachable!("exported shaders bind no storage buffers"),
     }
 }
 
@@ -556,7 +560,7 @@ fn translate(
                 .map(|(r, b)| {
                     let index = Some(msl_index(interface, b));
                     let target = match b.resource {
-                        Resource::Uniform | Resource::Storage { .. } => {
+                        Resource::Uniform | Resource::ParamsStorage | Resource::Storage { .. } => {
                             back::msl::BindTarget { buffer: index, ..Default::default() }
                         }
                         Resource::SampledTexture => back::msl::BindTarget { texture: index, ..Default::default() },

@@ -280,11 +280,7 @@ impl Gpu {
                     level,
                     passes,
                 );
-                let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("params"),
-                    contents: &params,
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
+                let params = self.params_buffer(kernel.source().interface.params(), "params", &params);
                 let buffers = &*buffers;
                 let bind_group = self.bind_group(&pipeline, &kernel.source().interface, |role| match role {
                     Role::Params => params.as_entire_binding(),

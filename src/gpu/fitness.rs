@@ -9,6 +9,7 @@ use wgpu::util::DeviceExt;
 
 use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
 use super::{Gpu, GpuError, Pipeline};
+use crate::jit::interface::own_params;
 use crate::jit::{KernelKind, Params, ReduceParams, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
 use crate::pipeline::FilterPipeline;
 use crate::scene::Scene;
@@ -265,11 +266,8 @@ impl Gpu {
                     .flat_map(|level| (first..end).step_by(rows as usize).map(move |row| (level, row)))
                     .map(|(level, row)| {
                         let base = Params { width: fs.width, height: fs.height, radius, row_offset: row };
-                        let buffer = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                            label: Some("params"),
-                            contents: &uniform_bytes(atrous, base, level, passes),
-                            usage: wgpu::BufferUsages::UNIFORM,
-                        });
+                        let bytes = uniform_bytes(atrous, base, level, passes);
+                        let buffer = self.params_buffer(own_params(), "params", &bytes);
                         (buffer, level, rows.min(end - row))
                     })
                     .collect()
@@ -283,11 +281,7 @@ impl Gpu {
                 (0..most)
                     .map(|member| {
                         let params = ReduceParams { width: fs.width, height: fs.height, member, _pad: 0 };
-                        device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                            label: Some("reduce params"),
-                            contents: bytemuck::bytes_of(&params),
-                            usage: wgpu::BufferUsages::UNIFORM,
-                        })
+                        self.params_buffer(own_params(), "reduce params", bytemuck::bytes_of(&params))
                     })
                     .collect()
             })

@@ -17,7 +17,7 @@ pub use fitness::{FitnessScene, Region, SceneError as FitnessError};
 pub use raw::{RawBuffer, RawKernel};
 pub use trace::{TraceScene, PATHTRACE_WGSL};
 
-use crate::jit::interface::TexelFormat;
+use crate::jit::interface::{Resource, TexelFormat};
 use crate::jit::{Access, BindingInterface, KernelKey, OutputFormat, Role, Slot, ValidatedKernel, ValidatedModule};
 
 #[derive(Debug, thiserror::Error)]
@@ -297,6 +297,21 @@ impl Gpu {
             layout: &pipeline.layout,
             entries: &entries,
         })
+    }
+
+    /// A buffer holding a dispatch's `Params`, of the kind a kernel binds
+    /// them in (`BindingInterface::params`: a uniform buffer, or a read-only
+    /// storage buffer for filterjit's own kernels, `jit::interface::own_params`).
+    pub(crate) fn params_buffer(&self, params: Resource, label: &str, bytes: &[u8]) -> wgpu::Buffer {
+        let usage = match params {
+            Resource::Uniform => wgpu::BufferUsages::UNIFORM,
+            Resource::ParamsStorage => wgpu::BufferUsages::STORAGE,
+            other => panic!("Params are never bound as {other:?}"),
+        };
+        wgpu::util::DeviceExt::create_buffer_init(
+            &self.device,
+            &wgpu::util::BufferInitDescriptor { label: Some(label), contents: bytes, usage },
+        )
     }
 
     /// The bind group of a module that is not a filterjit kernel (path

@@ -46,11 +46,11 @@ impl Gpu {
         let _turn = self.gl_turn();
         let device = self.device();
         let params = PrepassParams::of(pipeline, width, height);
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("pre-pass params"),
-            contents: bytemuck::bytes_of(&params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let uniform = self.params_buffer(
+            BindingInterface::prepass(None).params(),
+            "pre-pass params",
+            bytemuck::bytes_of(&params),
+        );
         let albedo = albedo.map(|a| {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("albedo"),

@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
+use crate::jit::interface::own_params;
 
 /// A validated, compiled WGSL module with entry point `main`.
 pub struct RawKernel {
@@ -39,11 +40,7 @@ impl Gpu {
     ) -> Result<(Duration, Vec<Vec<u8>>), GpuError> {
         let _turn = self.gl_turn();
         let device = self.device();
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: None,
-            contents: uniform,
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let uniform = self.params_buffer(own_params(), "raw params", uniform);
         let made: Vec<(wgpu::Buffer, Option<u64>)> = buffers
             .iter()
             .map(|b| match b {

@@ -6,6 +6,7 @@ use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
+use crate::jit::interface::own_params;
 use crate::jit::ValidatedModule;
 use crate::render::packed::{PackedScene, TraceParams, SUMS_PER_PIXEL};
 
@@ -83,11 +84,7 @@ impl Gpu {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let uniform = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("trace params"),
-            contents: bytemuck::bytes_of(params),
-            usage: wgpu::BufferUsages::UNIFORM,
-        });
+        let uniform = self.params_buffer(own_params(), "trace params", bytemuck::bytes_of(params));
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         // pathtrace.wgsl declares params, prims, materials, lights, sums in this order.
         let resources = [&uniform, &scene.prims, &scene.materials, &scene.lights, &sums];

@@ -99,7 +99,11 @@ impl Element {
 /// The kind of resource bound at a slot.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Resource {
+    /// The `Params` struct in a uniform buffer (exported shaders).
     Uniform,
+    /// The `Params` struct in a read-only storage buffer (filterjit's own
+    /// kernels): see [`own_params`].
+    ParamsStorage,
     Storage {
         element: Element,
         writable: bool,
@@ -125,6 +129,7 @@ impl Binding {
     pub fn declaration(&self) -> String {
         let (space, ty) = match self.resource {
             Resource::Uniform => ("<uniform>", "Params".to_string()),
+            Resource::ParamsStorage => ("<storage, read>", "Params".to_string()),
             Resource::Storage { element, writable: false } => ("<storage, read>", format!("array<{}>", element.wgsl())),
             Resource::Storage { element, writable: true } => {
                 ("<storage, read_write>", format!("array<{}>", element.wgsl()))
@@ -193,7 +198,7 @@ impl Resource {
     pub fn access(self) -> Access {
         match self {
             Resource::Uniform => Access::Uniform,
-            Resource::Storage { writable: false, .. } => Access::StorageRead,
+            Resource::ParamsStorage | Resource::Storage { writable: false, .. } => Access::StorageRead,
             Resource::Storage { writable: true, .. } => Access::StorageReadWrite,
             Resource::SampledTexture => Access::SampledTexture,
             Resource::StorageTexture(format) => Access::StorageTexture(format),
@@ -231,7 +236,7 @@ impl BindingInterface {
         };
         let written = |element| Resource::Storage { element, writable: true };
         let mut roles: Vec<(Role, Resource, String)> = vec![
-            (Role::Params, Resource::Uniform, "params".into()),
+            (Role::Params, if textures { Resource::Uniform } else { own_params() }, "params".into()),
             (Role::Color, read(Element::Vec4F32), format!("{prefix}color")),
         ];
         match kind {
@@ -349,7 +354,8 @@ impl BindingInterface {
                 )
             }
         };
-        let bindings = dense(std::iter::once((Role::Params, Resource::Uniform, "params".to_string())).chain(roles));
+        let params = if textures.is_some() { Resource::Uniform } else { own_params() };
+        let bindings = dense(std::iter::once((Role::Params, params, "params".to_string())).chain(roles));
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
             field("height", "u32", 4, "image height in pixels"),
@@ -367,7 +373,7 @@ impl BindingInterface {
         let written = |element| Resource::Storage { element, writable: true };
         let bindings = dense(
             [
-                (Role::Params, Resource::Uniform, "params"),
+                (Role::Params, own_params(), "params"),
                 (Role::Terms, read(Element::F32), "buf_terms"),
                 (Role::PixelFlags, read(Element::U32), "buf_pixel_flags"),
                 (Role::Output, written(Element::F32), "buf_partials"),
@@ -387,6 +393,11 @@ impl BindingInterface {
     /// The binding that plays `role`, if the kernel has one.
     pub fn binding(&self, role: Role) -> Option<&Binding> {
         self.bindings.iter().find(|b| b.role == role)
+    }
+
+    /// How the kernel binds its `Params` (a uniform or a storage buffer).
+    pub fn params(&self) -> Resource {
+        self.binding(Role::Params).map_or_else(|| panic!("a {:?} kernel has no Params", self.kind), |b| b.resource)
     }
 
     /// The WGSL name of `role`'s binding; panics if the kernel has none (a filterjit bug).
@@ -414,7 +425,10 @@ impl BindingInterface {
 
     /// Storage buffers the kernel binds (device limits count them per stage).
     pub fn storage_buffers(&self) -> u32 {
-        self.bindings.iter().filter(|b| matches!(b.resource, Resource::Storage { .. })).count() as u32
+        self.bindings
+            .iter()
+            .filter(|b| matches!(b.resource, Resource::Storage { .. } | Resource::ParamsStorage))
+            .count() as u32
     }
 
     /// Sampled textures the kernel binds.
@@ -453,6 +467,20 @@ impl BindingInterface {
 }
 
 /// Group 0's bindings from `roles` in order: slots dense from 0.
+/// Where filterjit's own kernels (not exported shaders) read their `Params`:
+/// a read-only storage buffer, not a uniform buffer. Mesa's lavapipe (22.x,
+/// Debian 12's) specialises a compute shader on the values of uniforms that
+/// steer its control flow (the à-trous pass's `last`, loop bounds) and
+/// recompiles it with LLVM at every dispatch that binds new values, with no
+/// cache of the variants: a small kernel was compiled again in every à-trous
+/// pass and for every scene of a fitness batch. Storage loads are opaque to
+/// that pass, so each pipeline compiles once (docs/BENCHMARKS.md, "Uniforms
+/// that recompile"). A few scalars read from a storage buffer cost a real GPU
+/// nothing measurable; exported shaders keep the uniform an engine expects.
+pub const fn own_params() -> Resource {
+    Resource::ParamsStorage
+}
+
 fn dense(roles: impl IntoIterator<Item = (Role, Resource, String)>) -> Vec<Binding> {
     roles
         .into_iter()
@@ -486,8 +514,14 @@ mod tests {
         }
         let fitness = BindingInterface::of(KernelKind::Fitness, &layout, Shape::WINDOW);
         assert_eq!(fitness.slot(Role::Reference), 6);
-        assert_eq!(fitness.storage_buffers(), 6);
+        // Colour, terms, flags, two inputs, reference, and the Params.
+        assert_eq!(fitness.storage_buffers(), 7);
+        assert_eq!(fitness.params(), Resource::ParamsStorage);
+        assert_eq!(BindingInterface::reduce().params(), Resource::ParamsStorage);
+        assert_eq!(BindingInterface::prepass(None).params(), Resource::ParamsStorage);
         let export = BindingInterface::of(KernelKind::Export(OutputFormat::Rgba16float), &layout, Shape::WINDOW);
+        assert_eq!(export.params(), Resource::Uniform);
+        assert_eq!(BindingInterface::prepass(Some(OutputFormat::Rgba16float)).params(), Resource::Uniform);
         assert_eq!(export.binding(Role::Flags), None);
         assert_eq!(export.uniform_bytes, 16 + 32);
         assert_eq!(export.sampled_textures(), 3);
