@@ -167,8 +167,8 @@ fn walk(e: &Expr, model: &CostModel, seen: &mut HashSet<String>, cost: &mut Expr
 pub fn taps(pipeline: &FilterPipeline, radius: u32) -> (f64, f64) {
     match pipeline.form {
         Form::Window => (((2 * radius + 1) * (2 * radius + 1)) as f64, 1.0),
-        Form::Atrous { passes } => {
-            let side = (2 * crate::pipeline::ATROUS_HALF_WIDTH + 1) as f64;
+        Form::Atrous { passes, stencil } => {
+            let side = (2 * stencil.half_width() + 1) as f64;
             (side * side, passes as f64)
         }
     }

@@ -232,17 +232,17 @@ pub fn filter_pipeline(
     check_inputs(expr, &working)?;
     let mut out = match pipeline.form {
         Form::Window => filter(expr, &working, radius)?,
-        Form::Atrous { passes } => {
+        Form::Atrous { passes, stencil } => {
             let carry = expr.variables().contains(&ScalarVar::ColorVariance);
             let mut flags = vec![0u32; scene.pixels()];
             let mut last = None;
             for level in 0..passes {
                 let step = FilterPipeline::step(level) as i64;
-                let half = pipeline::ATROUS_HALF_WIDTH as i64;
+                let half = stencil.half_width() as i64;
                 let offsets: Vec<(i64, i64, f64)> = (-half..=half)
                     .flat_map(|dy| {
                         (-half..=half).map(move |dx| {
-                            (dx * step, dy * step, pipeline::stencil(dx as i32) * pipeline::stencil(dy as i32))
+                            (dx * step, dy * step, stencil.weight(dx as i32) * stencil.weight(dy as i32))
                         })
                     })
                     .collect();

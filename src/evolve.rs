@@ -1086,6 +1086,13 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         let (mut allowed, mut allowed_variances) = (BTreeSet::new(), BTreeSet::new());
         for name in names {
             let provided = match (Feature::from_name(name), ScalarVar::from_name(name)) {
+                // What the outlier rule measured comes with the pipeline, not the scenes.
+                (None, Some(v)) if v.from_prepass() => {
+                    if config.pipeline.outliers.is_none() {
+                        bail!("--features names `{name}`, which the outlier pre-pass measures: add `outliers=K` to --pipeline");
+                    }
+                    true
+                }
                 (Some(f), _) => features.contains(&f) && allowed.insert(f),
                 (None, Some(v)) => variances.contains(&v) && allowed_variances.insert(v),
                 (None, None) => bail!("--features names `{name}`, which is no feature or variance"),

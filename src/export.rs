@@ -474,7 +474,7 @@ fn manifest(
         pipeline: pipeline.to_string(),
         passes: match pipeline.form {
             crate::pipeline::Form::Window => 1,
-            crate::pipeline::Form::Atrous { passes } => passes,
+            crate::pipeline::Form::Atrous { passes, .. } => passes,
         },
         prepass: None,
         order: Vec::new(),

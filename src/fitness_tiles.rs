@@ -67,7 +67,7 @@ pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
     let prepass = if pipeline.outliers.is_some() { OUTLIER_RADIUS } else { 0 };
     let form = match pipeline.form {
         Form::Window => radius,
-        Form::Atrous { passes } => {
+        Form::Atrous { passes, .. } => {
             (0..passes).map(|level| pipeline.pass_radius(radius) * FilterPipeline::step(level)).sum()
         }
     };
@@ -150,8 +150,11 @@ mod tests {
         assert_eq!(reach(&FilterPipeline::WINDOW, 3), 3);
         assert_eq!(halo(&FilterPipeline::WINDOW, 3), 8);
         assert_eq!(halo(&FilterPipeline::WINDOW, 10), 16);
-        let atrous =
-            FilterPipeline { outliers: Some(Outliers { k: 2.0 }), demodulate: true, form: Form::Atrous { passes: 5 } };
+        let atrous = FilterPipeline {
+            outliers: Some(Outliers { k: 2.0 }),
+            demodulate: true,
+            form: Form::Atrous { passes: 5, stencil: Default::default() },
+        };
         // 2 (pre-pass) + 2 · (1 + 2 + 4 + 8 + 16).
         assert_eq!(reach(&atrous, 3), 64);
         assert_eq!(halo(&atrous, 3), 64);

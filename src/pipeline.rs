@@ -27,12 +27,48 @@ pub const OUTLIER_RADIUS: u32 = 2;
 /// (Mitsuba's rough metals reach hundreds) does not darken.
 pub const ALBEDO_FLOOR: f64 = 0.1;
 
-/// The à-trous stencil: the 1-D B-spline weights h(0), h(±1), h(±2) of a 5×5
-/// pass (h(dx)·h(dy) multiplies the evolved weight).
-pub const ATROUS_STENCIL: [f64; 3] = [3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0];
+/// The taps of one à-trous pass: h(dx)·h(dy) for dx, dy in -half..=half
+/// steps multiplies the evolved weight.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
+pub enum Stencil {
+    /// 5×5 taps, the cubic B-spline h = (3/8, 1/4, 1/16) of Dammertz et al.
+    /// and SVGF (`atrous=K`).
+    #[default]
+    Cubic5,
+    /// 3×3 taps, the linear B-spline h = (1/2, 1/4) (`atrous3x3=K`): 9 taps
+    /// a pass instead of 25, for a cascade that must cost less than one
+    /// pass of a learned denoiser on a CPU; K+1 passes reach as far as K of
+    /// the 5×5 stencil, less one step.
+    Linear3,
+}
 
-/// Half-width of an à-trous pass's stencil, in steps.
-pub const ATROUS_HALF_WIDTH: i32 = 2;
+impl Stencil {
+    /// h(0), h(±1)[, h(±2)]: the 1-D weights, which sum to 1 over -half..=half.
+    pub fn weights(self) -> &'static [f64] {
+        match self {
+            Stencil::Cubic5 => &[3.0 / 8.0, 1.0 / 4.0, 1.0 / 16.0],
+            Stencil::Linear3 => &[1.0 / 2.0, 1.0 / 4.0],
+        }
+    }
+
+    /// Half-width in steps: taps from -half to half each way.
+    pub fn half_width(self) -> i32 {
+        self.weights().len() as i32 - 1
+    }
+
+    /// The weight h(|d|) of offset d in -half..=half.
+    pub fn weight(self, d: i32) -> f64 {
+        self.weights()[d.unsigned_abs() as usize]
+    }
+
+    /// The form's name in a pipeline's text (`atrous=K`, `atrous3x3=K`).
+    fn stage_name(self) -> &'static str {
+        match self {
+            Stencil::Cubic5 => "atrous",
+            Stencil::Linear3 => "atrous3x3",
+        }
+    }
+}
 
 /// The largest number of à-trous passes (step 2^(passes-1) ≤ 2^15 pixels).
 pub const MAX_ATROUS_PASSES: u32 = 16;
@@ -42,9 +78,9 @@ pub const MAX_ATROUS_PASSES: u32 = 16;
 pub enum Form {
     /// One pass over the (2r+1)² window (the thesis's filter); r is the run's radius.
     Window,
-    /// `passes` passes of a 5×5 stencil with step 2^k in pass k, each filtering
-    /// the previous pass's output with the same kernel.
-    Atrous { passes: u32 },
+    /// `passes` passes of a `stencil` (5×5 or 3×3 taps) with step 2^k in pass
+    /// k, each filtering the previous pass's output with the same kernel.
+    Atrous { passes: u32, stencil: Stencil },
 }
 
 /// What the outlier pre-pass does to each pixel (before demodulation).
@@ -82,7 +118,7 @@ impl FilterPipeline {
     pub fn passes(&self) -> u32 {
         match self.form {
             Form::Window => 1,
-            Form::Atrous { passes } => passes,
+            Form::Atrous { passes, .. } => passes,
         }
     }
 
@@ -91,7 +127,15 @@ impl FilterPipeline {
     pub fn pass_radius(&self, radius: u32) -> u32 {
         match self.form {
             Form::Window => radius,
-            Form::Atrous { .. } => ATROUS_HALF_WIDTH as u32,
+            Form::Atrous { stencil, .. } => stencil.half_width() as u32,
+        }
+    }
+
+    /// The à-trous stencil (the 5×5 one for a window form, which has none).
+    pub fn stencil(&self) -> Stencil {
+        match self.form {
+            Form::Window => Stencil::default(),
+            Form::Atrous { stencil, .. } => stencil,
         }
     }
 
@@ -153,25 +197,28 @@ impl FromStr for FilterPipeline {
                     pipeline.form = Form::Window;
                     form_seen = true;
                 }
-                ("atrous", Some(v)) => {
+                ("atrous" | "atrous3x3", Some(v)) => {
+                    let stencil = if name == "atrous" { Stencil::Cubic5 } else { Stencil::Linear3 };
                     let passes: u32 =
-                        v.parse().map_err(|_| error(format!("atrous={v}: passes must be a whole number")))?;
+                        v.parse().map_err(|_| error(format!("{name}={v}: passes must be a whole number")))?;
                     if !(1..=MAX_ATROUS_PASSES).contains(&passes) {
-                        return Err(error(format!("atrous={v}: passes must be from 1 to {MAX_ATROUS_PASSES}")));
+                        return Err(error(format!("{name}={v}: passes must be from 1 to {MAX_ATROUS_PASSES}")));
                     }
-                    pipeline.form = Form::Atrous { passes };
+                    pipeline.form = Form::Atrous { passes, stencil };
                     form_seen = true;
                 }
-                ("atrous", None) => return Err(error("`atrous` needs its number of passes: atrous=N".into())),
+                ("atrous" | "atrous3x3", None) => {
+                    return Err(error(format!("`{name}` needs its number of passes: {name}=N")))
+                }
                 (other, _) => {
                     return Err(error(format!(
-                        "unknown stage `{other}`; the stages are outliers=K, demodulate, window, atrous=N"
+                        "unknown stage `{other}`; the stages are outliers=K, demodulate, window, atrous=N, atrous3x3=N"
                     )))
                 }
             }
         }
         if !form_seen {
-            return Err(error("no form: end with `window` or `atrous=N`".into()));
+            return Err(error("no form: end with `window`, `atrous=N` or `atrous3x3=N`".into()));
         }
         Ok(pipeline)
     }
@@ -188,7 +235,7 @@ impl fmt::Display for FilterPipeline {
         }
         match self.form {
             Form::Window => write!(f, "window"),
-            Form::Atrous { passes } => write!(f, "atrous={passes}"),
+            Form::Atrous { passes, stencil } => write!(f, "{}={passes}", stencil.stage_name()),
         }
     }
 }
@@ -216,19 +263,20 @@ pub fn modulation(albedo: [f64; 3]) -> [f64; 3] {
     albedo.map(|a| a.clamp(0.0, 1.0).max(ALBEDO_FLOOR))
 }
 
-/// The stencil weight h(|d|) of an à-trous offset d in -2..=2.
-pub fn stencil(d: i32) -> f64 {
-    ATROUS_STENCIL[d.unsigned_abs() as usize]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn text_round_trips() {
-        for text in ["window", "atrous=5", "outliers=2,window", "outliers=1.5,demodulate,atrous=3", "demodulate,window"]
-        {
+        for text in [
+            "window",
+            "atrous=5",
+            "outliers=2,window",
+            "outliers=1.5,demodulate,atrous=3",
+            "demodulate,window",
+            "outliers=2,demodulate,atrous3x3=6",
+        ] {
             let p: FilterPipeline = text.parse().unwrap();
             assert_eq!(p.to_string(), text);
             assert_eq!(p.to_string().parse::<FilterPipeline>().unwrap(), p);
@@ -239,6 +287,7 @@ mod tests {
     fn bad_text_says_what_is_wrong() {
         for (text, needle) in [
             ("atrous=0", "from 1 to"),
+            ("atrous3x3", "atrous3x3=N"),
             ("outliers=-1,window", "at least 0"),
             ("demodulate", "no form"),
             ("window,demodulate", "last stage"),
@@ -254,7 +303,11 @@ mod tests {
     fn modulation_is_continuous_and_bounded() {
         assert_eq!(modulation([0.0, 0.05, 0.5]), [ALBEDO_FLOOR, ALBEDO_FLOOR, 0.5]);
         assert_eq!(modulation([300.0, -1.0, 1.0]), [1.0, ALBEDO_FLOOR, 1.0]);
-        let stencil_sum: f64 = (-2..=2).map(stencil).sum();
-        assert!((stencil_sum - 1.0).abs() < 1e-15);
+        for stencil in [Stencil::Cubic5, Stencil::Linear3] {
+            let half = stencil.half_width();
+            let sum: f64 = (-half..=half).map(|d| stencil.weight(d)).sum();
+            assert!((sum - 1.0).abs() < 1e-15, "{stencil:?}");
+        }
+        assert_eq!((Stencil::Cubic5.half_width(), Stencil::Linear3.half_width()), (2, 1));
     }
 }

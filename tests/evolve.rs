@@ -164,7 +164,9 @@ fn a_run_through_a_pipeline_reproduces_what_it_scored() {
     let (training, test) = datasets();
     let dir = temp_dir("pipeline");
     let pipeline: filterjit::pipeline::FilterPipeline = "outliers=2,demodulate,atrous=3".parse().unwrap();
-    let config = RunConfig { pipeline, ..config(training, test) };
+    // `--features` may name what the pipeline's outlier rule measures.
+    let features = ["color", "pixel", "normal", "texture", "clampedShare"].map(String::from).into();
+    let config = RunConfig { pipeline, features: Some(features), ..config(training, test) };
     let settings = Settings { generations: 2, ..small() };
     let summary = run(&dir, settings, config, false, None).expect("finished");
     let hall = dir.join(evolve::HALL_OF_FAME_FILE);
@@ -530,9 +532,15 @@ fn the_search_reads_only_the_features_it_is_given() {
         ..config
     };
     let (tiles, fusion) = (evolve::Tiles::Off, evolve::Fusion::Auto);
-    let error =
-        try_run(&temp_dir("features-missing"), small(), lacking, false, None, tiles, fusion).unwrap_err().to_string();
+    let error = try_run(&temp_dir("features-missing"), small(), lacking.clone(), false, None, tiles, fusion)
+        .unwrap_err()
+        .to_string();
     assert!(error.contains("--features") && error.contains("directIllumination"), "{error}");
+    // What the outlier rule measures comes with the pipeline: named without one, it is refused as such.
+    let measure = RunConfig { features: Some(["color".to_string(), "clampedShare".to_string()].into()), ..lacking };
+    let error =
+        try_run(&temp_dir("features-measure"), small(), measure, false, None, tiles, fusion).unwrap_err().to_string();
+    assert!(error.contains("clampedShare") && error.contains("outliers=K"), "{error}");
 }
 
 /// `--fitness-relative-to E --fitness-pool worst`: fitness is the largest

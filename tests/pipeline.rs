@@ -111,6 +111,8 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "outliers=2,demodulate,atrous=5",
         "outliers=2,demodulate,window",
         "outliers=0.5,atrous=2",
+        "outliers=2,demodulate,atrous3x3=4",
+        "atrous3x3=2",
     ] {
         let p = pipeline(text);
         for e in exprs {
@@ -133,7 +135,7 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
         parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3))").unwrap(),
         parse_expr("exp(-distance2(texture) / 0.1)").unwrap(),
     ];
-    for text in ["outliers=2,demodulate,atrous=4", "atrous=2", "demodulate,window"] {
+    for text in ["outliers=2,demodulate,atrous=4", "atrous=2", "demodulate,window", "outliers=2,atrous3x3=3"] {
         let p = pipeline(text);
         let kernels: Vec<_> = exprs
             .iter()
@@ -151,6 +153,29 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
             assert_eq!(row[0].flags, 0);
         }
     }
+}
+
+#[test]
+fn a_3x3_pass_reads_only_the_taps_one_step_away() {
+    // One bright pixel, weight 1: pass k of the 3x3 stencil spreads it 2^k
+    // pixels each way and no further, with the linear B-spline's weights.
+    let gpu = gpu();
+    let mut scene = synthetic_scene(9, 9, 1);
+    scene.color = vec![[0.0; 3]; 81];
+    scene.color[4 * 9 + 4] = [16.0; 3];
+    let expr = parse_expr("1").unwrap();
+    let at = |image: &[[f32; 3]], x: usize, y: usize| image[y * 9 + x][0];
+    let one = gpu_filter(&gpu, &expr, &scene, &pipeline("atrous3x3=1"), 2);
+    assert_eq!(at(&one, 4, 4), 16.0 * 0.25, "the centre keeps h(0)^2 = 1/4 of itself");
+    assert_eq!(at(&one, 5, 4), 16.0 * 0.125, "a step away: h(0) h(1) = 1/8");
+    assert_eq!(at(&one, 5, 5), 16.0 / 16.0, "diagonal: h(1)^2 = 1/16");
+    assert_eq!((at(&one, 6, 4), at(&one, 4, 2)), (0.0, 0.0), "two pixels away is outside a 3x3 pass");
+    let cubic = gpu_filter(&gpu, &expr, &scene, &pipeline("atrous=1"), 2);
+    assert!(at(&cubic, 6, 4) > 0.0, "the 5x5 stencil reaches two pixels");
+    let two = gpu_filter(&gpu, &expr, &scene, &pipeline("atrous3x3=2"), 2);
+    let on_cpu = cpu::filter_pipeline(&expr, &scene, &pipeline("atrous3x3=2"), 2).unwrap();
+    assert_eq!(agree_fraction(&two, &on_cpu.color).0, 1.0);
+    assert!(at(&two, 7, 4) > 0.0 && at(&two, 8, 4) == 0.0, "two passes reach 1 + 2 pixels");
 }
 
 #[test]

@@ -30,7 +30,7 @@ fn generated_wgsl_matches_snapshots() {
 
 /// The pipeline's kernels: the pre-pass module, and `@crossBilateralAtrous`
 /// as an à-trous pass (carrying the variance of an expression that reads it)
-/// in filter and fitness kernels.
+/// in filter and fitness kernels, and as a pass of the 3x3 stencil.
 #[test]
 fn pipeline_kernels_match_snapshots() {
     use filterjit::jit::{KernelKind, LowerOptions};
@@ -47,6 +47,12 @@ fn pipeline_kernels_match_snapshots() {
                 insta::assert_snapshot!(format!("pipeline__{name}.atrous.{label}"), kernel.wgsl());
             }
         }
+        // The 3x3 stencil's pass: the same kernel but for its taps and their weights.
+        let linear: filterjit::pipeline::FilterPipeline = "outliers=2,demodulate,atrous3x3=4".parse().unwrap();
+        let kernel =
+            jit::compile_shaped(&pipeline.expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(&linear))
+                .unwrap();
+        insta::assert_snapshot!("pipeline__crossBilateralAtrous.atrous3x3.filter", kernel.wgsl());
     });
 }
 

@@ -161,6 +161,22 @@ pub struct StageResult {
     pub ms_per_mpx: f64,
 }
 
+/// One way to denoise a whole frame of [`FRAME_SIDE`]²: a shipped filter in
+/// the pipeline it is stored with (device time of the pre-pass and every pass
+/// of the form), or OIDN (CPU wall time of each execution, as `oidnDenoise`
+/// reports it).
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameResult {
+    pub method: String,
+    pub pipeline: String,
+    /// Pipeline creation plus the first frame (none for OIDN: its program creates its filter each run).
+    pub compile_ms: Option<f64>,
+    pub warm_ms: Stat,
+    pub ms_per_mpx: f64,
+    /// This method's warm median over OIDN's (none without OIDN).
+    pub over_oidn: Option<f64>,
+}
+
 /// Side of the frame the pipeline's stages are timed on (the size OIDN is compared at).
 pub const FRAME_SIDE: usize = 256;
 
@@ -186,6 +202,9 @@ pub struct Report {
     pub simplified: Vec<SimplifiedResult>,
     /// The pipeline's stages and forms, side by side (`@crossBilateral` in each form).
     pub stages: Vec<StageResult>,
+    /// Whole pipelines (pre-pass and form) of the shipped à-trous filters on
+    /// the same frame, and the peer, Intel Open Image Denoise, where found.
+    pub frames: Vec<FrameResult>,
     pub generations: Vec<GenerationResult>,
 }
 
@@ -346,6 +365,7 @@ pub fn run(
     scene: &Scene,
     generation_scenes: &mut dyn FnMut(u32) -> anyhow::Result<Scene>,
     settings: &BenchSettings,
+    peer: Option<&crate::report::oidn::Oidn>,
     progress: &mut dyn FnMut(&str),
 ) -> anyhow::Result<Report> {
     let mut buffers = SceneBuffers::new(gpu, scene);
@@ -558,6 +578,11 @@ pub fn run(
 
     progress(&format!("pipeline stages and forms on {FRAME_SIDE}x{FRAME_SIDE}"));
     let stages = pipeline_stages(gpu, scene, settings.repeats)?;
+    progress(&format!(
+        "whole frames on {FRAME_SIDE}x{FRAME_SIDE}{}",
+        if peer.is_some() { ", and OIDN" } else { " (OIDN not found)" }
+    ));
+    let frames = whole_frames(gpu, scene, settings.repeats, peer)?;
 
     // One GP generation of the thesis's size.
     let mut generations = Vec::new();
@@ -616,6 +641,7 @@ pub fn run(
         handwritten: handwritten_result,
         simplified,
         stages,
+        frames,
         generations,
     })
 }
@@ -683,6 +709,81 @@ fn pipeline_stages(gpu: &Gpu, scene: &Scene, repeats: usize) -> anyhow::Result<V
             lower_validate_ms: Some(lower_validate),
             compile_ms,
             ms_per_mpx: warm_ms.median / mpx,
+            warm_ms,
+        });
+    }
+    Ok(results)
+}
+
+/// Every shipped filter stored with an à-trous pipeline, as a whole frame
+/// of [`FRAME_SIDE`]² (the bench scene tiled): the pre-pass's dispatch (the
+/// frame's buffers prepared afresh each round, uploads not counted) plus
+/// every pass of the form, in interleaved rounds; then OIDN colour + albedo
+/// + normal on the same frame, where its program is found.
+fn whole_frames(
+    gpu: &Gpu,
+    scene: &Scene,
+    repeats: usize,
+    peer: Option<&crate::report::oidn::Oidn>,
+) -> anyhow::Result<Vec<FrameResult>> {
+    let frame = crate::report::tile(scene, FRAME_SIDE);
+    let mpx = frame.pixels() as f64 / 1e6;
+    let shipped: Vec<(String, Expr, crate::pipeline::FilterPipeline)> = crate::corpus::named()
+        .into_iter()
+        .filter_map(|(name, text)| {
+            let pipeline = crate::corpus::pipeline_of(crate::corpus::EXPRESSIONS, name)?.ok()?;
+            pipeline.is_atrous().then(|| Ok((name.to_string(), parse_expr(text)?, pipeline)))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let radius = 2;
+    let mut prepared = Vec::new();
+    for (name, expr, pipeline) in &shipped {
+        let t = Instant::now();
+        let kernel = jit::compile_shaped(expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(pipeline))?;
+        let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
+        gpu.filter(&kernel, &mut buffers, &frame, radius)?;
+        prepared.push((name, pipeline, kernel, ms(t.elapsed())));
+    }
+    let mut times = vec![Vec::new(); prepared.len()];
+    for _ in 0..repeats.max(1) * 2 {
+        for (k, (_, pipeline, kernel, _)) in prepared.iter().enumerate() {
+            let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
+            let prepass = buffers.prepass_time().unwrap_or_default();
+            times[k].push(ms(prepass + gpu.filter(kernel, &mut buffers, &frame, radius)?.dispatch));
+        }
+    }
+    let oidn = match peer {
+        Some(oidn) => {
+            let dir = std::env::temp_dir().join(format!("filterjit-bench-oidn-{}", std::process::id()));
+            let denoised = oidn.denoise(&frame, crate::report::oidn::Auxiliary::AlbedoNormal, repeats.max(1) * 2, &dir);
+            let _ = std::fs::remove_dir_all(&dir);
+            Some(stat(denoised?.warm_ms))
+        }
+        None => None,
+    };
+    let over = |median: f64| oidn.as_ref().map(|o| median / o.median);
+    let mut results: Vec<FrameResult> = prepared
+        .into_iter()
+        .zip(times)
+        .map(|((name, pipeline, _, compile_ms), times)| {
+            let warm_ms = stat(times);
+            FrameResult {
+                method: format!("@{name}"),
+                pipeline: pipeline.to_string(),
+                compile_ms: Some(compile_ms),
+                ms_per_mpx: warm_ms.median / mpx,
+                over_oidn: over(warm_ms.median),
+                warm_ms,
+            }
+        })
+        .collect();
+    if let Some(warm_ms) = oidn {
+        results.push(FrameResult {
+            method: "OIDN colour+albedo+normal (CPU)".into(),
+            pipeline: "-".into(),
+            compile_ms: None,
+            ms_per_mpx: warm_ms.median / mpx,
+            over_oidn: Some(1.0),
             warm_ms,
         });
     }
@@ -885,6 +986,29 @@ pub fn table(r: &Report) -> String {
                 s.warm_ms.median,
                 s.ms_per_mpx
             );
+        }
+    }
+    if !r.frames.is_empty() {
+        t += &format!(
+            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: device time of pre-pass + passes; OIDN: CPU wall time; warm median [min, max], ms):\n"
+        );
+        t += &format!(
+            "  {:<34} {:<32} {:>10} {:>22} {:>10} {:>8}\n",
+            "method", "pipeline", "compile ms", "warm ms", "ms/Mpx", "/ OIDN"
+        );
+        for f in &r.frames {
+            t += &format!(
+                "  {:<34} {:<32} {:>10} {:>22} {:>10.1} {:>8}\n",
+                f.method,
+                f.pipeline,
+                f.compile_ms.map_or("-".into(), |v| format!("{v:.1}")),
+                format!("{:.2} [{:.2}, {:.2}]", f.warm_ms.median, f.warm_ms.min, f.warm_ms.max),
+                f.ms_per_mpx,
+                f.over_oidn.map_or("-".into(), |v| format!("{v:.2}x")),
+            );
+        }
+        if !r.frames.iter().any(|f| f.compile_ms.is_none()) {
+            t += "  (OIDN's oidnDenoise not found: FILTERJIT_OIDN, PATH or `pip install pyoidn`)\n";
         }
     }
     if !r.generations.is_empty() {

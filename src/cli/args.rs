@@ -147,6 +147,10 @@ pub(crate) enum Command {
         fuse: filterjit::evolve::Fusion,
         #[arg(short, long, default_value = "bench.json")]
         output: PathBuf,
+        /// Leave out Intel Open Image Denoise's whole-frame time even where its
+        /// `oidnDenoise` is found (FILTERJIT_OIDN, PATH, or the pyoidn Python package).
+        #[arg(long)]
+        no_oidn: bool,
     },
     /// Compare filters on scenes with references: error (relMSE both ways, MSE)
     /// against device time per megapixel, in tables, scatter plots with the
@@ -193,7 +197,7 @@ pub(crate) struct RenderArgs {
     pub(crate) radius: Option<u32>,
     /// The filter pipeline around the expression: stages separated by commas,
     /// `outliers=K` (firefly pre-pass), `demodulate` (filter colour/albedo),
-    /// then the form, `window` or `atrous=PASSES` [window].
+    /// then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3) [window].
     #[arg(long)]
     pub(crate) pipeline: Option<filterjit::pipeline::FilterPipeline>,
 }

@@ -181,6 +181,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             generation_radius,
             fuse,
             output,
+            no_oidn,
         } => {
             let settings = filterjit::bench::BenchSettings {
                 radius,
@@ -192,7 +193,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                 seed: 0,
                 fusion: fuse,
             };
-            bench(env, size, &settings, &output)
+            bench(env, size, &settings, no_oidn, &output)
         }
         Command::Scenes => {
             for (name, _) in render::BUILTIN {
@@ -303,7 +304,10 @@ pub(crate) fn filter(
     );
     let form = match pipeline.form {
         filterjit::pipeline::Form::Window => format!("radius {radius}"),
-        filterjit::pipeline::Form::Atrous { passes } => format!("{passes} a-trous passes"),
+        filterjit::pipeline::Form::Atrous { passes, stencil } => {
+            let side = 2 * stencil.half_width() + 1;
+            format!("{passes} a-trous passes of {side}x{side}")
+        }
     };
     println!("pipeline  {pipeline}");
     println!(
@@ -411,9 +415,12 @@ pub(crate) fn bench(
     env: &Environment,
     size: (u32, u32),
     settings: &filterjit::bench::BenchSettings,
+    no_oidn: bool,
     output: &Path,
 ) -> Result<()> {
     let gpu = gpu::Gpu::open(&env.adapter)?;
+    let peer =
+        if no_oidn { None } else { filterjit::report::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
     let scene_at = |gpu: &gpu::Gpu, w: u32, h: u32| -> Result<filterjit::Scene> {
         let d = render::builtin("glossy-floor").expect("built in")?;
         let rs = render::RenderSettings { width: w, height: h, spp: 4, reference_spp: 64, seed: 0 };
@@ -431,7 +438,7 @@ pub(crate) fn bench(
     let scene = scene_at(&gpu, size.0, size.1)?;
     let mut generation_scene = |s: u32| scene_at(&gpu, s, s);
     let mut progress = |what: &str| eprintln!("          {what}");
-    let report = filterjit::bench::run(&gpu, &scene, &mut generation_scene, settings, &mut progress)?;
+    let report = filterjit::bench::run(&gpu, &scene, &mut generation_scene, settings, peer.as_ref(), &mut progress)?;
     print!("{}", filterjit::bench::table(&report));
     filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())?;
     println!("wrote     {}", output.display());

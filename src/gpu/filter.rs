@@ -29,6 +29,8 @@ pub struct SceneBuffers {
     pub(super) modulation: Option<wgpu::Buffer>,
     /// Ping-pong images and carried variances of the à-trous passes.
     pub(super) scratch: Option<Scratch>,
+    /// How long the pre-pass's dispatch took (pipelines with a pre-pass).
+    pub(super) prepass_dispatch: Option<Duration>,
 }
 
 /// Intermediate images of the à-trous passes; they never leave the device.
@@ -105,6 +107,7 @@ impl SceneBuffers {
         });
         let (width, height) = (scene.width as u32, scene.height as u32);
         let mut inputs = HashMap::new();
+        let mut prepass_dispatch = None;
         let (color, modulation) = if pipeline.has_prepass() {
             let albedo = match (&scene.albedo, pipeline.demodulate) {
                 (Some(albedo), true) => Some(rgba(albedo)),
@@ -117,6 +120,7 @@ impl SceneBuffers {
                 (_, false) => None,
             };
             let prepared = gpu.prepass(pipeline, &color, albedo.as_deref(), width, height)?;
+            prepass_dispatch = Some(prepared.dispatch);
             if pipeline.outliers.is_some() {
                 // What the outlier rule measured is an input like any other, already on the device.
                 for (v, buffer) in ScalarVar::FROM_PREPASS.into_iter().zip(prepared.local) {
@@ -141,12 +145,19 @@ impl SceneBuffers {
                 variances: [make("a-trous variance", 4), make("a-trous variance", 4)],
             }
         });
-        Ok(SceneBuffers { width, height, color, inputs, pipeline: *pipeline, modulation, scratch })
+        Ok(SceneBuffers { width, height, color, inputs, pipeline: *pipeline, modulation, scratch, prepass_dispatch })
     }
 
     /// The pipeline these buffers were prepared for.
     pub fn pipeline(&self) -> &FilterPipeline {
         &self.pipeline
+    }
+
+    /// Wall time of the pre-pass's dispatch when these buffers were prepared
+    /// (submission to completion; uploads excluded), or `None` without a
+    /// pre-pass: with [`Filtered::dispatch`], a frame's device time.
+    pub fn prepass_time(&self) -> Option<Duration> {
+        self.prepass_dispatch
     }
 
     /// A kernel runs on buffers prepared for a pipeline of its shape.

@@ -97,6 +97,7 @@ impl Gpu {
                 })
                 .collect(),
         );
+        let start = std::time::Instant::now();
         let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
@@ -106,10 +107,11 @@ impl Gpu {
         }
         self.queue().submit([encoder.finish()]);
         self.wait("running the pre-pass")?;
+        let dispatch = start.elapsed();
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "running the pre-pass", message: error.to_string() });
         }
-        Ok(Prepared { color: prepared, modulation, local })
+        Ok(Prepared { color: prepared, modulation, local, dispatch })
     }
 }
 
@@ -119,4 +121,6 @@ pub(super) struct Prepared {
     pub modulation: wgpu::Buffer,
     /// `ScalarVar::FROM_PREPASS`, in that order.
     pub local: [wgpu::Buffer; 3],
+    /// Wall time from submission until the pre-pass was done.
+    pub dispatch: std::time::Duration,
 }

@@ -13,6 +13,7 @@ use super::helpers;
 use super::interface::{BindingInterface, Element, Role};
 use super::ir::{self, feature_ident, var_ident};
 use crate::lang::{Expr, Feature, FeatureSource, ScalarVar};
+use crate::pipeline::Stencil;
 use crate::semantics;
 
 /// Bumped whenever the template or the lowering changes what a kernel computes
@@ -118,20 +119,26 @@ pub enum KernelKind {
 pub struct Shape {
     pub atrous: bool,
     pub remodulate: bool,
+    /// The à-trous pass's taps (the default, and unused, for a window).
+    pub stencil: Stencil,
 }
 
 impl Shape {
     /// The thesis's kernel: one window pass, nothing multiplied back.
-    pub const WINDOW: Shape = Shape { atrous: false, remodulate: false };
+    pub const WINDOW: Shape = Shape { atrous: false, remodulate: false, stencil: Stencil::Cubic5 };
 
     /// The kernel shape of a pipeline's form.
     pub fn of(pipeline: &crate::pipeline::FilterPipeline) -> Shape {
-        Shape { atrous: pipeline.is_atrous(), remodulate: pipeline.demodulate }
+        Shape { atrous: pipeline.is_atrous(), remodulate: pipeline.demodulate, stencil: pipeline.stencil() }
     }
 
     /// A stable name, for cache keys.
     pub fn encode(self) -> String {
-        format!("atrous={} remodulate={}", self.atrous, self.remodulate)
+        let stencil = match self.stencil {
+            Stencil::Cubic5 => "",
+            Stencil::Linear3 => " stencil=3x3",
+        };
+        format!("atrous={} remodulate={}{stencil}", self.atrous, self.remodulate)
     }
 }
 
@@ -454,8 +461,8 @@ fn lower_members(
         context.insert("neighbour_variance", &Loads::of(&interface).carried_variance_at_neighbour());
         context.insert("centre_variance", &var_ident(ScalarVar::ColorVariance));
     }
-    context.insert("atrous_half", &crate::pipeline::ATROUS_HALF_WIDTH);
-    let stencil = crate::pipeline::ATROUS_STENCIL.map(wgsl_f32);
+    context.insert("atrous_half", &shape.stencil.half_width());
+    let stencil: Vec<String> = shape.stencil.weights().iter().copied().map(wgsl_f32).collect();
     context.insert("stencil", &stencil);
     let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
     let tile_radius = tile.map(|t| t.radius);

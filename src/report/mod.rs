@@ -3,7 +3,8 @@
 //!
 //! For every scene and method: relMSE (both variants), MSE, pixels with
 //! domain errors, and the filter's device time per megapixel (median of
-//! repeated dispatches after a warm-up that compiles the pipeline). Then
+//! repeated frames after a warm-up that compiles the pipeline: the pre-pass,
+//! if the pipeline has one, and every pass of the form). Then
 //! tables (Markdown, CSV, JSON), time-against-error scatter plots with the
 //! Pareto front (SVG), tone-mapped crops (PNG), a chart of feature usage, and
 //! `index.html` tying them together.
@@ -229,7 +230,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         });
         let timing_scene = tile(&scene, settings.timing_size);
         // Buffers per pipeline: each pipeline's pre-pass runs once per scene.
-        let mut prepared: BTreeMap<String, (SceneBuffers, SceneBuffers)> = BTreeMap::new();
+        let mut prepared: BTreeMap<String, (SceneBuffers, SceneBuffers, f64)> = BTreeMap::new();
         for (method, kernel) in methods.iter().zip(&kernels) {
             if let Some(reason) = runnable(&method.expr) {
                 results.cells.push(Cell {
@@ -244,12 +245,20 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             let key = method.pipeline.to_string();
             if !prepared.contains_key(&key) {
                 let buffers = SceneBuffers::for_pipeline(gpu, &scene, &method.pipeline)?;
-                let timing_buffers = SceneBuffers::for_pipeline(gpu, &timing_scene, &method.pipeline)?;
-                prepared.insert(key.clone(), (buffers, timing_buffers));
+                // The pre-pass runs once a frame, whatever the form: its dispatch
+                // time, median over as many preparations, joins every filter's.
+                let mut prepass_ms = Vec::new();
+                let mut timing_buffers = SceneBuffers::for_pipeline(gpu, &timing_scene, &method.pipeline)?;
+                for _ in 0..settings.repeats.max(1) {
+                    timing_buffers = SceneBuffers::for_pipeline(gpu, &timing_scene, &method.pipeline)?;
+                    prepass_ms.push(timing_buffers.prepass_time().unwrap_or_default().as_secs_f64() * 1e3);
+                }
+                prepass_ms.sort_by(f64::total_cmp);
+                prepared.insert(key.clone(), (buffers, timing_buffers, prepass_ms[prepass_ms.len() / 2]));
             }
-            let (buffers, timing_buffers) = prepared.get_mut(&key).expect("prepared above");
+            let (buffers, timing_buffers, prepass_ms) = prepared.get_mut(&key).expect("prepared above");
             let buffers = &mut *buffers;
-            let mut timing = Timing { scene: &timing_scene, buffers: timing_buffers };
+            let mut timing = Timing { scene: &timing_scene, buffers: timing_buffers, prepass_ms: *prepass_ms };
             let (cell, filtered) =
                 measure(gpu, kernel, buffers, &scene, &mut timing, &reference, settings, method.radius, noisy.relmse)
                     .with_context(|| format!("filtering {} with {}", scene.name, method.name))?;
@@ -378,6 +387,8 @@ fn summarise(
 struct Timing<'a> {
     scene: &'a Scene,
     buffers: &'a mut SceneBuffers,
+    /// The pipeline's pre-pass on this scene (0 without one), added to every dispatch's time.
+    prepass_ms: f64,
 }
 
 /// `scene` repeated to at least `side` pixels each way (colour, features and
@@ -397,7 +408,8 @@ pub fn tile(scene: &Scene, side: usize) -> Scene {
 }
 
 /// Filter the scene for the errors; time the filter on the timing scene: one
-/// warm-up dispatch (it compiles the pipeline), then `repeats` timed ones.
+/// warm-up dispatch (it compiles the pipeline), then `repeats` timed ones,
+/// each with the pipeline's pre-pass: a frame's device time.
 #[allow(clippy::too_many_arguments)]
 fn measure(
     gpu: &Gpu,
@@ -415,7 +427,8 @@ fn measure(
     gpu.filter(kernel, timing.buffers, timing.scene, radius)?;
     let mut times = Vec::new();
     for _ in 0..settings.repeats.max(1) {
-        times.push(gpu.filter(kernel, timing.buffers, timing.scene, radius)?.dispatch.as_secs_f64());
+        let form = gpu.filter(kernel, timing.buffers, timing.scene, radius)?.dispatch.as_secs_f64();
+        times.push(form + timing.prepass_ms / 1e3);
     }
     times.sort_by(f64::total_cmp);
     let mpx = timing.scene.pixels() as f64 / 1e6;
