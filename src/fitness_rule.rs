@@ -6,7 +6,11 @@
 //! mean. A user who wants a filter that beats the one they have on *every*
 //! scene divides by that filter's relMSE instead (`--fitness-relative-to`) and
 //! pools by the worst scene (`--fitness-pool worst`): a fitness below 1 then
-//! means better than the baseline everywhere the search looked.
+//! means better than the baseline everywhere the search looked. `worst` stalls
+//! where no small change helps every scene at once, and `mean` lets one scene
+//! where the baseline fails badly buy losses on all the others; `guarded`
+//! takes the mean but charges every scene's loss against the baseline in full
+//! (docs/BENCHMARKS.md, "Fitness that keeps every scene").
 
 use serde::{Deserialize, Serialize};
 
@@ -21,20 +25,26 @@ pub enum Pool {
     Mean,
     /// The largest: the scene where the candidate does worst.
     Worst,
+    /// The mean, plus each ratio's excess over 1 (the reference's own error)
+    /// in full: with N scenes a loss of x on one scene is offset only by
+    /// gains of (N + 1)·x over the others.
+    Guarded,
 }
 
 impl Pool {
-    pub const NAMES: &'static str = "mean, worst";
+    pub const NAMES: &'static str = "mean, worst, guarded";
 
     /// Pool `relmse[i] / divisor[i]` (the divisor floored, [`metrics::normalised`]).
     pub fn combine(self, relmse: impl IntoIterator<Item = f64>, divisors: &[f64]) -> f64 {
         let ratios = relmse.into_iter().zip(divisors).map(|(e, d)| metrics::normalised(e, *d));
+        let mean = |ratios: &[f64]| ratios.iter().sum::<f64>() / ratios.len().max(1) as f64;
         match self {
-            Pool::Mean => {
-                let (sum, n) = ratios.fold((0.0, 0usize), |(s, n), r| (s + r, n + 1));
-                sum / n.max(1) as f64
-            }
+            Pool::Mean => mean(&ratios.collect::<Vec<_>>()),
             Pool::Worst => ratios.fold(0.0, f64::max),
+            Pool::Guarded => {
+                let ratios: Vec<f64> = ratios.collect();
+                mean(&ratios) + ratios.iter().map(|r| (r - 1.0).max(0.0)).sum::<f64>()
+            }
         }
     }
 }
@@ -44,6 +54,7 @@ impl std::fmt::Display for Pool {
         f.write_str(match self {
             Pool::Mean => "mean",
             Pool::Worst => "worst",
+            Pool::Guarded => "guarded",
         })
     }
 }
@@ -54,6 +65,7 @@ impl std::str::FromStr for Pool {
         match s {
             "mean" => Ok(Pool::Mean),
             "worst" => Ok(Pool::Worst),
+            "guarded" => Ok(Pool::Guarded),
             _ => Err(format!("`{s}` is no way to pool scenes (one of: {})", Pool::NAMES)),
         }
     }
@@ -86,6 +98,7 @@ impl FitnessRule {
         let pool = match self.pool {
             Pool::Mean => "mean over scenes",
             Pool::Worst => "worst scene",
+            Pool::Guarded => "mean over scenes plus every loss against it in full",
         };
         format!("relMSE / {against}, {pool}")
     }
@@ -104,5 +117,21 @@ mod tests {
         assert!(Pool::Worst.combine([1e-3], &[0.0]).is_finite());
         assert_eq!("worst".parse::<Pool>(), Ok(Pool::Worst));
         assert!("max".parse::<Pool>().unwrap_err().contains("mean, worst"));
+    }
+
+    #[test]
+    fn guarded_charges_every_loss_in_full() {
+        let ones = [1.0; 4];
+        // Better everywhere: the mean.
+        assert_eq!(Pool::Guarded.combine([0.9, 0.8, 1.0, 0.9], &ones), Pool::Mean.combine([0.9, 0.8, 1.0, 0.9], &ones));
+        // One scene twice as good buys no 5 % loss on the other three, which `mean` would take:
+        // a loss is offset only by gains N + 1 times as large.
+        let trade = [0.5, 1.05, 1.05, 1.05];
+        assert!(Pool::Mean.combine(trade, &ones) < 1.0);
+        let guarded = Pool::Guarded.combine(trade, &ones);
+        assert!((guarded - (0.9125 + 0.15)).abs() < 1e-12, "{guarded}");
+        // A loss of x on one of N scenes against gains of x on every other still costs.
+        assert!(Pool::Guarded.combine([1.02, 0.98, 0.98, 0.98], &ones) > 1.0);
+        assert_eq!("guarded".parse::<Pool>(), Ok(Pool::Guarded));
     }
 }

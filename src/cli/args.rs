@@ -385,10 +385,11 @@ pub(crate) struct EvolveArgs {
     /// is the baseline's [default: the noisy input, the thesis's rule]. Kept in the checkpoint.
     #[arg(long, value_name = "EXPR")]
     pub(crate) fitness_relative_to: Option<String>,
-    /// Pool the per-scene ratios by their mean or by the worst scene (with
+    /// Pool the per-scene ratios by their mean, by the worst scene (with
     /// `--fitness-relative-to`, a fitness below 1 is then better than the
-    /// baseline on every training scene). Kept in the checkpoint.
-    #[arg(long, default_value = "mean", value_name = "mean|worst")]
+    /// baseline on every training scene), or `guarded`: the mean plus every
+    /// scene's loss against the baseline in full. Kept in the checkpoint.
+    #[arg(long, default_value = "mean", value_name = "mean|worst|guarded")]
     pub(crate) fitness_pool: filterjit::fitness_rule::Pool,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
