@@ -294,12 +294,21 @@ pub struct Facts {
     /// Where the class's values lie (members are equal, so each member's
     /// range holds for the class).
     pub range: Range,
+    /// How often merges have narrowed `range` (at most [`NARROWINGS`]).
+    narrowed: u8,
 }
+
+/// How often a class's range may be narrowed by merging. Literals are equal
+/// within two f32 ulps (`readable`), so `x * c` and `x` can share a class for
+/// a `c` a hair below 1; each narrowing of the class's range then narrows
+/// `x * c`'s by the factor c again, forever. A range left wider is still
+/// sound, so after this many narrowings a class keeps the one it has.
+const NARROWINGS: u8 = 16;
 
 impl Facts {
     fn of(range: Range, may_flag: bool) -> Facts {
         let constant = (range.lo == range.hi && !may_flag).then_some(range.lo);
-        Facts { constant, may_flag, range }
+        Facts { constant, may_flag, range, narrowed: 0 }
     }
 }
 
@@ -312,7 +321,8 @@ impl Analysis<Node> for Semantics {
 
     fn make(egraph: &mut EGraph<Node, Self>, node: &Node, _: Id) -> Facts {
         let facts = |id: &Id| &egraph[*id].data;
-        let constant = |value: f64| Facts { constant: Some(value), may_flag: false, range: Range::point(value) };
+        let constant =
+            |value: f64| Facts { constant: Some(value), may_flag: false, range: Range::point(value), narrowed: 0 };
         match node {
             Node::Const(bits) => constant(semantics::literal(f64::from_bits(*bits))),
             Node::Var(ScalarVar::Level) => Facts::of(Range { lo: 0.0, hi: semantics::BIG }, false),
@@ -343,11 +353,13 @@ impl Analysis<Node> for Semantics {
     }
 
     fn merge(&mut self, a: &mut Facts, b: Facts) -> DidMerge {
-        let merged = Facts {
-            constant: a.constant.or(b.constant),
-            may_flag: a.may_flag && b.may_flag,
-            range: a.range.intersect(b.range),
+        let narrowed = a.narrowed.max(b.narrowed);
+        let (range, narrowed) = match a.range.intersect(b.range) {
+            same if same == a.range => (same, narrowed),
+            narrower if narrowed < NARROWINGS => (narrower, narrowed + 1),
+            _ => (a.range, narrowed),
         };
+        let merged = Facts { constant: a.constant.or(b.constant), may_flag: a.may_flag && b.may_flag, range, narrowed };
         let merged =
             Facts { constant: merged.constant.or(Facts::of(merged.range, merged.may_flag).constant), ..merged };
         let changed_a = merged != *a;

@@ -174,6 +174,27 @@ fn the_default_runs_bloat_is_removed() {
     );
 }
 
+/// A constant a hair below 1 is 1 to the f32 literals the kernels hold, so
+/// `x * c` and `x` meet in one class; the range analysis narrowed that class
+/// by the factor c forever, and `evolve` hung at the end of a run simplifying
+/// its hall of fame. Both expressions came out of that run.
+#[test]
+fn a_factor_a_hair_below_one_does_not_narrow_a_range_forever() {
+    let exprs = [
+        "(distance1(color) * exp(-0.000000000000001)) / 1",
+        "exp(-(distance1(color) / (62.8 * sqrt(colorVariance) + 3) + (exp(-(distance1(color) / (exp(-(pow(0.1, 11) / (2 * pow(62.8, 2)))) * pow(0.1, 2)) + 1 + pow(0.1, 2) / (2 * pow(62.8, 2)) / 2)) + (1 + 1)) / 1 + distance2(worldPosition) / (2 / (pow(distance1(pixel), 2) * 1))))",
+    ];
+    for text in exprs {
+        let expr = parse_expr(text).unwrap();
+        let (done, result) = std::sync::mpsc::channel();
+        std::thread::spawn(move || done.send(simplify::simplify(&expr)));
+        let simplified = result
+            .recv_timeout(std::time::Duration::from_secs(60))
+            .unwrap_or_else(|_| panic!("simplifying `{text}` did not finish in a minute"));
+        assert!(simplified.len() < parse_expr(text).unwrap().len(), "{text} -> {simplified}");
+    }
+}
+
 #[test]
 fn simplified_expressions_score_the_same_fitness_on_built_in_scenes() {
     use filterjit::evolve::GpuEvaluator;

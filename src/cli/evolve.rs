@@ -194,6 +194,9 @@ pub(crate) fn evolve_on(
             r.best, r.median, r.invalid, r.compile_s, r.evaluate_s, r.gp_s
         ));
     };
+    // The run's fitness rule in words, so that the final figure is read as what it is
+    // (a resumed run must have the same settings, so these are the checkpoint's).
+    let rule = config.fitness.describe();
     let summary = ev::run_with(
         &gpu,
         ev::RunOptions {
@@ -222,13 +225,10 @@ pub(crate) fn evolve_on(
     let length = lang::parse_expr(&summary.best.expr).map(|e| e.len()).unwrap_or(0);
     match summary.rescored_hall_of_fame.iter().find(|r| r.expr == summary.best.expr).and_then(|r| r.fitness) {
         Some(whole) => println!(
-            "fitness   {whole:.5} (training, whole images: mean relMSE / noisy relMSE; {:.5} on the search's {}), length {length}",
+            "fitness   {whole:.5} (training, whole images: {rule}; {:.5} on the search's {}), length {length}",
             summary.best.fitness.value, summary.training_scored_on
         ),
-        None => println!(
-            "fitness   {:.5} (training: mean relMSE / noisy relMSE), length {length}",
-            summary.best.fitness.value
-        ),
+        None => println!("fitness   {:.5} (training: {rule}), length {length}", summary.best.fitness.value),
     }
     let baseline_names: Vec<String> = (0..summary.test_baselines.len()).map(|k| format!("baseline{}", k + 1)).collect();
     println!(
