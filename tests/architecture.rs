@@ -61,3 +61,20 @@ fn lang_holds_no_wgsl() {
         }
     }
 }
+
+/// filterjit's own modules read their parameters from a read-only storage
+/// buffer; only exported shaders bind a uniform (lavapipe recompiles a
+/// shader whose uniform values steer its control flow at every dispatch).
+#[test]
+fn only_exported_shaders_bind_a_uniform() {
+    assert_eq!(files_with("BufferUsages::UNIFORM"), ["gpu/mod.rs"], "params buffers are made by Gpu::params_buffer");
+    let templates = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("templates");
+    for entry in std::fs::read_dir(&templates).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        assert!(!text.contains("var<uniform>"), "{} declares a uniform of its own", path.display());
+    }
+    use filterjit::jit::interface::{BindingInterface, Resource};
+    assert_eq!(BindingInterface::prepass(None).params(), Resource::ParamsStorage);
+    assert_eq!(BindingInterface::prepass(Some(filterjit::jit::OutputFormat::Rgba16float)).params(), Resource::Uniform);
+}
