@@ -247,13 +247,13 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                 let buffers = SceneBuffers::for_pipeline(gpu, &scene, &method.pipeline)?;
                 // The pre-pass runs once a frame, whatever the form: its dispatch
                 // time, median over as many preparations, joins every filter's.
-                let mut prepass_ms = Vec::new();
-                let mut timing_buffers = SceneBuffers::for_pipeline(gpu, &timing_scene, &method.pipeline)?;
-                for _ in 0..settings.repeats.max(1) {
-                    timing_buffers = SceneBuffers::for_pipeline(gpu, &timing_scene, &method.pipeline)?;
-                    prepass_ms.push(timing_buffers.prepass_time().unwrap_or_default().as_secs_f64() * 1e3);
-                }
+                let mut preparations = (0..settings.repeats.max(1))
+                    .map(|_| SceneBuffers::for_pipeline(gpu, &timing_scene, &method.pipeline))
+                    .collect::<Result<Vec<_>, _>>()?;
+                let mut prepass_ms: Vec<f64> =
+                    preparations.iter().map(|b| b.prepass_time().unwrap_or_default().as_secs_f64() * 1e3).collect();
                 prepass_ms.sort_by(f64::total_cmp);
+                let timing_buffers = preparations.pop().expect("at least one preparation");
                 prepared.insert(key.clone(), (buffers, timing_buffers, prepass_ms[prepass_ms.len() / 2]));
             }
             let (buffers, timing_buffers, prepass_ms) = prepared.get_mut(&key).expect("prepared above");
