@@ -73,11 +73,22 @@ impl CostModel {
     /// A model read from `path`: a bare model, or `bench.json` (its `cost_model`).
     pub fn read(path: &std::path::Path) -> Result<CostModel, String> {
         let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let value: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| format!("{}: not JSON: {e}", path.display()))?;
+        Self::parse(&text).map_err(|e| format!("{}: {e}", path.display()))
+    }
+
+    /// The model `filterjit bench` measured on lavapipe on a 2-core CPU
+    /// (`data/cost-model-lavapipe.json`), which `evolve --preset realtime`
+    /// searches with; other devices measure their own (`--cost-model`).
+    pub fn lavapipe() -> CostModel {
+        Self::parse(include_str!("../data/cost-model-lavapipe.json")).expect("the shipped cost model parses")
+    }
+
+    /// A model from JSON text: a bare model, or a bench report with one.
+    fn parse(text: &str) -> Result<CostModel, String> {
+        let value: serde_json::Value = serde_json::from_str(text).map_err(|e| format!("not JSON: {e}"))?;
         let model = value.get("cost_model").cloned().unwrap_or(value);
-        let model: CostModel = serde_json::from_value(model)
-            .map_err(|e| format!("{}: not a cost model or a bench report with one: {e}", path.display()))?;
+        let model: CostModel =
+            serde_json::from_value(model).map_err(|e| format!("not a cost model or a bench report with one: {e}"))?;
         let known: HashSet<&str> = UnaryOp::ALL
             .iter()
             .map(|o| o.name())
@@ -86,17 +97,14 @@ impl CostModel {
             .collect();
         for (name, cost) in &model.operators {
             if !known.contains(name.as_str()) {
-                return Err(format!("{}: `{name}` is not an operator", path.display()));
+                return Err(format!("`{name}` is not an operator"));
             }
             if !(cost.is_finite() && *cost >= 0.0) {
-                return Err(format!(
-                    "{}: the cost of `{name}` must be a finite number ≥ 0, not {cost}",
-                    path.display()
-                ));
+                return Err(format!("the cost of `{name}` must be a finite number ≥ 0, not {cost}"));
             }
         }
         if !(model.tap.is_finite() && model.tap >= 0.0 && model.pixel.is_finite() && model.pixel >= 0.0) {
-            return Err(format!("{}: `tap` and `pixel` must be finite numbers ≥ 0", path.display()));
+            return Err("`tap` and `pixel` must be finite numbers ≥ 0".to_string());
         }
         Ok(model)
     }

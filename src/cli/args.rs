@@ -176,6 +176,15 @@ pub(crate) enum Preset {
     Quick,
     /// The thesis's settings: 4 islands of 100, 200 generations, 64x64 scenes, radius 10.
     Thesis,
+    /// The run that made `@evolvedAtrous3x3`, for filters that hold up on real
+    /// renders at a real-time cost: pipeline `outliers=2,demodulate,atrous3x3=4`,
+    /// 128x128 scenes with 1024-spp references, seeded with `@svgfAtrous` and
+    /// scored against it (`--fitness-pool guarded`), 4 islands of 40, 30
+    /// generations, 2 elites, `--objectives error,cost` with the cost model
+    /// measured on lavapipe, and only what a Mitsuba or engine G-buffer holds
+    /// (colour, position, normal, albedo, depth, colour variance) plus the
+    /// outlier rule's measures. About 9 minutes on a 2-core CPU once the scenes are rendered.
+    Realtime,
 }
 
 /// Render settings and radius; unset ones come from `evolve`'s preset, or
@@ -282,16 +291,16 @@ pub(crate) struct EvolveArgs {
     pub(crate) test_scenes: Vec<String>,
     #[command(flatten)]
     pub(crate) render: RenderArgs,
-    /// The expression the population is seeded from.
-    #[arg(long, default_value = "@bilateral")]
-    pub(crate) seed_expr: String,
-    /// Number of islands [quick, thesis: 4].
+    /// The expression the population is seeded from [quick, thesis: @bilateral; realtime: @svgfAtrous].
+    #[arg(long)]
+    pub(crate) seed_expr: Option<String>,
+    /// Number of islands [quick, thesis, realtime: 4].
     #[arg(long)]
     pub(crate) islands: Option<usize>,
-    /// Individuals per island [quick: 25, thesis: 100].
+    /// Individuals per island [quick: 25, thesis: 100, realtime: 40].
     #[arg(long)]
     pub(crate) island_size: Option<usize>,
-    /// Generations to run: the stopping rule [quick: 15, thesis: 200].
+    /// Generations to run: the stopping rule [quick: 15, thesis: 200, realtime: 30].
     #[arg(long)]
     pub(crate) generations: Option<u32>,
     /// Longest expression, in nodes [75].
@@ -330,9 +339,10 @@ pub(crate) struct EvolveArgs {
     pub(crate) simplify_offspring: bool,
     /// What the search minimises: `error` (the thesis) or `error,cost`:
     /// NSGA-II over error and the modelled cost per pixel (src/cost.rs); the
-    /// run's result is a front of filters, fast to accurate (pareto.json).
-    #[arg(long, default_value_t = filterjit::gp::Objectives::Error)]
-    pub(crate) objectives: filterjit::gp::Objectives,
+    /// run's result is a front of filters, fast to accurate (pareto.json)
+    /// [quick, thesis: error; realtime: error,cost].
+    #[arg(long)]
+    pub(crate) objectives: Option<filterjit::gp::Objectives>,
     /// With `--objectives error,cost`: how many islands (the first) keep
     /// minimising error alone at the run's radius, feeding the front's
     /// accurate end through migration [default: all but one, as measured in
@@ -341,9 +351,9 @@ pub(crate) struct EvolveArgs {
     pub(crate) error_islands: Option<usize>,
     /// The best N of each island pass to the next generation unchanged, so
     /// that the best filter found is never lost to tournament chance
-    /// [default: 0, the thesis's search, which can lose it].
-    #[arg(long, default_value_t = 0)]
-    pub(crate) elites: usize,
+    /// [quick, thesis: 0, the thesis's search, which can lose it; realtime: 2].
+    #[arg(long)]
+    pub(crate) elites: Option<usize>,
     /// Run directory: checkpoint, log, hall of fame, summary [default: runs/evolve, or
     /// runs/evolve-2, -3, … when it holds a run already; with --resume the newest of them].
     #[arg(short, long)]
@@ -362,8 +372,8 @@ pub(crate) struct EvolveArgs {
     pub(crate) tiles: filterjit::evolve::Tiles,
     /// The weights of the modelled cost that `--objectives error,cost` trades
     /// against error, as `filterjit bench` measured them on this device
-    /// (its `bench.json`, or a file holding just its `cost_model`) [default:
-    /// the operator table's]. Kept in the run's checkpoint.
+    /// (its `bench.json`, or a file holding just its `cost_model`) [quick,
+    /// thesis: the operator table's; realtime: data/cost-model-lavapipe.json]. Kept in the run's checkpoint.
     #[arg(long, value_name = "FILE")]
     pub(crate) cost_model: Option<PathBuf>,
     /// Score fitness on COUNT tiles of SIZExSIZE pixels per training scene
@@ -376,21 +386,23 @@ pub(crate) struct EvolveArgs {
     /// The only features and variances the search may read, e.g.
     /// `color,pixel,normal,texture,worldPosition,depth` for filters meant for
     /// Mitsuba renders (no direct illumination, secondary albedo or per-feature
-    /// variances) [default: every one the training scenes provide]. Kept in the checkpoint.
+    /// variances) [quick, thesis: every one the training scenes provide; realtime:
+    /// color,pixel,normal,texture,worldPosition,depth,colorVariance and the outlier measures]. Kept in the checkpoint.
     #[arg(long, value_delimiter = ',', value_parser = parse_terminal)]
     pub(crate) features: Vec<String>,
     /// Divide each training scene's relMSE by this filter's relMSE on it
     /// (an expression, `@NAME` or `@FILE:NAME`; scored once, through the run's
     /// pipeline, on the same pixels) instead of by the noisy input's: fitness 1
-    /// is the baseline's [default: the noisy input, the thesis's rule]. Kept in the checkpoint.
+    /// is the baseline's [quick, thesis: the noisy input, the thesis's rule; realtime: @svgfAtrous]. Kept in the checkpoint.
     #[arg(long, value_name = "EXPR")]
     pub(crate) fitness_relative_to: Option<String>,
     /// Pool the per-scene ratios by their mean, by the worst scene (with
     /// `--fitness-relative-to`, a fitness below 1 is then better than the
     /// baseline on every training scene), or `guarded`: the mean plus every
-    /// scene's loss against the baseline in full. Kept in the checkpoint.
-    #[arg(long, default_value = "mean", value_name = "mean|worst|guarded")]
-    pub(crate) fitness_pool: filterjit::fitness_rule::Pool,
+    /// scene's loss against the baseline in full [quick, thesis: mean;
+    /// realtime: guarded]. Kept in the checkpoint.
+    #[arg(long, value_name = "mean|worst|guarded")]
+    pub(crate) fitness_pool: Option<filterjit::fitness_rule::Pool>,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
     pub(crate) fuse: filterjit::evolve::Fusion,

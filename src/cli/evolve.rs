@@ -49,63 +49,7 @@ pub(crate) fn evolve_on(
 ) -> Result<()> {
     use filterjit::evolve as ev;
     let root = transport.is_root();
-    let base = filterjit::gp::Settings::default();
-    let (preset, size, spp, reference_spp, radius) = match args.preset {
-        Preset::Quick => {
-            (filterjit::gp::Settings { island_size: 25, generations: 15, ..base.clone() }, (32, 32), 4, 512, 3)
-        }
-        Preset::Thesis => (base.clone(), (64, 64), 4, 1024, 10),
-    };
-    let settings = filterjit::gp::Settings {
-        islands: args.islands.unwrap_or(preset.islands),
-        island_size: args.island_size.unwrap_or(preset.island_size),
-        generations: args.generations.unwrap_or(preset.generations),
-        max_length: args.max_length.unwrap_or(preset.max_length),
-        tournament: args.tournament.unwrap_or(preset.tournament),
-        replication: args.replication.unwrap_or(preset.replication),
-        crossover: args.crossover.unwrap_or(preset.crossover),
-        crossover_mutation: args.crossover_mutation.unwrap_or(preset.crossover_mutation),
-        mutation_weights: args.mutation_weights.clone().unwrap_or(preset.mutation_weights.clone()),
-        migration_interval: args.migration_interval.unwrap_or(preset.migration_interval),
-        seed_share: args.seed_share.unwrap_or(preset.seed_share),
-        hall_of_fame: args.hall_of_fame.unwrap_or(preset.hall_of_fame),
-        seed: args.seed.unwrap_or(preset.seed),
-        simplify_offspring: args.simplify_offspring,
-        objectives: args.objectives,
-        error_islands: match (args.objectives, args.error_islands) {
-            (_, Some(n)) => n,
-            (filterjit::gp::Objectives::ErrorCost, None) => args.islands.unwrap_or(preset.islands).saturating_sub(1),
-            (filterjit::gp::Objectives::Error, None) => 0,
-        },
-        elites: args.elites,
-    };
-    let size = args.render.size.unwrap_or(size);
-    let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
-    let seed_text = resolve_expr(&args.seed_expr)?.to_string();
-    let config = ev::RunConfig {
-        training: if args.scenes.is_empty() { builtin(render::Split::Train) } else { args.scenes.clone() },
-        test: if args.test_scenes.is_empty() { builtin(render::Split::Test) } else { args.test_scenes.clone() },
-        render: render::RenderSettings {
-            width: size.0,
-            height: size.1,
-            spp: args.render.spp.unwrap_or(spp),
-            reference_spp: args.render.reference_spp.unwrap_or(reference_spp),
-            seed: settings.seed as u32,
-        },
-        radius: args.render.radius.unwrap_or(radius),
-        seed_expr: seed_text,
-        pipeline: args.render.pipeline.unwrap_or_default(),
-        cost_model: match &args.cost_model {
-            Some(path) => filterjit::cost::CostModel::read(path).map_err(anyhow::Error::msg)?,
-            None => filterjit::cost::CostModel::table(),
-        },
-        fitness_tiles: args.fitness_tiles,
-        features: (!args.features.is_empty()).then(|| args.features.iter().cloned().collect()),
-        fitness: filterjit::fitness_rule::FitnessRule {
-            relative_to: args.fitness_relative_to.as_deref().map(resolve_expr).transpose()?.map(|e| e.to_string()),
-            pool: args.fitness_pool,
-        },
-    };
+    let (settings, config) = run_settings(&args)?;
     let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {
         Some(dir) => dir.clone(),
@@ -144,8 +88,8 @@ pub(crate) fn evolve_on(
             settings.max_length,
             config.radius,
             config.pipeline,
-            size.0,
-            size.1,
+            config.render.width,
+            config.render.height,
             match config.fitness_tiles {
                 Some(t) => format!(" scored on {} tiles of {}x{} each", t.count, t.size, t.size),
                 None => String::new(),
@@ -274,4 +218,189 @@ pub(crate) fn evolve_on(
         ev::SUMMARY_FILE
     );
     Ok(())
+}
+
+/// What a preset gives every flag left unset.
+struct PresetValues {
+    gp: filterjit::gp::Settings,
+    size: (u32, u32),
+    spp: u32,
+    reference_spp: u32,
+    radius: u32,
+    pipeline: filterjit::pipeline::FilterPipeline,
+    seed_expr: &'static str,
+    objectives: filterjit::gp::Objectives,
+    elites: usize,
+    features: &'static [&'static str],
+    relative_to: Option<&'static str>,
+    pool: filterjit::fitness_rule::Pool,
+    cost_model: fn() -> filterjit::cost::CostModel,
+}
+
+impl PresetValues {
+    fn of(preset: Preset) -> PresetValues {
+        use filterjit::fitness_rule::Pool;
+        use filterjit::gp::Objectives;
+        let base = filterjit::gp::Settings::default();
+        let thesis = PresetValues {
+            gp: base.clone(),
+            size: (64, 64),
+            spp: 4,
+            reference_spp: 1024,
+            radius: 10,
+            pipeline: filterjit::pipeline::FilterPipeline::WINDOW,
+            seed_expr: "@bilateral",
+            objectives: Objectives::Error,
+            elites: 0,
+            features: &[],
+            relative_to: None,
+            pool: Pool::Mean,
+            cost_model: filterjit::cost::CostModel::table,
+        };
+        match preset {
+            Preset::Thesis => thesis,
+            Preset::Quick => PresetValues {
+                gp: filterjit::gp::Settings { island_size: 25, generations: 15, ..base },
+                size: (32, 32),
+                reference_spp: 512,
+                radius: 3,
+                ..thesis
+            },
+            Preset::Realtime => PresetValues {
+                gp: filterjit::gp::Settings { island_size: 40, generations: 30, ..base },
+                size: (128, 128),
+                radius: 3,
+                pipeline: "outliers=2,demodulate,atrous3x3=4".parse().expect("a valid pipeline"),
+                seed_expr: "@svgfAtrous",
+                objectives: Objectives::ErrorCost,
+                elites: 2,
+                features: &[
+                    "color",
+                    "pixel",
+                    "normal",
+                    "texture",
+                    "worldPosition",
+                    "depth",
+                    "colorVariance",
+                    "localMean",
+                    "localStd",
+                    "clampedShare",
+                ],
+                relative_to: Some("@svgfAtrous"),
+                pool: Pool::Guarded,
+                cost_model: filterjit::cost::CostModel::lavapipe,
+                ..thesis
+            },
+        }
+    }
+}
+
+/// The search's settings and the run's configuration: every flag given, the preset's value for the rest.
+fn run_settings(args: &EvolveArgs) -> Result<(filterjit::gp::Settings, filterjit::evolve::RunConfig)> {
+    use filterjit::evolve as ev;
+    let preset = PresetValues::of(args.preset);
+    let objectives = args.objectives.unwrap_or(preset.objectives);
+    let islands = args.islands.unwrap_or(preset.gp.islands);
+    let gp = &preset.gp;
+    let settings = filterjit::gp::Settings {
+        islands,
+        island_size: args.island_size.unwrap_or(gp.island_size),
+        generations: args.generations.unwrap_or(gp.generations),
+        max_length: args.max_length.unwrap_or(gp.max_length),
+        tournament: args.tournament.unwrap_or(gp.tournament),
+        replication: args.replication.unwrap_or(gp.replication),
+        crossover: args.crossover.unwrap_or(gp.crossover),
+        crossover_mutation: args.crossover_mutation.unwrap_or(gp.crossover_mutation),
+        mutation_weights: args.mutation_weights.clone().unwrap_or(gp.mutation_weights.clone()),
+        migration_interval: args.migration_interval.unwrap_or(gp.migration_interval),
+        seed_share: args.seed_share.unwrap_or(gp.seed_share),
+        hall_of_fame: args.hall_of_fame.unwrap_or(gp.hall_of_fame),
+        seed: args.seed.unwrap_or(gp.seed),
+        simplify_offspring: args.simplify_offspring,
+        objectives,
+        error_islands: match (objectives, args.error_islands) {
+            (_, Some(n)) => n,
+            (filterjit::gp::Objectives::ErrorCost, None) => islands.saturating_sub(1),
+            (filterjit::gp::Objectives::Error, None) => 0,
+        },
+        elites: args.elites.unwrap_or(preset.elites),
+    };
+    let size = args.render.size.unwrap_or(preset.size);
+    let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
+    let seed_text = resolve_expr(args.seed_expr.as_deref().unwrap_or(preset.seed_expr))?.to_string();
+    let features: Vec<String> = match args.features.is_empty() {
+        true => preset.features.iter().map(|f| f.to_string()).collect(),
+        false => args.features.clone(),
+    };
+    let relative_to = args.fitness_relative_to.as_deref().or(preset.relative_to);
+    let config = ev::RunConfig {
+        training: if args.scenes.is_empty() { builtin(render::Split::Train) } else { args.scenes.clone() },
+        test: if args.test_scenes.is_empty() { builtin(render::Split::Test) } else { args.test_scenes.clone() },
+        render: render::RenderSettings {
+            width: size.0,
+            height: size.1,
+            spp: args.render.spp.unwrap_or(preset.spp),
+            reference_spp: args.render.reference_spp.unwrap_or(preset.reference_spp),
+            seed: settings.seed as u32,
+        },
+        radius: args.render.radius.unwrap_or(preset.radius),
+        seed_expr: seed_text,
+        pipeline: args.render.pipeline.unwrap_or(preset.pipeline),
+        cost_model: match &args.cost_model {
+            Some(path) => filterjit::cost::CostModel::read(path).map_err(anyhow::Error::msg)?,
+            None => (preset.cost_model)(),
+        },
+        fitness_tiles: args.fitness_tiles,
+        features: (!features.is_empty()).then(|| features.into_iter().collect()),
+        fitness: filterjit::fitness_rule::FitnessRule {
+            relative_to: relative_to.map(resolve_expr).transpose()?.map(|e| e.to_string()),
+            pool: args.fitness_pool.unwrap_or(preset.pool),
+        },
+    };
+    Ok((settings, config))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    fn settings_of(flags: &[&str]) -> (filterjit::gp::Settings, filterjit::evolve::RunConfig) {
+        let cli = Cli::try_parse_from(["filterjit", "evolve"].iter().chain(flags)).expect("valid flags");
+        let Command::Evolve(args) = cli.command else { panic!("an evolve command") };
+        run_settings(&args).expect("settings resolve")
+    }
+
+    #[test]
+    fn the_realtime_preset_is_the_run_that_made_the_shipped_3x3_filter() {
+        let (settings, config) = settings_of(&["--preset", "realtime"]);
+        assert_eq!((settings.islands, settings.island_size, settings.generations, settings.elites), (4, 40, 30, 2));
+        assert_eq!((settings.objectives, settings.error_islands), (filterjit::gp::Objectives::ErrorCost, 3));
+        assert_eq!(config.pipeline.to_string(), "outliers=2,demodulate,atrous3x3=4");
+        assert_eq!((config.render.width, config.render.height, config.render.reference_spp), (128, 128, 1024));
+        let svgf = resolve_expr("@svgfAtrous").unwrap().to_string();
+        assert_eq!(config.seed_expr, svgf);
+        assert_eq!(config.fitness.relative_to, Some(svgf));
+        assert_eq!(config.fitness.pool, filterjit::fitness_rule::Pool::Guarded);
+        assert_eq!(config.cost_model, filterjit::cost::CostModel::lavapipe());
+        let features = config.features.expect("a restricted terminal set");
+        assert!(features.contains("clampedShare") && !features.contains("directIllumination"), "{features:?}");
+        // The shipped filter's comment names this preset's run: its pipeline is the preset's.
+        let shipped = filterjit::corpus::resolve_with_pipeline("@evolvedAtrous3x3").unwrap();
+        assert_eq!(shipped.pipeline, Some(config.pipeline));
+    }
+
+    #[test]
+    fn flags_override_the_preset_and_the_quick_preset_keeps_the_thesis_rules() {
+        let (settings, config) = settings_of(&["--preset", "realtime", "--elites", "0", "--fitness-pool", "mean"]);
+        assert_eq!(settings.elites, 0);
+        assert_eq!(config.fitness.pool, filterjit::fitness_rule::Pool::Mean);
+        let (settings, config) = settings_of(&[]);
+        assert_eq!((settings.island_size, settings.generations, settings.elites), (25, 15, 0));
+        assert_eq!(settings.objectives, filterjit::gp::Objectives::Error);
+        assert!(config.fitness.is_thesis() && config.features.is_none());
+        assert_eq!(config.pipeline, filterjit::pipeline::FilterPipeline::WINDOW);
+        assert_eq!(config.seed_expr, resolve_expr("@bilateral").unwrap().to_string());
+        assert_eq!(config.cost_model, filterjit::cost::CostModel::table());
+    }
 }
