@@ -282,6 +282,21 @@ pub fn export(expr: &Expr, target: Target, format: OutputFormat) -> Result<Expor
     export_pipeline(expr, &FilterPipeline::WINDOW, target, format)
 }
 
+/// A stored filter as an engine gets it: the cheapest equivalent weight
+/// (`simplify`: the same weights), its whole pipeline exported, and the window
+/// radius it was stored with in the manifest.
+pub fn export_filter(
+    expr: &Expr,
+    pipeline: &FilterPipeline,
+    radius: Option<u32>,
+    target: Target,
+    format: OutputFormat,
+) -> Result<Exported, ExportError> {
+    let mut exported = export_pipeline(&crate::simplify::simplify(expr), pipeline, target, format)?;
+    exported.manifest.radius = radius;
+    Ok(exported)
+}
+
 /// [`export`] of `expr` in `pipeline`: the form's shader (one à-trous pass,
 /// dispatched K times, for `atrous=K`) and the pre-pass's where there is one.
 pub fn export_pipeline(

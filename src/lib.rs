@@ -9,6 +9,7 @@ pub mod corpus;
 pub mod cost;
 pub mod cpu;
 pub mod datasets;
+pub mod denoise;
 pub mod environment;
 pub mod evolve;
 pub mod export;

@@ -78,3 +78,17 @@ fn only_exported_shaders_bind_a_uniform() {
     assert_eq!(BindingInterface::prepass(None).params(), Resource::ParamsStorage);
     assert_eq!(BindingInterface::prepass(Some(filterjit::jit::OutputFormat::Rgba16float)).params(), Resource::Uniform);
 }
+
+#[test]
+fn the_python_binding_is_thin() {
+    // python/src/lib.rs turns arrays into `scene::Images` and calls the
+    // library; it reaches no device, compiler or file format of its own, so
+    // `denoise` and `filterjit filter` cannot drift apart.
+    let binding = std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("python/src/lib.rs")).unwrap();
+    for needle in ["wgpu::", "naga::", "exr::", "std::fs", "jit::lower", "SceneBuffers"] {
+        let lines: Vec<&str> =
+            binding.lines().filter(|l| !l.trim_start().starts_with("//") && l.contains(needle)).collect();
+        assert!(lines.is_empty(), "python/src/lib.rs uses `{needle}`: {lines:?}");
+    }
+    assert!(binding.contains("scene::prepare(") && binding.contains("filterjit::denoise::filter("));
+}

@@ -69,9 +69,10 @@ pub(crate) enum Command {
     },
     /// Filter a scene with an expression on the GPU; write the result as EXR and a PNG preview.
     Filter {
-        /// The expression, or @name for a shipped one.
+        /// The expression, @name for a shipped one, or @FILE[:NAME] [default:
+        /// the best shipped filter whose inputs the scene has; stderr says which and why].
         #[arg(long)]
-        expr: String,
+        expr: Option<String>,
         /// Window radius r: the window is (2r+1)² pixels [default: the one
         /// stored with the expression (a front member's `# radius:`), else 5].
         #[arg(long)]

@@ -11,6 +11,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 
+use filterjit::denoise::{Choice, Provided};
 use filterjit::environment::Environment;
 use filterjit::metrics::{self, Errors};
 use filterjit::scene::{self, Absent, Request};
@@ -61,10 +62,8 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                 }
             };
             let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
-            // An engine gets the cheapest equivalent form (the same weights).
-            let expr = filterjit::simplify::simplify(&resolved.expr);
-            let mut exported = filterjit::export::export_pipeline(&expr, &pipeline, target, format)?;
-            exported.manifest.radius = resolved.radius;
+            let mut exported =
+                filterjit::export::export_filter(&resolved.expr, &pipeline, resolved.radius, target, format)?;
             let manifest_path = manifest_path(&output);
             let mut files = vec![(output.clone(), exported.code.to_bytes())];
             if let (Some(code), Some(stage)) = (&exported.prepass, exported.manifest.prepass.as_mut()) {
@@ -136,7 +135,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Filter { expr, radius, scene, output, reference, spp, absent, cpu_check, pipeline } => {
-            filter(env, &expr, radius, &scene, &output, reference, spp, absent, cpu_check, pipeline)
+            filter(env, expr.as_deref(), radius, &scene, &output, reference, spp, absent, cpu_check, pipeline)
         }
         Command::Render { scene, spp, reference_spp, size, seed, output } => {
             render(env, &scene, spp, reference_spp, size, seed, output.as_deref())
@@ -242,7 +241,7 @@ pub(crate) fn resolve_expr(arg: &str) -> Result<lang::Expr> {
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn filter(
     env: &Environment,
-    expr: &str,
+    expr: Option<&str>,
     radius: Option<u32>,
     scene_path: &Path,
     output: &Path,
@@ -252,12 +251,23 @@ pub(crate) fn filter(
     cpu_check: bool,
     pipeline: Option<filterjit::pipeline::FilterPipeline>,
 ) -> Result<()> {
-    let resolved = corpus::resolve_with_pipeline(expr)?;
-    let expr = resolved.expr;
-    let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
-    let radius = radius.or(resolved.radius).unwrap_or(5);
-    let request =
-        Request { reference_path: reference, spp, absent, albedo: pipeline.demodulate, ..Request::for_expr(&expr) };
+    let choice = match expr {
+        Some(expr) => Choice::asked(expr, pipeline, radius)?,
+        None => {
+            let (features, variances) =
+                scene::provides(scene_path).with_context(|| format!("reading scene {}", scene_path.display()))?;
+            let choice = Choice::asked_or_best(None, pipeline, radius, &Provided::new(features, variances))?;
+            eprintln!(
+                "filter    {} (pipeline {}): {}",
+                choice.describe(),
+                choice.pipeline,
+                choice.chosen_because.as_deref().unwrap_or_default()
+            );
+            choice
+        }
+    };
+    let (expr, pipeline, radius) = (&choice.expr, choice.pipeline, choice.radius);
+    let request = Request { reference_path: reference, spp, absent, ..choice.request() };
     let load_start = Instant::now();
     let scene = scene::load(scene_path, &request).with_context(|| format!("loading scene {}", scene_path.display()))?;
     let load_time = load_start.elapsed();
@@ -268,8 +278,7 @@ pub(crate) fn filter(
     }
 
     let compile_start = Instant::now();
-    let shape = jit::Shape::of(&pipeline);
-    let kernel = jit::compile_shaped(&expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
+    let kernel = choice.compile()?;
     let lower_validate = compile_start.elapsed();
     let gpu = gpu::Gpu::open(&env.adapter)?;
     let prepass_start = Instant::now();
@@ -343,7 +352,7 @@ pub(crate) fn filter(
         None => println!("error     no reference image: errors not computed"),
     }
     if cpu_check {
-        let reference = cpu::filter_pipeline(&expr, &scene, &pipeline, radius)?;
+        let reference = cpu::filter_pipeline(expr, &scene, &pipeline, radius)?;
         let worst = rgb
             .iter()
             .zip(&reference.color)

@@ -122,9 +122,16 @@ impl Layout {
                 })
                 .collect();
         }
-        let n = channels.len().max(1) as f32;
-        (0..pixels).map(|p| channels.iter().map(|c| c[p]).sum::<f32>() / n).collect()
+        channel_mean(channels)
     }
+}
+
+/// The per-pixel mean over `channels` (a colour variance's R, G and B), in f32
+/// in channel order, as every renderer's variance is read.
+pub fn channel_mean(channels: &[Vec<f32>]) -> Vec<f32> {
+    let pixels = channels.first().map_or(0, Vec::len);
+    let n = channels.len().max(1) as f32;
+    (0..pixels).map(|p| channels.iter().map(|c| c[p]).sum::<f32>() / n).collect()
 }
 
 /// The first alternative whose channels all exist.

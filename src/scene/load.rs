@@ -1,52 +1,128 @@
 //! `load`: a dataset's files into a [`Scene`], decoding only the channels a
-//! [`Request`] names. In order: plan the noisy image's channels (so it is
-//! decoded once), decode them, then the features (stored and gradients), the
-//! variances (in the noisy image or `variance.exr`), the reference and the metadata.
+//! [`Request`] names, in two steps: the files are decoded into the renderer's
+//! raw [`Images`] (the noisy image's channels planned so it is decoded once,
+//! then the variances in the noisy image or `variance.exr`, the reference and
+//! the metadata), and [`prepare`] makes the scene from them. Images that
+//! never were files (arrays handed over from Python) take the second step alone.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use std::path::Path;
 
 use super::import::{pick, Layout};
-use super::{exr_io, locate, preprocess, Absent, Files, Request, Scene, SceneError};
+use super::{exr_io, locate, preprocess, Absent, Images, Origin, Request, Scene, SceneError};
 use crate::lang::{Feature, FeatureSource, ScalarVar};
 use crate::semantics::COLOR_LIMIT;
 
 /// Load a scene: a directory holding `noisy.exr` (and `reference.exr`,
 /// `variance.exr`, `meta.json` where present), or a noisy EXR file.
 pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
+    prepare(decode(path, request)?, request)
+}
+
+/// The raw images of the dataset at `path` that `request` needs.
+fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
     let files = locate(path, request)?;
     let (channels, width, height) = exr_io::channel_names(&files.noisy)?;
     if width == 0 || height == 0 {
         return Err(SceneError::Empty { file: files.noisy.clone() });
     }
     let layout = Layout::detect(&channels);
-    let plan = NoisyPlan::new(layout, &channels, request, &files)?;
+    let plan = NoisyPlan::new(layout, &channels, request, &files.noisy)?;
     let noisy = exr_io::read_channels(&files.noisy, &plan.names)?;
-    let mut loader = Loader { request, files: &files, layout, channels: &channels, width, height, notes: Vec::new() };
-
-    let gathered = |range: &Range<usize>| gather(&noisy.data, range, width * height);
-    let color = loader.sanitized("noisy colour", gathered(&plan.color), COLOR_LIMIT);
-    let albedo = plan.albedo.as_ref().map(|range| loader.sanitized("albedo", gathered(range), f32::MAX));
-    let features = loader.features(&plan, &noisy.data)?;
-    let variances = loader.variances(&plan, &noisy.data)?;
-    let reference = if request.reference { loader.reference()? } else { None };
+    let pixels = width * height;
+    let gathered = |range: &Range<usize>| gather(&noisy.data, range, pixels);
+    let mut variances: BTreeMap<ScalarVar, Vec<f32>> =
+        plan.variances.iter().map(|(v, range)| (*v, layout.variance_values(&noisy.data[range.clone()]))).collect();
+    if let Some(file) = &files.variance {
+        if !plan.separate_variances.is_empty() {
+            let (names, w, h) = exr_io::channel_names(file)?;
+            check_size(file, (w, h), &files.noisy, (width, height))?;
+            for (v, alternatives) in &plan.separate_variances {
+                if let Some(chosen) = pick(alternatives, &names) {
+                    variances.insert(*v, layout.variance_values(&exr_io::read_channels(file, chosen)?.data));
+                }
+            }
+        }
+    }
+    let reference = match (&files.reference, request.reference) {
+        (Some(file), true) => Some(read_reference(file, layout, &files.noisy, (width, height))?),
+        _ => None,
+    };
     let (meta_spp, meta_name) = match &files.meta {
         Some(meta) => read_meta(meta)?,
         None => (None, None),
     };
-    Ok(Scene {
+    let provided = Feature::ALL
+        .iter()
+        .copied()
+        .filter(|f| f.source() == FeatureSource::Stored(*f) && pick(layout.feature(*f), &channels).is_some())
+        .collect();
+    Ok(Images {
         name: meta_name.unwrap_or_else(|| files.name.clone()),
         width,
         height,
-        spp: request.spp.or(meta_spp),
-        layout: Some(layout.name()),
+        spp: meta_spp,
+        origin: Origin::File { layout: layout.name(), file: files.noisy.clone() },
+        color: gathered(&plan.color),
+        features: plan.features.iter().map(|(f, range)| (*f, gathered(range))).collect(),
+        provided,
+        variances,
+        reference,
+    })
+}
+
+/// A scene from a renderer's raw images: every image sanitised (non-finite
+/// values to 0, colour limited), stored features normalised, gradients taken,
+/// variances normalised, and inputs the request names but the images lack
+/// refused or read as zero (`request.absent`). `request.spp` overrides the images'.
+pub fn prepare(images: Images, request: &Request) -> Result<Scene, SceneError> {
+    let Images { name, width, height, spp, origin, color, features: stored, provided, mut variances, reference } =
+        images;
+    let mut preparer = Preparer { request, name: &name, origin: &origin, provided: &provided, notes: Vec::new() };
+    let color = preparer.sanitized("noisy colour", color, COLOR_LIMIT);
+    let albedo = match request.albedo {
+        false => None,
+        true => match stored.get(&Feature::Texture) {
+            Some(albedo) => Some(preparer.sanitized("albedo", albedo.clone(), f32::MAX)),
+            None => return Err(SceneError::MissingAlbedo { scene: name.clone(), origin: origin.clone() }),
+        },
+    };
+    let features = preparer.features(stored, width, height)?;
+    let mut prepared = BTreeMap::new();
+    // `level` and the outlier measures are no stored channels: the pipeline supplies them.
+    for &v in request.variances.iter().filter(|v| v.is_stored()) {
+        let values = match variances.remove(&v) {
+            Some(values) => {
+                let mut values = preparer.sanitized(v, values, f32::MAX);
+                let scale = preprocess::normalise_scalars(&mut values);
+                preparer.notes.push(format!("{v}: divided by {scale:.6e}"));
+                values
+            }
+            None => {
+                preparer.absent(v.name())?;
+                vec![0.0; width * height]
+            }
+        };
+        prepared.insert(v, values);
+    }
+    let reference = match (reference, request.reference) {
+        (Some(reference), true) => Some(preparer.sanitized("reference", reference, COLOR_LIMIT)),
+        _ => None,
+    };
+    let notes = preparer.notes;
+    Ok(Scene {
+        name,
+        width,
+        height,
+        spp: request.spp.or(spp),
+        layout: origin.layout(),
         color,
         reference,
         features,
-        variances,
+        variances: prepared,
         albedo,
-        notes: loader.notes,
+        notes,
     })
 }
 
@@ -55,18 +131,16 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
 struct NoisyPlan {
     names: Vec<&'static str>,
     color: Range<usize>,
-    /// The stored features the request's features are made from (a gradient
-    /// from its base), where the image has them.
-    bases: BTreeSet<Feature>,
+    /// The stored features the request's features (and the albedo) are made
+    /// from (a gradient from its base), where the image has them.
     features: BTreeMap<Feature, Range<usize>>,
-    albedo: Option<Range<usize>>,
     variances: BTreeMap<ScalarVar, Range<usize>>,
     /// Variances the layout keeps in `variance.exr`: their channel alternatives.
     separate_variances: BTreeMap<ScalarVar, &'static [&'static [&'static str]]>,
 }
 
 impl NoisyPlan {
-    fn new(layout: Layout, channels: &[String], request: &Request, files: &Files) -> Result<NoisyPlan, SceneError> {
+    fn new(layout: Layout, channels: &[String], request: &Request, noisy: &Path) -> Result<NoisyPlan, SceneError> {
         let mut names: Vec<&'static str> = Vec::new();
         let mut plan = |alternatives| -> Option<Range<usize>> {
             let chosen = pick(alternatives, channels)?;
@@ -75,41 +149,22 @@ impl NoisyPlan {
             Some(start..names.len())
         };
         let color = plan(layout.color()).ok_or_else(|| SceneError::MissingChannel {
-            file: files.noisy.clone(),
+            file: noisy.to_path_buf(),
             channel: "R, G, B".into(),
             available: channels.to_vec(),
         })?;
-        let bases: BTreeSet<Feature> = request
-            .features
-            .iter()
-            .filter_map(|f| match f.source() {
-                FeatureSource::Stored(b) | FeatureSource::Gradient(b) if b != Feature::Color => Some(b),
-                _ => None,
-            })
-            .collect();
+        let mut bases = stored_bases(request);
+        if request.albedo {
+            bases.insert(Feature::Texture);
+        }
         let mut features = BTreeMap::new();
-        for &base in &bases {
+        for base in bases {
             if let Some(range) = plan(layout.feature(base)) {
                 features.insert(base, range);
             }
         }
-        let albedo = match request.albedo {
-            false => None,
-            true => Some(
-                features
-                    .get(&Feature::Texture)
-                    .cloned()
-                    .or_else(|| plan(layout.feature(Feature::Texture)))
-                    .ok_or_else(|| SceneError::MissingAlbedo {
-                        scene: files.name.clone(),
-                        layout: layout.name(),
-                        file: files.noisy.clone(),
-                    })?,
-            ),
-        };
         let mut variances = BTreeMap::new();
         let mut separate_variances = BTreeMap::new();
-        // `level` is no stored channel: the pipeline supplies it.
         for &v in request.variances.iter().filter(|v| v.is_stored()) {
             let (alternatives, separate) = layout.variance(v);
             if separate {
@@ -118,8 +173,20 @@ impl NoisyPlan {
                 variances.insert(v, range);
             }
         }
-        Ok(NoisyPlan { names, color, bases, features, albedo, variances, separate_variances })
+        Ok(NoisyPlan { names, color, features, variances, separate_variances })
     }
+}
+
+/// The stored features the request's features are made from (a gradient from its base).
+fn stored_bases(request: &Request) -> BTreeSet<Feature> {
+    request
+        .features
+        .iter()
+        .filter_map(|f| match f.source() {
+            FeatureSource::Stored(b) | FeatureSource::Gradient(b) if b != Feature::Color => Some(b),
+            _ => None,
+        })
+        .collect()
 }
 
 /// Decoded channels `range` as RGB pixels.
@@ -150,18 +217,16 @@ impl Values for Vec<f32> {
     }
 }
 
-/// What every step of a load needs, and the notes it collects for the user.
-struct Loader<'a> {
+/// What every step of [`prepare`] needs, and the notes it collects for the user.
+struct Preparer<'a> {
     request: &'a Request,
-    files: &'a Files,
-    layout: Layout,
-    channels: &'a [String],
-    width: usize,
-    height: usize,
+    name: &'a str,
+    origin: &'a Origin,
+    provided: &'a BTreeSet<Feature>,
     notes: Vec<String>,
 }
 
-impl Loader<'_> {
+impl Preparer<'_> {
     /// `values` with non-finite entries replaced by 0 and magnitudes limited
     /// to `limit`, noting how many there were.
     fn sanitized<T: Values>(&mut self, what: impl std::fmt::Display, mut values: T, limit: f32) -> T {
@@ -172,136 +237,106 @@ impl Loader<'_> {
         values
     }
 
-    /// An input the scene lacks: refused, or read as 0 with a note (`--absent`).
+    /// An input the scene lacks: refused, or read as 0 with a note (`Absent`).
     fn absent(&mut self, what: &str) -> Result<(), SceneError> {
         match self.request.absent {
             Absent::Refuse => Err(SceneError::MissingFeature {
-                scene: self.files.name.clone(),
+                scene: self.name.to_string(),
                 feature: what.to_string(),
-                layout: self.layout.name(),
-                file: self.files.noisy.clone(),
-                provided: Feature::ALL
+                origin: self.origin.clone(),
+                provided: self
+                    .provided
                     .iter()
-                    .filter(|f| {
-                        f.source() == FeatureSource::Stored(**f)
-                            && pick(self.layout.feature(**f), self.channels).is_some()
-                    })
                     .map(|f| f.name().to_string())
                     .chain(["color".into(), "pixel".into()])
                     .collect(),
             }),
             Absent::Zero => {
-                self.notes.push(format!("`{what}` is absent from this scene and is read as 0 (--absent zero)"));
+                self.notes.push(format!("`{what}` is absent from this scene and is read as 0"));
                 Ok(())
             }
         }
     }
 
     /// The requested features: stored ones normalised, gradients by Sobel of
-    /// their normalised base; a base the image lacks is zero (and absent).
+    /// their normalised base; a base the images lack is zero (and absent).
     fn features(
         &mut self,
-        plan: &NoisyPlan,
-        data: &[Vec<f32>],
+        mut raw: BTreeMap<Feature, Vec<[f32; 3]>>,
+        width: usize,
+        height: usize,
     ) -> Result<BTreeMap<Feature, Vec<[f32; 3]>>, SceneError> {
-        let pixels = self.width * self.height;
+        let pixels = width * height;
         let mut stored = BTreeMap::new();
-        for &base in &plan.bases {
-            let Some(range) = plan.features.get(&base) else {
-                stored.insert(base, vec![[0f32; 3]; pixels]);
+        for base in stored_bases(self.request) {
+            let Some(values) = raw.remove(&base) else {
+                stored.insert(base, None);
                 continue;
             };
-            let mut values = self.sanitized(base, gather(data, range, pixels), f32::MAX);
+            let mut values = self.sanitized(base, values, f32::MAX);
             let scale = preprocess::normalise_vectors(&mut values);
             self.notes.push(format!("{base}: divided by {scale:.6} (99.9th percentile of lengths)"));
-            stored.insert(base, values);
+            stored.insert(base, Some(values));
         }
+        let zeros = || vec![[0f32; 3]; pixels];
         let mut features = BTreeMap::new();
         for &f in &self.request.features {
             match f.source() {
                 FeatureSource::Stored(Feature::Color) | FeatureSource::Coordinates => {}
                 FeatureSource::Stored(base) => {
-                    if !plan.features.contains_key(&base) {
-                        self.absent(f.name())?;
-                    }
-                    features.insert(f, stored[&base].clone());
+                    let values = match &stored[&base] {
+                        Some(values) => values.clone(),
+                        None => {
+                            self.absent(f.name())?;
+                            zeros()
+                        }
+                    };
+                    features.insert(f, values);
                 }
                 FeatureSource::Gradient(base) => {
-                    let mut g = preprocess::sobel(&stored[&base], self.width, self.height);
-                    if plan.features.contains_key(&base) {
-                        let scale = preprocess::normalise_vectors(&mut g);
-                        self.notes.push(format!("{f}: Sobel magnitude divided by {scale:.6}"));
-                    } else {
-                        self.absent(f.name())?;
-                    }
+                    let g = match &stored[&base] {
+                        Some(values) => {
+                            let mut g = preprocess::sobel(values, width, height);
+                            let scale = preprocess::normalise_vectors(&mut g);
+                            self.notes.push(format!("{f}: Sobel magnitude divided by {scale:.6}"));
+                            g
+                        }
+                        None => {
+                            self.absent(f.name())?;
+                            preprocess::sobel(&zeros(), width, height)
+                        }
+                    };
                     features.insert(f, g);
                 }
             }
         }
         Ok(features)
     }
+}
 
-    /// The requested stored variances, from the noisy image or `variance.exr`, normalised.
-    fn variances(&mut self, plan: &NoisyPlan, data: &[Vec<f32>]) -> Result<BTreeMap<ScalarVar, Vec<f32>>, SceneError> {
-        let mut variances = BTreeMap::new();
-        // `level` is no stored channel: the pipeline supplies it.
-        for &v in self.request.variances.iter().filter(|v| v.is_stored()) {
-            let values = if let Some(range) = plan.variances.get(&v) {
-                Some(self.layout.variance_values(&data[range.clone()]))
-            } else if let (Some(alternatives), Some(file)) = (plan.separate_variances.get(&v), &self.files.variance) {
-                let (channels, w, h) = exr_io::channel_names(file)?;
-                self.check_size(file, (w, h))?;
-                match pick(alternatives, &channels) {
-                    Some(chosen) => Some(self.layout.variance_values(&exr_io::read_channels(file, chosen)?.data)),
-                    None => None,
-                }
-            } else {
-                None
-            };
-            let values = match values {
-                Some(values) => {
-                    let mut values = self.sanitized(v, values, f32::MAX);
-                    let scale = preprocess::normalise_scalars(&mut values);
-                    self.notes.push(format!("{v}: divided by {scale:.6e}"));
-                    values
-                }
-                None => {
-                    self.absent(v.name())?;
-                    vec![0.0; self.width * self.height]
-                }
-            };
-            variances.insert(v, values);
-        }
-        Ok(variances)
-    }
+/// The reference image's colour.
+fn read_reference(
+    file: &Path,
+    layout: Layout,
+    noisy: &Path,
+    expected: (usize, usize),
+) -> Result<Vec<[f32; 3]>, SceneError> {
+    let (channels, w, h) = exr_io::channel_names(file)?;
+    check_size(file, (w, h), noisy, expected)?;
+    let chosen = pick(layout.color(), &channels).ok_or_else(|| SceneError::MissingChannel {
+        file: file.to_path_buf(),
+        channel: "R, G, B".into(),
+        available: channels.clone(),
+    })?;
+    let data = exr_io::read_channels(file, chosen)?.data;
+    Ok((0..w * h).map(|p| [data[0][p], data[1][p], data[2][p]]).collect())
+}
 
-    /// The reference image, where the dataset has one.
-    fn reference(&mut self) -> Result<Option<Vec<[f32; 3]>>, SceneError> {
-        let Some(file) = &self.files.reference else { return Ok(None) };
-        let (channels, w, h) = exr_io::channel_names(file)?;
-        self.check_size(file, (w, h))?;
-        let chosen = pick(self.layout.color(), &channels).ok_or_else(|| SceneError::MissingChannel {
-            file: file.clone(),
-            channel: "R, G, B".into(),
-            available: channels.clone(),
-        })?;
-        let data = exr_io::read_channels(file, chosen)?.data;
-        let rgb: Vec<[f32; 3]> = (0..w * h).map(|p| [data[0][p], data[1][p], data[2][p]]).collect();
-        Ok(Some(self.sanitized("reference", rgb, COLOR_LIMIT)))
+fn check_size(file: &Path, size: (usize, usize), noisy: &Path, expected: (usize, usize)) -> Result<(), SceneError> {
+    if size != expected {
+        return Err(SceneError::SizeMismatch { file: file.to_path_buf(), size, noisy: noisy.to_path_buf(), expected });
     }
-
-    fn check_size(&self, file: &Path, size: (usize, usize)) -> Result<(), SceneError> {
-        let expected = (self.width, self.height);
-        if size != expected {
-            return Err(SceneError::SizeMismatch {
-                file: file.to_path_buf(),
-                size,
-                noisy: self.files.noisy.clone(),
-                expected,
-            });
-        }
-        Ok(())
-    }
+    Ok(())
 }
 
 /// Samples per pixel and scene name from Mitsuba's `meta.json` (`noisy.spp`,

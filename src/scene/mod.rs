@@ -6,7 +6,7 @@ pub mod import;
 mod load;
 pub mod preprocess;
 
-pub use load::load;
+pub use load::{load, prepare};
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -22,13 +22,15 @@ pub enum SceneError {
     Exr { file: PathBuf, message: String },
     #[error("{}: no channel `{channel}` (the file has: {})", file.display(), available.join(", "))]
     MissingChannel { file: PathBuf, channel: String, available: Vec<String> },
-    #[error("scene `{scene}` has no `{feature}` ({layout} data from {} provides: {}); \
-             the expression needs it. Use an expression without it, or pass --absent zero to read it as 0",
-            file.display(), provided.join(", "))]
-    MissingFeature { scene: String, feature: String, layout: &'static str, file: PathBuf, provided: Vec<String> },
-    #[error("scene `{scene}` has no albedo ({layout} data from {} has no texture/albedo channels); \
-             demodulation divides by it: use a pipeline without `demodulate`", file.display())]
-    MissingAlbedo { scene: String, layout: &'static str, file: PathBuf },
+    #[error("scene `{scene}` has no `{feature}` ({origin} provides: {}); \
+             the expression needs it. Use an expression without it, or have absent inputs read as 0 \
+             (`--absent zero`)", provided.join(", "))]
+    MissingFeature { scene: String, feature: String, origin: Origin, provided: Vec<String> },
+    #[error(
+        "scene `{scene}` has no albedo ({origin} has no texture/albedo); \
+             demodulation divides by it: use a pipeline without `demodulate`"
+    )]
+    MissingAlbedo { scene: String, origin: Origin },
     #[error("{}: image is {}x{}, but the noisy image {} is {}x{}", file.display(), size.0, size.1, noisy.display(), expected.0, expected.1)]
     SizeMismatch { file: PathBuf, size: (usize, usize), noisy: PathBuf, expected: (usize, usize) },
     #[error("{}: no noisy image here (expected {} or an .exr file)", path.display(), NOISY_FILE)]
@@ -87,6 +89,56 @@ impl Request {
     pub fn for_expr(expr: &Expr) -> Self {
         Request { features: expr.features(), variances: expr.stored_variables(), reference: true, ..Default::default() }
     }
+}
+
+/// Where a scene's images came from, for messages.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Origin {
+    /// A renderer's EXR files, read by their channel layout.
+    File { layout: &'static str, file: PathBuf },
+    /// Arrays handed over in memory (the Python module's `denoise`).
+    Arrays,
+}
+
+impl Origin {
+    /// The renderer's channel layout, for files.
+    pub fn layout(&self) -> Option<&'static str> {
+        match self {
+            Origin::File { layout, .. } => Some(layout),
+            Origin::Arrays => None,
+        }
+    }
+}
+
+impl std::fmt::Display for Origin {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Origin::File { layout, file } => write!(f, "{layout} data from {}", file.display()),
+            Origin::Arrays => f.write_str("the arrays given"),
+        }
+    }
+}
+
+/// A scene's images as its renderer made them, before [`prepare`] sanitises
+/// and normalises them: what a dataset's files hold, or arrays in memory.
+#[derive(Clone, Debug)]
+pub struct Images {
+    pub name: String,
+    pub width: usize,
+    pub height: usize,
+    /// Samples per pixel of the noisy colour, when known.
+    pub spp: Option<u32>,
+    pub origin: Origin,
+    /// Noisy colour, `width`×`height` pixels, row-major.
+    pub color: Vec<[f32; 3]>,
+    /// Stored features (never colour, pixel or gradients), zero-padded to 3
+    /// components; the texture feature doubles as the albedo demodulation divides by.
+    pub features: BTreeMap<Feature, Vec<[f32; 3]>>,
+    /// The stored features the source has, decoded or not (for messages).
+    pub provided: BTreeSet<Feature>,
+    /// Per-pixel scalar variances (a colour variance is the mean over its channels).
+    pub variances: BTreeMap<ScalarVar, Vec<f32>>,
+    pub reference: Option<Vec<[f32; 3]>>,
 }
 
 /// A loaded scene. Features are normalised and zero-padded to 3 components.

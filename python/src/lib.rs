@@ -1,0 +1,391 @@
+//! `filterjit._filterjit`: the Python binding, thin by design. Arrays become
+//! `scene::Images`, and everything else is the library's: the same filter
+//! choice (`denoise::Choice`), the same scene preparation (`scene::prepare`),
+//! kernels and device code as `filterjit filter`, so that both give the same
+//! pixels. `python/filterjit/__init__.py` re-exports these functions.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::sync::{Arc, Mutex};
+
+use clap::ValueEnum;
+use numpy::{PyArray1, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::{PyBytes, PyDict};
+
+use filterjit::denoise::{Choice, Provided};
+use filterjit::environment::Environment;
+use filterjit::export::{Code, Target};
+use filterjit::gpu::Gpu;
+use filterjit::jit::{self, OutputFormat, ValidatedKernel};
+use filterjit::lang::{Feature, ScalarVar};
+use filterjit::pipeline::FilterPipeline;
+use filterjit::scene::{self, import, Images, Origin};
+
+/// The device, opened on first use and kept for the process (adapter chosen
+/// as the command line chooses it, from `FILTERJIT_BACKEND` and `FILTERJIT_ADAPTER`).
+static DEVICE: Mutex<Option<Arc<Gpu>>> = Mutex::new(None);
+
+/// Kernels compiled in this process, by filter, pipeline and radius.
+type KernelCache = Mutex<HashMap<(String, String), Arc<ValidatedKernel>>>;
+static KERNELS: std::sync::LazyLock<KernelCache> = std::sync::LazyLock::new(Default::default);
+
+fn device() -> PyResult<Arc<Gpu>> {
+    let mut held = DEVICE.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some(gpu) = held.as_ref() {
+        return Ok(gpu.clone());
+    }
+    let env = Environment::read().map_err(runtime)?;
+    let gpu = Arc::new(Gpu::open(&env.adapter).map_err(runtime)?);
+    *held = Some(gpu.clone());
+    Ok(gpu)
+}
+
+fn value(e: impl Into<anyhow::Error>) -> PyErr {
+    PyValueError::new_err(format!("{:#}", e.into()))
+}
+
+fn runtime(e: impl Into<anyhow::Error>) -> PyErr {
+    PyRuntimeError::new_err(format!("{:#}", e.into()))
+}
+
+/// An image argument read into row-major pixels: a float32 array of shape
+/// (H, W, C) or (H, W) (C = 1), every value finite.
+struct Image {
+    height: usize,
+    width: usize,
+    channels: usize,
+    values: Vec<f32>,
+}
+
+impl Image {
+    fn read(name: &str, array: &Bound<'_, PyAny>) -> PyResult<Image> {
+        let untyped = array.cast::<PyUntypedArray>().map_err(|_| {
+            PyTypeError::new_err(format!(
+                "`{name}` must be a numpy array of float32, not {}",
+                array.get_type().name().map(|n| n.to_string()).unwrap_or_else(|_| "this object".into())
+            ))
+        })?;
+        let typed = untyped.cast::<PyArrayDyn<f32>>().map_err(|_| {
+            PyTypeError::new_err(format!(
+                "`{name}` has dtype {}, but filterjit takes float32 (convert with `.astype(numpy.float32)`)",
+                untyped.dtype()
+            ))
+        })?;
+        let shape = typed.shape().to_vec();
+        let (height, width, channels) = match shape[..] {
+            [h, w] => (h, w, 1),
+            [h, w, c] => (h, w, c),
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "`{name}` has shape {shape:?}; images are (height, width, channels) or (height, width)"
+                )))
+            }
+        };
+        if height == 0 || width == 0 {
+            return Err(PyValueError::new_err(format!("`{name}` is empty (shape {shape:?})")));
+        }
+        let readonly = typed.readonly();
+        let values: Vec<f32> = readonly.as_array().iter().copied().collect();
+        if let Some(k) = values.iter().position(|v| !v.is_finite()) {
+            let c = k % channels;
+            let (y, x) = ((k / channels) / width, (k / channels) % width);
+            return Err(PyValueError::new_err(format!(
+                "`{name}` has a non-finite value ({}) at row {y}, column {x}, channel {c}",
+                values[k]
+            )));
+        }
+        Ok(Image { height, width, channels, values })
+    }
+
+    /// This image as RGB pixels, checked to be `size` with one of `channels`
+    /// (1 channel fills the first component, as a depth channel is stored).
+    fn pixels(&self, name: &str, size: (usize, usize), channels: &[usize]) -> PyResult<Vec<[f32; 3]>> {
+        if (self.height, self.width) != size || !channels.contains(&self.channels) {
+            let wanted: Vec<String> = channels.iter().map(|c| format!("({}, {}, {c})", size.0, size.1)).collect();
+            return Err(PyValueError::new_err(format!(
+                "`{name}` has shape ({}, {}, {}), but `color` is ({}, {}, 3): `{name}` must be {}",
+                self.height,
+                self.width,
+                self.channels,
+                size.0,
+                size.1,
+                wanted.join(" or ")
+            )));
+        }
+        Ok(self
+            .values
+            .chunks_exact(self.channels)
+            .map(|c| {
+                let mut p = [0.0; 3];
+                p[..c.len()].copy_from_slice(c);
+                p
+            })
+            .collect())
+    }
+
+    /// The per-pixel mean over channels, as every renderer's variance is read.
+    fn channel_mean(&self) -> Vec<f32> {
+        let planes: Vec<Vec<f32>> =
+            (0..self.channels).map(|c| self.values.iter().skip(c).step_by(self.channels).copied().collect()).collect();
+        import::channel_mean(&planes)
+    }
+}
+
+fn rgb(name: &str, array: &Bound<'_, PyAny>) -> PyResult<(usize, usize, Vec<[f32; 3]>)> {
+    let image = Image::read(name, array)?;
+    let size = (image.height, image.width);
+    Ok((size.0, size.1, image.pixels(name, size, &[3])?))
+}
+
+fn parse_pipeline(pipeline: Option<&str>) -> PyResult<Option<FilterPipeline>> {
+    pipeline.map(|p| p.parse::<FilterPipeline>().map_err(value)).transpose()
+}
+
+/// Denoise a render. See `filterjit.denoise`'s docstring (python/filterjit/__init__.py).
+#[pyfunction]
+#[pyo3(signature = (color, *, albedo=None, normal=None, position=None, depth=None, variance=None,
+                    spp=None, filter=None, pipeline=None, radius=None))]
+#[allow(clippy::too_many_arguments)]
+fn denoise<'py>(
+    py: Python<'py>,
+    color: &Bound<'py, PyAny>,
+    albedo: Option<&Bound<'py, PyAny>>,
+    normal: Option<&Bound<'py, PyAny>>,
+    position: Option<&Bound<'py, PyAny>>,
+    depth: Option<&Bound<'py, PyAny>>,
+    variance: Option<&Bound<'py, PyAny>>,
+    spp: Option<u32>,
+    filter: Option<&str>,
+    pipeline: Option<&str>,
+    radius: Option<u32>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let (height, width, color) = rgb("color", color)?;
+    let size = (height, width);
+    let mut features = BTreeMap::new();
+    for (name, array, feature, channels) in [
+        ("albedo", albedo, Feature::Texture, &[3][..]),
+        ("normal", normal, Feature::Normal, &[3]),
+        ("position", position, Feature::WorldPosition, &[3]),
+        ("depth", depth, Feature::Depth, &[1]),
+    ] {
+        if let Some(array) = array {
+            features.insert(feature, Image::read(name, array)?.pixels(name, size, channels)?);
+        }
+    }
+    let mut variances = BTreeMap::new();
+    if let Some(array) = variance {
+        let image = Image::read("variance", array)?;
+        image.pixels("variance", size, &[1, 3])?;
+        variances.insert(ScalarVar::ColorVariance, image.channel_mean());
+    }
+    let provided: BTreeSet<Feature> = features.keys().copied().collect();
+    let choice = Choice::asked_or_best(
+        filter,
+        parse_pipeline(pipeline)?,
+        radius,
+        &Provided::new(provided.clone(), variances.keys().copied().collect()),
+    )
+    .map_err(value)?;
+    let missing = choice.missing(&Provided::new(provided.clone(), variances.keys().copied().collect()));
+    if !missing.is_empty() {
+        let arguments: Vec<String> = missing.iter().map(|m| argument_for(m)).collect();
+        return Err(PyValueError::new_err(format!(
+            "filter {} (pipeline {}) reads {}, which the call does not give: {}",
+            choice.describe(),
+            choice.pipeline,
+            missing.join(", "),
+            arguments.join("; ")
+        )));
+    }
+    let images = Images {
+        name: "arrays".into(),
+        width,
+        height,
+        spp,
+        origin: Origin::Arrays,
+        color,
+        features,
+        provided,
+        variances,
+        reference: None,
+    };
+    let request = scene::Request { reference: false, ..choice.request() };
+    let scene = scene::prepare(images, &request).map_err(value)?;
+    let kernel = kernel(&choice)?;
+    let gpu = device()?;
+    let filtered = py.detach(|| filterjit::denoise::filter(&gpu, &choice, &kernel, &scene)).map_err(runtime)?;
+    let flat: Vec<f32> = filtered.color.iter().flat_map(|c| [c[0], c[1], c[2]]).collect();
+    Ok(PyArray1::from_vec(py, flat).reshape([height, width, 3])?.into_any())
+}
+
+/// How a caller gives the input a filter reads (`Choice::missing`'s names).
+fn argument_for(input: &str) -> String {
+    let name = input.split_whitespace().next().unwrap_or(input);
+    let argument = INPUTS.iter().find(|(_, f)| f.map(Feature::name) == Some(name));
+    match (argument, name == ScalarVar::ColorVariance.name()) {
+        (Some((argument, _)), _) => format!("pass {argument}="),
+        (None, true) => "pass variance=".to_string(),
+        (None, false) => format!("`{name}` is no input of denoise: choose a filter without it"),
+    }
+}
+
+/// `denoise`'s keyword arguments for stored features (variance is a variance).
+const INPUTS: [(&str, Option<Feature>); 5] = [
+    ("albedo", Some(Feature::Texture)),
+    ("normal", Some(Feature::Normal)),
+    ("position", Some(Feature::WorldPosition)),
+    ("depth", Some(Feature::Depth)),
+    ("variance", None),
+];
+
+/// The choice's kernel, compiled once a process.
+fn kernel(choice: &Choice) -> PyResult<Arc<ValidatedKernel>> {
+    let key = (choice.expr.to_string(), choice.pipeline.to_string());
+    let mut kernels = KERNELS.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+    if let Some(kernel) = kernels.get(&key) {
+        return Ok(kernel.clone());
+    }
+    let kernel = Arc::new(choice.compile().map_err(value)?);
+    kernels.insert(key, kernel.clone());
+    Ok(kernel)
+}
+
+/// The shipped filter `denoise` takes for the inputs named (a list of
+/// `albedo`, `normal`, `position`, `depth`, `variance`): (name, pipeline, why).
+#[pyfunction]
+fn choose(inputs: Vec<String>) -> PyResult<(String, String, String)> {
+    let mut features = BTreeSet::new();
+    let mut variances = BTreeSet::new();
+    for input in &inputs {
+        match INPUTS.iter().find(|(name, _)| name == input) {
+            Some((_, Some(feature))) => features.insert(*feature),
+            Some((_, None)) => variances.insert(ScalarVar::ColorVariance),
+            None => {
+                return Err(PyValueError::new_err(format!(
+                    "unknown input `{input}`: denoise takes albedo, normal, position, depth and variance"
+                )))
+            }
+        };
+    }
+    let choice = Choice::best_for(&Provided::new(features, variances)).map_err(value)?;
+    Ok((choice.describe(), choice.pipeline.to_string(), choice.chosen_because.unwrap_or_default()))
+}
+
+/// An expression argument: text, `@name` of a shipped one, or `@FILE[:NAME]`.
+fn resolve(expr: &str) -> PyResult<filterjit::corpus::Resolved> {
+    filterjit::corpus::resolve_with_pipeline(expr).map_err(value)
+}
+
+/// The canonical form, length and inputs of an expression.
+#[pyfunction]
+fn check<'py>(py: Python<'py>, expr: &str) -> PyResult<Bound<'py, PyDict>> {
+    let expr = resolve(expr)?.expr;
+    let out = PyDict::new(py);
+    out.set_item("canonical", expr.to_string())?;
+    out.set_item("length", expr.len())?;
+    let inputs: Vec<&str> =
+        expr.features().iter().map(|f| f.name()).chain(expr.variables().iter().map(|v| v.name())).collect();
+    out.set_item("inputs", inputs)?;
+    Ok(out)
+}
+
+/// The cheapest equivalent expression.
+#[pyfunction]
+fn simplify(expr: &str) -> PyResult<String> {
+    Ok(filterjit::simplify::simplify(&resolve(expr)?.expr).to_string())
+}
+
+/// The validated WGSL kernel of an expression, for its pipeline's shape.
+#[pyfunction]
+#[pyo3(signature = (expr, pipeline=None))]
+fn compile(expr: &str, pipeline: Option<&str>) -> PyResult<String> {
+    let resolved = resolve(expr)?;
+    let pipeline = parse_pipeline(pipeline)?.or(resolved.pipeline).unwrap_or_default();
+    let kernel =
+        jit::compile_shaped(&resolved.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, jit::Shape::of(&pipeline))
+            .map_err(value)?;
+    Ok(kernel.wgsl().to_string())
+}
+
+fn code<'py>(py: Python<'py>, code: &Code) -> Bound<'py, PyAny> {
+    match code {
+        Code::Text(text) => text.clone().into_pyobject(py).expect("a string converts").into_any(),
+        Code::SpirV(_) => PyBytes::new(py, &code.to_bytes()).into_any(),
+    }
+}
+
+/// A standalone shader of the whole pipeline and its manifest, as `filterjit export` writes them.
+#[pyfunction]
+#[pyo3(signature = (expr, target="wgsl", pipeline=None, format="rgba16float"))]
+fn export<'py>(
+    py: Python<'py>,
+    expr: &str,
+    target: &str,
+    pipeline: Option<&str>,
+    format: &str,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let target = Target::from_str(target, true).map_err(|_| {
+        let names: Vec<String> = Target::value_variants()
+            .iter()
+            .filter_map(|t| t.to_possible_value())
+            .map(|v| v.get_name().into())
+            .collect();
+        PyValueError::new_err(format!("unknown target `{target}`; there are: {}", names.join(", ")))
+    })?;
+    let format = OutputFormat::from_str(format, true).map_err(|_| {
+        let names: Vec<String> = OutputFormat::value_variants()
+            .iter()
+            .filter_map(|t| t.to_possible_value())
+            .map(|v| v.get_name().into())
+            .collect();
+        PyValueError::new_err(format!("unknown format `{format}`; there are: {}", names.join(", ")))
+    })?;
+    let resolved = resolve(expr)?;
+    let pipeline = parse_pipeline(pipeline)?.or(resolved.pipeline).unwrap_or_default();
+    let exported =
+        filterjit::export::export_filter(&resolved.expr, &pipeline, resolved.radius, target, format).map_err(value)?;
+    let text = serde_json::to_string(&exported.manifest).map_err(value)?;
+    let manifest = py.import("json")?.call_method1("loads", (text,))?;
+    if let Some(prepass) = &exported.prepass {
+        manifest.get_item("prepass")?.set_item("source", code(py, prepass))?;
+    }
+    Ok((code(py, &exported.code), manifest))
+}
+
+/// relMSE of `image` against `reference` (thesis equation 3.5 without m/2), as the command line reports it.
+#[pyfunction]
+fn relmse(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f64> {
+    let (h, w, image) = rgb("image", image)?;
+    let reference = Image::read("reference", reference)?.pixels("reference", (h, w), &[3])?;
+    Ok(filterjit::metrics::errors(&image, &reference, None).relmse)
+}
+
+/// Mean HDR-FLIP of `image` against `reference`, as the command line reports it.
+#[pyfunction]
+fn flip(py: Python<'_>, image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f64> {
+    let (h, w, image) = rgb("image", image)?;
+    let reference = Image::read("reference", reference)?.pixels("reference", (h, w), &[3])?;
+    Ok(py.detach(|| filterjit::flip::hdr_flip(&reference, &image, w, h).mean()))
+}
+
+/// The adapter `denoise` runs on (opening the device if it is not open yet).
+#[pyfunction]
+fn device_name() -> PyResult<String> {
+    Ok(device()?.describe())
+}
+
+#[pymodule]
+fn _filterjit(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(denoise, m)?)?;
+    m.add_function(wrap_pyfunction!(choose, m)?)?;
+    m.add_function(wrap_pyfunction!(check, m)?)?;
+    m.add_function(wrap_pyfunction!(simplify, m)?)?;
+    m.add_function(wrap_pyfunction!(compile, m)?)?;
+    m.add_function(wrap_pyfunction!(export, m)?)?;
+    m.add_function(wrap_pyfunction!(relmse, m)?)?;
+    m.add_function(wrap_pyfunction!(flip, m)?)?;
+    m.add_function(wrap_pyfunction!(device_name, m)?)?;
+    m.add("SHIPPED_BY_QUALITY", filterjit::denoise::SHIPPED_BY_QUALITY.to_vec())?;
+    Ok(())
+}

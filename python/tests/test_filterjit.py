@@ -1,0 +1,229 @@
+"""filterjit from Python as a Mitsuba user runs it: a scene rendered in this
+process, denoised with `filterjit.denoise`, compared with the reference, with
+`filterjit filter` on the same data written to EXR, and with OIDN.
+
+Run against the installed wheel (`pip install .`, then `pytest python/tests`).
+The command-line comparison needs the `filterjit` binary: FILTERJIT_BIN, else
+target/{debug,release}/filterjit. Under CI=true nothing here may be skipped.
+"""
+
+import os
+import pathlib
+import subprocess
+
+import numpy as np
+import pytest
+
+import filterjit
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+SIZE = 64
+SPP = 4
+REFERENCE_SPP = 1024
+
+
+def require(condition, why):
+    """Skip when `condition` fails, except under CI, where it is a failure."""
+    if not condition:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"required under CI=true: {why}")
+        pytest.skip(why)
+
+
+def mitsuba():
+    try:
+        import mitsuba as mi
+    except ImportError as e:  # pragma: no cover - depends on the machine
+        require(False, f"the mitsuba package is not installed ({e})")
+    try:
+        mi.set_variant("llvm_ad_rgb")
+    except Exception as e:  # pragma: no cover - libLLVM missing
+        require(False, f"Mitsuba's LLVM variant needs libLLVM (Debian: libllvm19): {e}")
+    return mi
+
+
+@pytest.fixture(scope="session")
+def render():
+    """A Cornell box at 64x64: 4 spp with albedo, normal, position, depth and
+    the colour's per-sample variance (Mitsuba's `moment` around `aov`), and a
+    1024-spp reference."""
+    mi = mitsuba()
+    scene = mi.cornell_box()
+    scene["sensor"]["film"]["width"] = SIZE
+    scene["sensor"]["film"]["height"] = SIZE
+    aovs = "albedo:albedo,sh_normal:sh_normal,position:position,depth:depth"
+    path = {"type": "path", "max_depth": 8}
+    scene["integrator"] = {"type": "moment", "nested": {"type": "aov", "aovs": aovs, "integrator": path}}
+    noisy = mi.load_dict(scene)
+    image = np.array(mi.render(noisy, spp=SPP, seed=7), dtype=np.float32)
+    names = noisy.sensors()[0].film().bitmap().struct_()
+    channels = [names[k].name for k in range(len(names))]
+
+    def take(*wanted):
+        return np.ascontiguousarray(image[..., [channels.index(w) for w in wanted]])
+
+    rgb = take("nested.integrator.R", "nested.integrator.G", "nested.integrator.B")
+    second = take("m2_nested.integrator.R", "m2_nested.integrator.G", "m2_nested.integrator.B")
+    scene["integrator"] = path
+    reference = np.array(mi.render(mi.load_dict(scene), spp=REFERENCE_SPP, seed=8), dtype=np.float32)
+    return {
+        "color": rgb,
+        "albedo": take("nested.albedo.R", "nested.albedo.G", "nested.albedo.B"),
+        "normal": take("nested.sh_normal.X", "nested.sh_normal.Y", "nested.sh_normal.Z"),
+        "position": take("nested.position.X", "nested.position.Y", "nested.position.Z"),
+        "depth": take("nested.depth.T"),
+        "variance": np.maximum(second - rgb * rgb, 0).astype(np.float32),
+        "reference": np.ascontiguousarray(reference[..., :3]),
+    }
+
+
+def inputs(render, *without):
+    names = ["albedo", "normal", "position", "depth", "variance"]
+    return {k: render[k] for k in names if k not in without}
+
+
+def test_a_mitsuba_render_is_denoised_below_its_noisy_error(render):
+    out = filterjit.denoise(render["color"], **inputs(render), spp=SPP)
+    assert out.shape == (SIZE, SIZE, 3) and out.dtype == np.float32
+    assert np.isfinite(out).all()
+    noisy = filterjit.relmse(render["color"], render["reference"])
+    ours = filterjit.relmse(out, render["reference"])
+    print(f"relMSE noisy {noisy:.4f}, filterjit {ours:.4f} ({filterjit.choose(list(inputs(render)))[0]})")
+    assert ours < 0.5 * noisy, (ours, noisy)
+    assert filterjit.flip(out, render["reference"]) < filterjit.flip(render["color"], render["reference"])
+
+
+def test_oidn_side_by_side(render):
+    try:
+        import pyoidn
+    except ImportError as e:
+        require(False, f"pyoidn is not installed ({e})")
+    ref = render["reference"]
+    theirs = pyoidn.denoise(render["color"], render["albedo"], render["normal"], hdr=True)
+    ours = filterjit.denoise(render["color"], **inputs(render))
+    e_oidn, e_ours = filterjit.relmse(theirs, ref), filterjit.relmse(ours, ref)
+    print(f"relMSE: OIDN colour+albedo+normal {e_oidn:.4f}, filterjit {e_ours:.4f} ({e_ours / e_oidn:.2f}x)")
+    assert np.isfinite(theirs).all() and e_oidn < filterjit.relmse(render["color"], ref)
+
+
+def test_the_default_filter_follows_the_inputs_given(render):
+    name, pipeline, _ = filterjit.choose(list(inputs(render)))
+    assert name == "@" + filterjit.SHIPPED_BY_QUALITY[0], name
+    name, _, why = filterjit.choose(list(inputs(render, "variance")))
+    assert "colorVariance" in why and name != "@" + filterjit.SHIPPED_BY_QUALITY[0]
+    assert filterjit.choose([]) [0] == "@bilateral"
+    # What choose names is what denoise runs: the same pixels as asking for it by name.
+    without = inputs(render, "variance")
+    chosen = filterjit.denoise(render["color"], **without)
+    named = filterjit.denoise(render["color"], **without, filter=name)
+    assert np.array_equal(chosen, named)
+
+
+def cli():
+    explicit = os.environ.get("FILTERJIT_BIN")
+    candidates = [pathlib.Path(explicit)] if explicit else [
+        ROOT / "target" / "debug" / "filterjit",
+        ROOT / "target" / "release" / "filterjit",
+    ]
+    found = [c for c in candidates if c.is_file()]
+    require(found, f"no filterjit binary at {', '.join(map(str, candidates))} (set FILTERJIT_BIN)")
+    return found[0]
+
+
+def write_mitsuba_dataset(mi, folder, render):
+    """The render as Mitsuba's aov layout writes it: noisy.exr with the AOVs,
+    variance.exr beside it, reference.exr."""
+    folder.mkdir(parents=True, exist_ok=True)
+    planes = [render["color"], render["albedo"], render["normal"], render["position"], render["depth"]]
+    names = ["R", "G", "B", "albedo.R", "albedo.G", "albedo.B", "sh_normal.X", "sh_normal.Y", "sh_normal.Z",
+             "position.X", "position.Y", "position.Z", "depth.T"]
+    multi = np.ascontiguousarray(np.concatenate(planes, axis=2))
+    mi.Bitmap(multi, mi.Bitmap.PixelFormat.MultiChannel, channel_names=names).write(str(folder / "noisy.exr"))
+    mi.Bitmap(render["variance"], mi.Bitmap.PixelFormat.RGB).write(str(folder / "variance.exr"))
+    mi.Bitmap(render["reference"], mi.Bitmap.PixelFormat.RGB).write(str(folder / "reference.exr"))
+
+
+@pytest.mark.parametrize("filter", [None, "@crossBilateralAtrous", "@bilateral"])
+def test_python_and_the_command_line_give_the_same_pixels(render, tmp_path, filter):
+    mi = mitsuba()
+    binary = cli()
+    write_mitsuba_dataset(mi, tmp_path / "scene", render)
+    out = tmp_path / "out.exr"
+    command = [str(binary), "filter", str(tmp_path / "scene"), "-o", str(out)]
+    if filter:
+        command += ["--expr", filter]
+    run = subprocess.run(command, capture_output=True, text=True, env={**os.environ, "NODEVICE_SELECT": "1"})
+    assert run.returncode == 0, run.stderr
+    from_cli = np.array(mi.Bitmap(str(out)), dtype=np.float32)[..., :3]
+    given = inputs(render) if filter != "@bilateral" else {}
+    from_python = filterjit.denoise(render["color"], **given, filter=filter)
+    assert from_cli.shape == from_python.shape
+    differ = np.argwhere(from_cli != from_python)
+    assert differ.size == 0, f"{len(differ)} values differ, first at {differ[0]}: cli {from_cli[tuple(differ[0])]}, python {from_python[tuple(differ[0])]}"
+    if filter is None:
+        assert "filter    @" + filterjit.SHIPPED_BY_QUALITY[0] in run.stderr, run.stderr
+
+
+def test_bad_input_raises_clear_exceptions(render):
+    color = render["color"]
+    with pytest.raises(TypeError, match=r"`color` has dtype float64.*float32"):
+        filterjit.denoise(color.astype(np.float64))
+    with pytest.raises(TypeError, match=r"`albedo` must be a numpy array"):
+        filterjit.denoise(color, albedo=[[0.0]])
+    with pytest.raises(ValueError, match=r"`normal` has shape \(32, 64, 3\), but `color` is \(64, 64, 3\)"):
+        filterjit.denoise(color, normal=render["normal"][:32])
+    with pytest.raises(ValueError, match=r"`color` has shape \[64, 64, 3, 1\]"):
+        filterjit.denoise(color[..., None])
+    bad = color.copy()
+    bad[5, 9, 2] = np.nan
+    with pytest.raises(ValueError, match=r"`color` has a non-finite value \(NaN\) at row 5, column 9, channel 2"):
+        filterjit.denoise(bad)
+    bad[5, 9, 2] = np.inf
+    with pytest.raises(ValueError, match=r"non-finite value \(inf\)"):
+        filterjit.denoise(bad)
+    with pytest.raises(ValueError, match=r"no shipped expression `@noSuchFilter`; there are: .*@evolvedAtrous3x3"):
+        filterjit.denoise(color, filter="@noSuchFilter")
+    with pytest.raises(ValueError, match=r"(?s)--> 1:16.*unknown name `colr`"):
+        filterjit.denoise(color, filter="exp(-distance2(colr))")
+    with pytest.raises(ValueError, match=r"reads .*colorVariance.*pass variance="):
+        filterjit.denoise(color, **inputs(render, "variance"), filter="@evolvedAtrous3x3")
+    with pytest.raises(ValueError, match=r"reads worldPosition.*pass position="):
+        filterjit.denoise(color, albedo=render["albedo"], filter="exp(-distance2(worldPosition))")
+    with pytest.raises(ValueError, match=r"unknown input `alebdo`"):
+        filterjit.choose(["alebdo"])
+
+
+def test_expressions_check_simplify_compile_and_export():
+    checked = filterjit.check("exp(-(distance2(color) + 0 * distance2(normal)))")
+    assert checked["length"] > 5 and set(checked["inputs"]) == {"color", "normal"}
+    with pytest.raises(ValueError, match=r"(?s)--> 1:5"):
+        filterjit.check("exp(")
+    assert filterjit.simplify("distance2(color) * 1 + 0") == "distance2(color)"
+    wgsl = filterjit.compile("@svgfAtrous")
+    assert "@compute" in wgsl and "exp(-(distance1(color)" in wgsl
+    shader, manifest = filterjit.export("@evolvedAtrous3x3")
+    assert "@compute" in shader and manifest["language"] == "WGSL"
+    assert manifest["passes"] == 4 and "@compute" in manifest["prepass"]["source"]
+    spirv, manifest = filterjit.export("@bilateral", target="spirv")
+    assert isinstance(spirv, bytes) and spirv[:4] == (0x07230203).to_bytes(4, "little")
+    assert "prepass" not in manifest or manifest["prepass"] is None
+    with pytest.raises(ValueError, match=r"unknown target `cuda`; there are: wgsl"):
+        filterjit.export("@bilateral", target="cuda")
+
+
+def test_metrics_follow_the_command_lines_definitions():
+    image = np.zeros((1, 2, 3), np.float32)
+    image[0, 0, 0] = 1.0
+    reference = np.zeros((1, 2, 3), np.float32)
+    # (1/2) * 1 / (0 + 0.01), as metrics::errors' unit test.
+    assert filterjit.relmse(image, reference) == pytest.approx(50.0)
+    same = np.full((8, 8, 3), 0.5, np.float32)
+    assert filterjit.flip(same, same) == 0.0
+    with pytest.raises(ValueError, match=r"`reference` has shape"):
+        filterjit.relmse(image, same)
+
+
+def test_the_readme_shows_the_example_ci_runs():
+    example = (ROOT / "examples" / "python" / "denoise_mitsuba.py").read_text()
+    readme = (ROOT / "README.md").read_text()
+    assert "```python\n" + example + "```" in readme, "README's Python example differs from examples/python/denoise_mitsuba.py"

@@ -1,0 +1,208 @@
+//! A render denoised with a filter: the one asked for, or else the best
+//! shipped filter whose inputs the render has; the inputs it reads requested
+//! from the scene, its pipeline run on the device. The command line's
+//! `filter` and the Python module's `denoise` both go through here, so that
+//! they choose alike and give the same pixels.
+
+use std::collections::BTreeSet;
+
+use anyhow::{bail, Result};
+
+use crate::corpus;
+use crate::gpu::{Filtered, Gpu, SceneBuffers};
+use crate::jit;
+use crate::lang::{Expr, Feature, ScalarVar};
+use crate::pipeline::FilterPipeline;
+use crate::scene::Request;
+use crate::Scene;
+
+/// The shipped filters a render gets when none is asked for, best first: by
+/// mean relMSE over OIDN's (colour + albedo + normal) on the public Mitsuba
+/// renders (docs/BENCHMARKS.md: 1.54×, 1.96×, 2.08×, 2.13×), then the window
+/// filters. The first whose inputs a render has is taken; `bilateral` reads
+/// colour alone, so there always is one.
+pub const SHIPPED_BY_QUALITY: &[&str] =
+    &["evolvedAtrous3x3", "evolvedAtrous128", "svgfAtrous", "crossBilateralAtrous", "crossBilateralTuned", "bilateral"];
+
+/// The window radius of a filter that states none.
+pub const DEFAULT_RADIUS: u32 = 5;
+
+/// The inputs a render has: stored features (colour and pixel position
+/// always) and per-pixel variances.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Provided {
+    pub features: BTreeSet<Feature>,
+    pub variances: BTreeSet<ScalarVar>,
+}
+
+impl Provided {
+    pub fn new(features: BTreeSet<Feature>, variances: BTreeSet<ScalarVar>) -> Self {
+        let mut features = features;
+        features.extend([Feature::Color, Feature::Pixel]);
+        // A gradient is computed from its base.
+        for f in Feature::ALL {
+            if f.base() != *f && features.contains(&f.base()) {
+                features.insert(*f);
+            }
+        }
+        Provided { features, variances }
+    }
+}
+
+/// A filter ready to run: its expression, pipeline and radius, and how it was chosen.
+#[derive(Clone, Debug)]
+pub struct Choice {
+    /// The shipped or stored name, when it has one.
+    pub name: Option<String>,
+    pub expr: Expr,
+    pub pipeline: FilterPipeline,
+    pub radius: u32,
+    /// Why this filter, when it was chosen rather than asked for.
+    pub chosen_because: Option<String>,
+}
+
+impl Choice {
+    /// A filter asked for: an expression's text, `@name` of a shipped one or
+    /// `@FILE[:NAME]`; `pipeline` and `radius` override what it was stored with.
+    pub fn asked(filter: &str, pipeline: Option<FilterPipeline>, radius: Option<u32>) -> Result<Choice> {
+        let resolved = corpus::resolve_with_pipeline(filter)?;
+        Ok(Choice {
+            name: resolved.name,
+            expr: resolved.expr,
+            pipeline: pipeline.or(resolved.pipeline).unwrap_or_default(),
+            radius: radius.or(resolved.radius).unwrap_or(DEFAULT_RADIUS),
+            chosen_because: None,
+        })
+    }
+
+    /// The best shipped filter (`SHIPPED_BY_QUALITY`) whose inputs `provided` has.
+    pub fn best_for(provided: &Provided) -> Result<Choice> {
+        let mut passed_over = Vec::new();
+        for name in SHIPPED_BY_QUALITY {
+            let choice = Choice::asked(&format!("@{name}"), None, None)?;
+            let missing = choice.missing(provided);
+            if missing.is_empty() {
+                let because = match passed_over.is_empty() {
+                    true => "the best shipped filter, and the render has every input it reads".to_string(),
+                    false => {
+                        format!("the best shipped filter whose inputs the render has ({})", passed_over.join("; "))
+                    }
+                };
+                return Ok(Choice { chosen_because: Some(because), ..choice });
+            }
+            passed_over.push(format!("@{name} needs {}", missing.join(", ")));
+        }
+        bail!("no shipped filter fits this render: {}", passed_over.join("; "))
+    }
+
+    /// The filter asked for, or else the best shipped one for what the render provides.
+    pub fn asked_or_best(
+        filter: Option<&str>,
+        pipeline: Option<FilterPipeline>,
+        radius: Option<u32>,
+        provided: &Provided,
+    ) -> Result<Choice> {
+        match filter {
+            Some(filter) => Choice::asked(filter, pipeline, radius),
+            None => {
+                let best = Choice::best_for(provided)?;
+                Ok(Choice {
+                    pipeline: pipeline.unwrap_or(best.pipeline),
+                    radius: radius.unwrap_or(best.radius),
+                    ..best
+                })
+            }
+        }
+    }
+
+    /// The inputs this filter reads that `provided` lacks, by name (the
+    /// albedo under `texture`, which demodulation divides by).
+    pub fn missing(&self, provided: &Provided) -> Vec<String> {
+        let mut missing: Vec<String> =
+            self.expr.features().difference(&provided.features).map(|f| f.name().to_string()).collect();
+        if self.pipeline.demodulate
+            && !provided.features.contains(&Feature::Texture)
+            && !missing.iter().any(|m| m == Feature::Texture.name())
+        {
+            missing.push(format!("{} (the albedo `demodulate` divides by)", Feature::Texture.name()));
+        }
+        missing.extend(self.expr.stored_variables().difference(&provided.variances).map(|v| v.name().to_string()));
+        missing
+    }
+
+    /// What a scene must hold for this filter (its reference too, for errors).
+    pub fn request(&self) -> Request {
+        Request { albedo: self.pipeline.demodulate, ..Request::for_expr(&self.expr) }
+    }
+
+    /// How the filter is called in messages: `@name` or the expression.
+    pub fn describe(&self) -> String {
+        match &self.name {
+            Some(name) => format!("@{name}"),
+            None => self.expr.to_string(),
+        }
+    }
+
+    /// The filter's kernel for its pipeline, lowered and validated.
+    pub fn compile(&self) -> Result<jit::ValidatedKernel> {
+        let shape = jit::Shape::of(&self.pipeline);
+        Ok(jit::compile_shaped(&self.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?)
+    }
+}
+
+/// `scene` filtered on `gpu` with `kernel` (the choice's, [`Choice::compile`]):
+/// the pre-pass, then the form, read back.
+pub fn filter(gpu: &Gpu, choice: &Choice, kernel: &jit::ValidatedKernel, scene: &Scene) -> Result<Filtered> {
+    let mut buffers = SceneBuffers::for_pipeline(gpu, scene, &choice.pipeline)?;
+    Ok(gpu.filter(kernel, &mut buffers, scene, choice.radius)?)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn provided(features: &[Feature], variances: &[ScalarVar]) -> Provided {
+        Provided::new(features.iter().copied().collect(), variances.iter().copied().collect())
+    }
+
+    #[test]
+    fn every_listed_filter_is_shipped_and_the_last_reads_colour_alone() {
+        for name in SHIPPED_BY_QUALITY {
+            assert!(corpus::lookup(name).is_some(), "@{name} is shipped");
+        }
+        let last = Choice::best_for(&provided(&[], &[])).unwrap();
+        assert_eq!(last.name.as_deref(), Some(*SHIPPED_BY_QUALITY.last().unwrap()));
+    }
+
+    #[test]
+    fn the_best_filter_is_taken_when_the_render_has_its_inputs() {
+        use Feature::*;
+        let all = provided(&[Texture, Normal, WorldPosition, Depth], &[ScalarVar::ColorVariance]);
+        let best = Choice::best_for(&all).unwrap();
+        assert_eq!(best.name.as_deref(), Some(SHIPPED_BY_QUALITY[0]));
+        assert!(best.missing(&all).is_empty());
+        assert_eq!(best.pipeline.to_string(), "outliers=2,demodulate,atrous3x3=4");
+
+        // Without a variance, a filter that needs none; the message says what was passed over.
+        let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
+        let chosen = Choice::best_for(&no_variance).unwrap();
+        assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
+        let because = chosen.chosen_because.unwrap();
+        assert!(because.contains("@evolvedAtrous3x3 needs colorVariance"), "{because}");
+
+        // Demodulation needs the albedo even where the weight does not read it.
+        let no_albedo = provided(&[Normal, WorldPosition, Depth], &[ScalarVar::ColorVariance]);
+        let chosen = Choice::best_for(&no_albedo).unwrap();
+        assert!(!chosen.pipeline.demodulate, "{}", chosen.pipeline);
+    }
+
+    #[test]
+    fn a_filter_asked_for_overrides_the_choice_and_keeps_its_pipeline() {
+        let choice = Choice::asked_or_best(Some("@svgfAtrous"), None, None, &Provided::default()).unwrap();
+        assert_eq!(choice.name.as_deref(), Some("svgfAtrous"));
+        assert_eq!(choice.pipeline.to_string(), "outliers=2,demodulate,atrous=5");
+        assert!(choice.chosen_because.is_none());
+        let err = Choice::asked("@noSuchFilter", None, None).unwrap_err().to_string();
+        assert!(err.contains("no shipped expression `@noSuchFilter`"), "{err}");
+    }
+}
