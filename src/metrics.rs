@@ -25,6 +25,9 @@ pub struct Errors {
     /// Equation 3.5 as printed, with the m/2 factor (m = samples per pixel);
     /// `None` when m is unknown.
     pub relmse_half_spp: Option<f64>,
+    /// The image's mean luminance over the reference's: 1 keeps the light, below
+    /// 1 is darker (a denoiser's bias); `None` for a black reference.
+    pub light: Option<f64>,
 }
 
 /// One pixel's term of equation 3.5: Σ_rgb (c − g)² / (g² + ε).
@@ -54,8 +57,29 @@ pub fn errors<A: Copy + Into<f64>, B: Copy + Into<f64>>(
     }
     let n = image.len().max(1) as f64;
     let relmse = rel / n;
-    Errors { mse: se / n, relmse, relmse_half_spp: spp.map(|m| relmse * m as f64 / 2.0) }
+    Errors {
+        mse: se / n,
+        relmse,
+        relmse_half_spp: spp.map(|m| relmse * m as f64 / 2.0),
+        light: light(image, reference),
+    }
 }
+
+/// Mean luminance (`pipeline::luminance`, the outlier rule's) of an image.
+pub fn mean_luminance<A: Copy + Into<f64>>(image: &[[A; 3]]) -> f64 {
+    let sum: f64 = image.iter().map(|c| crate::pipeline::luminance([c[0].into(), c[1].into(), c[2].into()])).sum();
+    sum / image.len().max(1) as f64
+}
+
+/// `image`'s mean luminance over `reference`'s; `None` when the reference is black.
+pub fn light<A: Copy + Into<f64>, B: Copy + Into<f64>>(image: &[[A; 3]], reference: &[[B; 3]]) -> Option<f64> {
+    let reference = mean_luminance(reference);
+    (reference > 0.0).then(|| mean_luminance(image) / reference)
+}
+
+/// How far a mean-luminance ratio may stray from 1 before a method is said
+/// to change the image's light (`filter` and `report` flag it).
+pub const LIGHT_TOLERANCE: f64 = 0.03;
 
 #[cfg(test)]
 mod tests {
@@ -69,5 +93,19 @@ mod tests {
         assert!((e.relmse - 50.0).abs() < 1e-9, "(1/2) * 1/(0 + 0.01)");
         assert_eq!(e.relmse_half_spp, Some(100.0));
         assert_eq!(e.mse, 0.5);
+        assert_eq!(e.light, None, "a black reference has no light to keep");
+    }
+
+    #[test]
+    fn light_is_the_ratio_of_mean_luminances() {
+        let reference = [[1.0f32, 1.0, 1.0], [0.0, 0.0, 0.0]];
+        let darker = [[0.5f32, 0.5, 0.5], [0.0, 0.0, 0.0]];
+        // The same mean moved between pixels keeps the light; halving it does not.
+        let moved = [[0.0f32, 0.0, 0.0], [1.0, 1.0, 1.0]];
+        assert!((errors(&darker, &reference, None).light.unwrap() - 0.5).abs() < 1e-12);
+        assert!((errors(&moved, &reference, None).light.unwrap() - 1.0).abs() < 1e-12);
+        // Only green: its luminance weight.
+        let green = [[0.0f32, 1.0, 0.0], [0.0, 0.0, 0.0]];
+        assert!((light(&green, &reference).unwrap() - crate::pipeline::LUMINANCE[1]).abs() < 1e-12);
     }
 }

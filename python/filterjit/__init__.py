@@ -29,6 +29,7 @@ __all__ = [
     "export",
     "relmse",
     "flip",
+    "light",
     "device_name",
     "SHIPPED_BY_QUALITY",
 ]
@@ -143,6 +144,13 @@ def flip(image, reference):
     """Mean HDR-FLIP of ``image`` against ``reference`` (float32 (H, W, 3)),
     as the command line reports it (a port of NVlabs' FLIP 1.7)."""
     return _filterjit.flip(image, reference)
+
+
+def light(image, reference):
+    """``image``'s mean luminance over ``reference``'s (float32 (H, W, 3)):
+    1 keeps the light, below 1 is darker. A denoiser's bias; ``None`` for a
+    black reference."""
+    return _filterjit.light(image, reference)
 
 
 def device_name():

@@ -315,6 +315,15 @@ fn code<'py>(py: Python<'py>, code: &Code) -> Bound<'py, PyAny> {
     }
 }
 
+/// A flag-like argument by its command-line spelling (`wgsl`, `rgba16float`).
+fn named_value<T: ValueEnum>(what: &str, text: &str) -> PyResult<T> {
+    T::from_str(text, true).map_err(|_| {
+        let names: Vec<String> =
+            T::value_variants().iter().filter_map(|t| t.to_possible_value()).map(|v| v.get_name().into()).collect();
+        PyValueError::new_err(format!("unknown {what} `{text}`; there are: {}", names.join(", ")))
+    })
+}
+
 /// A standalone shader of the whole pipeline and its manifest, as `filterjit export` writes them.
 #[pyfunction]
 #[pyo3(signature = (expr, target="wgsl", pipeline=None, format="rgba16float"))]
@@ -325,22 +334,8 @@ fn export<'py>(
     pipeline: Option<&str>,
     format: &str,
 ) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
-    let target = Target::from_str(target, true).map_err(|_| {
-        let names: Vec<String> = Target::value_variants()
-            .iter()
-            .filter_map(|t| t.to_possible_value())
-            .map(|v| v.get_name().into())
-            .collect();
-        PyValueError::new_err(format!("unknown target `{target}`; there are: {}", names.join(", ")))
-    })?;
-    let format = OutputFormat::from_str(format, true).map_err(|_| {
-        let names: Vec<String> = OutputFormat::value_variants()
-            .iter()
-            .filter_map(|t| t.to_possible_value())
-            .map(|v| v.get_name().into())
-            .collect();
-        PyValueError::new_err(format!("unknown format `{format}`; there are: {}", names.join(", ")))
-    })?;
+    let target: Target = named_value("target", target)?;
+    let format: OutputFormat = named_value("format", format)?;
     let resolved = resolve(expr)?;
     let pipeline = parse_pipeline(pipeline)?.or(resolved.pipeline).unwrap_or_default();
     let exported =
@@ -359,6 +354,14 @@ fn relmse(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f6
     let (h, w, image) = rgb("image", image)?;
     let reference = Image::read("reference", reference)?.pixels("reference", (h, w), &[3])?;
     Ok(filterjit::metrics::errors(&image, &reference, None).relmse)
+}
+
+/// `image`'s mean luminance over `reference`'s (1 keeps the light; `None` for a black reference).
+#[pyfunction]
+fn light(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<Option<f64>> {
+    let (h, w, image) = rgb("image", image)?;
+    let reference = Image::read("reference", reference)?.pixels("reference", (h, w), &[3])?;
+    Ok(filterjit::metrics::light(&image, &reference))
 }
 
 /// Mean HDR-FLIP of `image` against `reference`, as the command line reports it.
@@ -385,6 +388,7 @@ fn _filterjit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(export, m)?)?;
     m.add_function(wrap_pyfunction!(relmse, m)?)?;
     m.add_function(wrap_pyfunction!(flip, m)?)?;
+    m.add_function(wrap_pyfunction!(light, m)?)?;
     m.add_function(wrap_pyfunction!(device_name, m)?)?;
     m.add("SHIPPED_BY_QUALITY", filterjit::denoise::SHIPPED_BY_QUALITY.to_vec())?;
     Ok(())

@@ -91,6 +91,9 @@ def test_a_mitsuba_render_is_denoised_below_its_noisy_error(render):
     print(f"relMSE noisy {noisy:.4f}, filterjit {ours:.4f} ({filterjit.choose(list(inputs(render)))[0]})")
     assert ours < 0.5 * noisy, (ours, noisy)
     assert filterjit.flip(out, render["reference"]) < filterjit.flip(render["color"], render["reference"])
+    light = filterjit.light(out, render["reference"])
+    print(f"light (mean luminance / reference's): noisy {filterjit.light(render['color'], render['reference']):.3f}, filterjit {light:.3f}")
+    assert 0.5 < light < 1.5
 
 
 def test_oidn_side_by_side(render):
@@ -219,6 +222,8 @@ def test_metrics_follow_the_command_lines_definitions():
     assert filterjit.relmse(image, reference) == pytest.approx(50.0)
     same = np.full((8, 8, 3), 0.5, np.float32)
     assert filterjit.flip(same, same) == 0.0
+    assert filterjit.light(0.5 * same, same) == pytest.approx(0.5)
+    assert filterjit.light(same, 0 * same) is None
     with pytest.raises(ValueError, match=r"`reference` has shape"):
         filterjit.relmse(image, same)
 

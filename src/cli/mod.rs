@@ -345,7 +345,11 @@ pub(crate) fn filter(
             let filtered = metrics::errors(&rgb, reference, scene.spp);
             let flip =
                 |image: &[[f32; 3]]| filterjit::flip::hdr_flip(reference, image, scene.width, scene.height).mean();
-            println!("error     {:<10} {:>12} {:>14} {:>12} {:>10}", "", "relMSE", "relMSE*m/2", "MSE", "HDR-FLIP");
+            println!(
+                "error     {:<10} {:>12} {:>14} {:>12} {:>8} {:>10}",
+                "", "relMSE", "relMSE*m/2", "MSE", "light", "HDR-FLIP"
+            );
+            println!("          (light: the image's mean luminance over the reference's; 1 keeps the light)");
             print_errors("noisy", &noisy, flip(&scene.color));
             print_errors("filtered", &filtered, flip(&rgb));
         }
@@ -456,7 +460,15 @@ pub(crate) fn bench(
 
 pub(crate) fn print_errors(label: &str, e: &Errors, flip: f64) {
     let m2 = e.relmse_half_spp.map_or("-".to_string(), |v| format!("{v:.6}"));
-    println!("          {label:<10} {:>12.6} {:>14} {:>12.6} {flip:>10.6}", e.relmse, m2, e.mse);
+    let light = e.light.map_or("-".to_string(), |l| format!("{l:.4}"));
+    println!("          {label:<10} {:>12.6} {:>14} {:>12.6} {light:>8} {flip:>10.6}", e.relmse, m2, e.mse);
+    if let Some(l) = e.light.filter(|l| (l - 1.0).abs() > metrics::LIGHT_TOLERANCE) {
+        println!(
+            "light     {label}: mean luminance {:+.1} % from the reference's (more than {} %): it changes the light",
+            (l - 1.0) * 100.0,
+            metrics::LIGHT_TOLERANCE * 100.0
+        );
+    }
 }
 
 pub(crate) fn ms(d: std::time::Duration) -> f64 {
