@@ -180,14 +180,9 @@ fn denoise<'py>(
         variances.insert(ScalarVar::ColorVariance, image.channel_mean());
     }
     let provided: BTreeSet<Feature> = features.keys().copied().collect();
-    let choice = Choice::asked_or_best(
-        filter,
-        parse_pipeline(pipeline)?,
-        radius,
-        &Provided::new(provided.clone(), variances.keys().copied().collect()),
-    )
-    .map_err(value)?;
-    let missing = choice.missing(&Provided::new(provided.clone(), variances.keys().copied().collect()));
+    let given = Provided::new(provided.clone(), variances.keys().copied().collect());
+    let choice = Choice::asked_or_best(filter, parse_pipeline(pipeline)?, radius, &given).map_err(value)?;
+    let missing = choice.missing(&given);
     if !missing.is_empty() {
         let arguments: Vec<String> = missing.iter().map(|m| argument_for(m)).collect();
         return Err(PyValueError::new_err(format!(
