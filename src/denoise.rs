@@ -36,16 +36,9 @@ pub struct Provided {
 }
 
 impl Provided {
-    pub fn new(features: BTreeSet<Feature>, variances: BTreeSet<ScalarVar>) -> Self {
-        let mut features = features;
-        features.extend([Feature::Color, Feature::Pixel]);
-        // A gradient is computed from its base.
-        for f in Feature::ALL {
-            if f.base() != *f && features.contains(&f.base()) {
-                features.insert(*f);
-            }
-        }
-        Provided { features, variances }
+    /// From the stored features a render has (colour, pixel and gradients are derived).
+    pub fn new(stored: BTreeSet<Feature>, variances: BTreeSet<ScalarVar>) -> Self {
+        Provided { features: crate::scene::with_derived(stored), variances }
     }
 }
 

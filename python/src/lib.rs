@@ -98,21 +98,27 @@ impl Image {
         Ok(Image { height, width, channels, values })
     }
 
+    /// Refuses this image unless it is `size` with one of `channels`.
+    fn check(&self, name: &str, size: (usize, usize), channels: &[usize]) -> PyResult<()> {
+        if (self.height, self.width) == size && channels.contains(&self.channels) {
+            return Ok(());
+        }
+        let wanted: Vec<String> = channels.iter().map(|c| format!("({}, {}, {c})", size.0, size.1)).collect();
+        Err(PyValueError::new_err(format!(
+            "`{name}` has shape ({}, {}, {}), but `color` is ({}, {}, 3): `{name}` must be {}",
+            self.height,
+            self.width,
+            self.channels,
+            size.0,
+            size.1,
+            wanted.join(" or ")
+        )))
+    }
+
     /// This image as RGB pixels, checked to be `size` with one of `channels`
     /// (1 channel fills the first component, as a depth channel is stored).
     fn pixels(&self, name: &str, size: (usize, usize), channels: &[usize]) -> PyResult<Vec<[f32; 3]>> {
-        if (self.height, self.width) != size || !channels.contains(&self.channels) {
-            let wanted: Vec<String> = channels.iter().map(|c| format!("({}, {}, {c})", size.0, size.1)).collect();
-            return Err(PyValueError::new_err(format!(
-                "`{name}` has shape ({}, {}, {}), but `color` is ({}, {}, 3): `{name}` must be {}",
-                self.height,
-                self.width,
-                self.channels,
-                size.0,
-                size.1,
-                wanted.join(" or ")
-            )));
-        }
+        self.check(name, size, channels)?;
         Ok(self
             .values
             .chunks_exact(self.channels)
@@ -142,7 +148,31 @@ fn parse_pipeline(pipeline: Option<&str>) -> PyResult<Option<FilterPipeline>> {
     pipeline.map(|p| p.parse::<FilterPipeline>().map_err(value)).transpose()
 }
 
-/// Denoise a render. See `filterjit.denoise`'s docstring (python/filterjit/__init__.py).
+/// Denoise a render on the GPU and return the filtered colour.
+///
+/// :param color: noisy linear RGB, float32, shape (H, W, 3).
+/// :param albedo: the surfaces' albedo (Mitsuba's ``albedo`` AOV), (H, W, 3).
+/// :param normal: shading normals (Mitsuba's ``sh_normal``), (H, W, 3).
+/// :param position: world positions (Mitsuba's ``position``), (H, W, 3).
+/// :param depth: depth (Mitsuba's ``depth``), (H, W) or (H, W, 1).
+/// :param variance: per-pixel sample variance of the colour, (H, W), (H, W, 1)
+///     or (H, W, 3) (the mean over channels is used, as from files).
+/// :param spp: samples per pixel of ``color`` (for information only).
+/// :param filter: a shipped filter's name (``"@evolvedAtrous3x3"``), an
+///     expression, or ``"@FILE:NAME"`` (a hall of fame entry). By default the
+///     best shipped filter whose inputs are given, by the rule the command
+///     line uses (see :func:`choose`).
+/// :param pipeline: the filter pipeline, e.g. ``"outliers=2,demodulate,atrous=5"``;
+///     by default the one the filter was stored with.
+/// :param radius: window radius of the ``window`` form; by default the stored one, else 5.
+/// :returns: float32 array of shape (H, W, 3).
+/// :raises TypeError: an input is not a float32 numpy array.
+/// :raises ValueError: a shape differs from ``color``'s, a value is not
+///     finite, an expression is invalid (with its line and column), a filter
+///     is unknown, or the filter needs an input that was not given.
+/// :raises RuntimeError: no GPU adapter, or the device failed.
+///
+/// The GIL is released while the GPU works.
 #[pyfunction]
 #[pyo3(signature = (color, *, albedo=None, normal=None, position=None, depth=None, variance=None,
                     spp=None, filter=None, pipeline=None, radius=None))]
@@ -163,21 +193,19 @@ fn denoise<'py>(
     let (height, width, color) = rgb("color", color)?;
     let size = (height, width);
     let mut features = BTreeMap::new();
-    for (name, array, feature, channels) in [
-        ("albedo", albedo, Feature::Texture, &[3][..]),
-        ("normal", normal, Feature::Normal, &[3]),
-        ("position", position, Feature::WorldPosition, &[3]),
-        ("depth", depth, Feature::Depth, &[1]),
-    ] {
-        if let Some(array) = array {
-            features.insert(feature, Image::read(name, array)?.pixels(name, size, channels)?);
-        }
-    }
     let mut variances = BTreeMap::new();
-    if let Some(array) = variance {
-        let image = Image::read("variance", array)?;
-        image.pixels("variance", size, &[1, 3])?;
-        variances.insert(ScalarVar::ColorVariance, image.channel_mean());
+    for ((name, feature), array) in INPUTS.iter().zip([albedo, normal, position, depth, variance]) {
+        let Some(array) = array else { continue };
+        let image = Image::read(name, array)?;
+        match feature {
+            Some(feature) => {
+                features.insert(*feature, image.pixels(name, size, &[feature.dimension()])?);
+            }
+            None => {
+                image.check(name, size, &[1, 3])?;
+                variances.insert(ScalarVar::ColorVariance, image.channel_mean());
+            }
+        }
     }
     let provided: BTreeSet<Feature> = features.keys().copied().collect();
     let given = Provided::new(provided.clone(), variances.keys().copied().collect());
@@ -225,7 +253,8 @@ fn argument_for(input: &str) -> String {
     }
 }
 
-/// `denoise`'s keyword arguments for stored features (variance is a variance).
+/// `denoise`'s keyword arguments for images, in its order: stored features
+/// (as many channels as the feature has) and the colour variance (`None`).
 const INPUTS: [(&str, Option<Feature>); 5] = [
     ("albedo", Some(Feature::Texture)),
     ("normal", Some(Feature::Normal)),
@@ -246,14 +275,16 @@ fn kernel(choice: &Choice) -> PyResult<Arc<ValidatedKernel>> {
     Ok(kernel)
 }
 
-/// The shipped filter `denoise` takes for the inputs named (a list of
-/// `albedo`, `normal`, `position`, `depth`, `variance`): (name, pipeline, why).
+/// The shipped filter :func:`denoise` takes when given ``inputs`` (names
+/// among ``albedo``, ``normal``, ``position``, ``depth``, ``variance``; the
+/// colour is always there): ``(name, pipeline, why)``.
 #[pyfunction]
-fn choose(inputs: Vec<String>) -> PyResult<(String, String, String)> {
+fn choose(inputs: &Bound<'_, PyAny>) -> PyResult<(String, String, String)> {
     let mut features = BTreeSet::new();
     let mut variances = BTreeSet::new();
-    for input in &inputs {
-        match INPUTS.iter().find(|(name, _)| name == input) {
+    for input in inputs.try_iter()? {
+        let input: String = input?.extract()?;
+        match INPUTS.iter().find(|(name, _)| *name == input) {
             Some((_, Some(feature))) => features.insert(*feature),
             Some((_, None)) => variances.insert(ScalarVar::ColorVariance),
             None => {
@@ -272,7 +303,11 @@ fn resolve(expr: &str) -> PyResult<filterjit::corpus::Resolved> {
     filterjit::corpus::resolve_with_pipeline(expr).map_err(value)
 }
 
-/// The canonical form, length and inputs of an expression.
+/// Parse and type-check an expression (text, ``@name`` or ``@FILE[:NAME]``):
+/// ``{"canonical": str, "length": int, "inputs": [str]}``.
+///
+/// :raises ValueError: the expression is invalid; the message gives the line
+///     and column with a caret.
 #[pyfunction]
 fn check<'py>(py: Python<'py>, expr: &str) -> PyResult<Bound<'py, PyDict>> {
     let expr = resolve(expr)?.expr;
@@ -285,13 +320,15 @@ fn check<'py>(py: Python<'py>, expr: &str) -> PyResult<Bound<'py, PyDict>> {
     Ok(out)
 }
 
-/// The cheapest equivalent expression.
+/// The cheapest equivalent expression (equality saturation with rules
+/// exact under filterjit's numeric semantics), as text.
 #[pyfunction]
 fn simplify(expr: &str) -> PyResult<String> {
     Ok(filterjit::simplify::simplify(&resolve(expr)?.expr).to_string())
 }
 
-/// The validated WGSL kernel of an expression, for its pipeline's shape.
+/// The validated WGSL compute kernel of an expression (the one ``filterjit
+/// compile`` prints), shaped for ``pipeline`` (default: the stored one, else ``window``).
 #[pyfunction]
 #[pyo3(signature = (expr, pipeline=None))]
 fn compile(expr: &str, pipeline: Option<&str>) -> PyResult<String> {
@@ -319,7 +356,16 @@ fn named_value<T: ValueEnum>(what: &str, text: &str) -> PyResult<T> {
     })
 }
 
-/// A standalone shader of the whole pipeline and its manifest, as `filterjit export` writes them.
+/// A standalone shader for an engine, as ``filterjit export`` writes it:
+/// ``(shader, manifest)``.
+///
+/// ``shader`` is text (``bytes`` of SPIR-V words for ``target="spirv"``);
+/// ``manifest`` is the manifest as a dict (bindings, uniform, passes, order of
+/// dispatches). Where the pipeline has a pre-pass, its shader is
+/// ``manifest["prepass"]["source"]``.
+///
+/// :param target: ``wgsl``, ``glsl``, ``hlsl``, ``msl`` or ``spirv``.
+/// :param format: texel format of the output storage texture.
 #[pyfunction]
 #[pyo3(signature = (expr, target="wgsl", pipeline=None, format="rgba16float"))]
 fn export<'py>(
@@ -343,7 +389,8 @@ fn export<'py>(
     Ok((code(py, &exported.code), manifest))
 }
 
-/// relMSE of `image` against `reference` (thesis equation 3.5 without m/2), as the command line reports it.
+/// relMSE of ``image`` against ``reference`` (float32 (H, W, 3)): the mean
+/// over pixels of sum_rgb (c - g)^2 / (g^2 + 0.01), as the command line reports it.
 #[pyfunction]
 fn relmse(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f64> {
     let (h, w, image) = rgb("image", image)?;
@@ -351,7 +398,9 @@ fn relmse(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f6
     Ok(filterjit::metrics::errors(&image, &reference, None).relmse)
 }
 
-/// `image`'s mean luminance over `reference`'s (1 keeps the light; `None` for a black reference).
+/// ``image``'s mean luminance over ``reference``'s (float32 (H, W, 3)):
+/// 1 keeps the light, below 1 is darker. A denoiser's bias; ``None`` for a
+/// black reference.
 #[pyfunction]
 fn light(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<Option<f64>> {
     let (h, w, image) = rgb("image", image)?;
@@ -359,7 +408,8 @@ fn light(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<Opt
     Ok(filterjit::metrics::light(&image, &reference))
 }
 
-/// Mean HDR-FLIP of `image` against `reference`, as the command line reports it.
+/// Mean HDR-FLIP of ``image`` against ``reference`` (float32 (H, W, 3)),
+/// as the command line reports it (a port of NVlabs' FLIP 1.7).
 #[pyfunction]
 fn flip(py: Python<'_>, image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f64> {
     let (h, w, image) = rgb("image", image)?;
@@ -367,7 +417,7 @@ fn flip(py: Python<'_>, image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) 
     Ok(py.detach(|| filterjit::flip::hdr_flip(&reference, &image, w, h).mean()))
 }
 
-/// The adapter `denoise` runs on (opening the device if it is not open yet).
+/// The GPU adapter :func:`denoise` runs on (opening it if needed).
 #[pyfunction]
 fn device_name() -> PyResult<String> {
     Ok(device()?.describe())

@@ -256,7 +256,7 @@ pub(crate) fn filter(
         None => {
             let (features, variances) =
                 scene::provides(scene_path).with_context(|| format!("reading scene {}", scene_path.display()))?;
-            let choice = Choice::asked_or_best(None, pipeline, radius, &Provided::new(features, variances))?;
+            let choice = Choice::asked_or_best(None, pipeline, radius, &Provided { features, variances })?;
             eprintln!(
                 "filter    {} (pipeline {}): {}",
                 choice.describe(),

@@ -75,6 +75,12 @@ impl Layout {
         }
     }
 
+    /// The stored features (never colour, pixel or gradients) whose channels
+    /// are among `channels`.
+    pub fn stored_features(self, channels: &[String]) -> std::collections::BTreeSet<Feature> {
+        Feature::ALL.iter().copied().filter(|f| f.base() == *f && pick(self.feature(*f), channels).is_some()).collect()
+    }
+
     /// Channels of a per-pixel variance, and whether they live in the
     /// separate `variance.exr` beside the noisy image.
     pub fn variance(self, v: ScalarVar) -> (Alternatives, bool) {

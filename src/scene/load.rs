@@ -53,11 +53,6 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
         Some(meta) => read_meta(meta)?,
         None => (None, None),
     };
-    let provided = Feature::ALL
-        .iter()
-        .copied()
-        .filter(|f| f.source() == FeatureSource::Stored(*f) && pick(layout.feature(*f), &channels).is_some())
-        .collect();
     Ok(Images {
         name: meta_name.unwrap_or_else(|| files.name.clone()),
         width,
@@ -66,7 +61,7 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
         origin: Origin::File { layout: layout.name(), file: files.noisy.clone() },
         color: gathered(&plan.color),
         features: plan.features.iter().map(|(f, range)| (*f, gathered(range))).collect(),
-        provided,
+        provided: layout.stored_features(&channels),
         variances,
         reference,
     })

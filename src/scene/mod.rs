@@ -274,20 +274,11 @@ pub fn datasets_in(dir: &Path) -> Result<Vec<PathBuf>, SceneError> {
     Ok(out)
 }
 
-/// The features and variances a scene on disk provides, from its channel names alone.
-pub fn provides(path: &Path) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>), SceneError> {
-    let files = locate(path, &Request::default())?;
-    let (channels, _, _) = exr_io::channel_names(&files.noisy)?;
-    let layout = Layout::detect(&channels);
-    let mut features: BTreeSet<Feature> = [Feature::Color, Feature::Pixel].into_iter().collect();
-    for f in Feature::ALL {
-        if f.source() == FeatureSource::Stored(*f)
-            && *f != Feature::Color
-            && pick(layout.feature(*f), &channels).is_some()
-        {
-            features.insert(*f);
-        }
-    }
+/// `stored` features with what every scene derives from them: colour, pixel
+/// position, and the gradient of each stored feature.
+pub fn with_derived(stored: BTreeSet<Feature>) -> BTreeSet<Feature> {
+    let mut features = stored;
+    features.extend([Feature::Color, Feature::Pixel]);
     for f in Feature::ALL {
         if let FeatureSource::Gradient(base) = f.source() {
             if features.contains(&base) {
@@ -295,6 +286,15 @@ pub fn provides(path: &Path) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>),
             }
         }
     }
+    features
+}
+
+/// The features and variances a scene on disk provides, from its channel names alone.
+pub fn provides(path: &Path) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>), SceneError> {
+    let files = locate(path, &Request::default())?;
+    let (channels, _, _) = exr_io::channel_names(&files.noisy)?;
+    let layout = Layout::detect(&channels);
+    let features = with_derived(layout.stored_features(&channels));
     let separate = match &files.variance {
         Some(file) => exr_io::channel_names(file)?.0,
         None => Vec::new(),
