@@ -59,7 +59,7 @@ pub fn pipeline_of(text: &str, name: &str) -> Option<anyhow::Result<crate::pipel
 /// A resolved expression argument.
 pub struct Resolved {
     pub name: Option<String>,
-    pub expr: crate::Expr,
+    pub expr: crate::lang::Expr,
     /// The pipeline the expression was stored with (a hall of fame states the run's).
     pub pipeline: Option<crate::pipeline::FilterPipeline>,
     /// The window radius it was stored with (a multi-objective run's front states each member's).
@@ -69,7 +69,7 @@ pub struct Resolved {
 /// An expression argument: `@name` for a shipped expression, `@FILE[:NAME]`
 /// for one in a file of `name = expression` lines (the first without
 /// `:NAME`), or the expression's text. Returns the name, when it has one.
-pub fn resolve(arg: &str) -> anyhow::Result<(Option<String>, crate::Expr)> {
+pub fn resolve(arg: &str) -> anyhow::Result<(Option<String>, crate::lang::Expr)> {
     let resolved = resolve_with_pipeline(arg)?;
     Ok((resolved.name, resolved.expr))
 }
@@ -95,7 +95,8 @@ pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
                     radius = radius_of(&content, name)
                         .transpose()
                         .with_context(|| format!("{}: the radius of `{name}`", path.display()))?;
-                    (name.to_string(), text.to_string(), pipeline)
+                    let expr = parse_checked(text).with_context(|| format!("{}: `{name}`", path.display()))?;
+                    return Ok(Resolved { name: Some(name.to_string()), expr, pipeline, radius });
                 }
                 None => bail!(
                     "{} has no expression{}",
@@ -119,8 +120,8 @@ pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
     Ok(Resolved { name: Some(name), expr: parse_checked(&text)?, pipeline, radius })
 }
 
-fn parse_checked(text: &str) -> anyhow::Result<crate::Expr> {
-    crate::parse_expr(text).map_err(|e| anyhow::anyhow!("invalid expression:\n{e}"))
+fn parse_checked(text: &str) -> anyhow::Result<crate::lang::Expr> {
+    crate::lang::parse_expr(text).map_err(|e| anyhow::anyhow!("invalid expression:\n{e}"))
 }
 
 /// `PATH` or `PATH:NAME` of an existing file of named expressions.

@@ -1,12 +1,15 @@
 //! A model of what a filter costs to run per pixel, in units of one add: what
 //! the multi-objective search (`evolve --objectives error,cost`) trades
-//! against error. It counts what the JIT emits: constant subtrees fold away,
-//! a subexpression that does not read the neighbour is computed once per
-//! pixel (hoisted), one that does is computed at every tap, and equal
-//! subexpressions are computed once (common subexpressions). Operators weigh
-//! what the operator table says (`UnaryOp::cost` and friends); the form
-//! decides the taps. How well it ranks measured times is reported with every
-//! front (`pareto.json`, docs/BENCHMARKS.md).
+//! against error, what `pareto.json` states and what `simplify` keeps a form
+//! by. It prices the program that runs: the kernel body the JIT builds
+//! (`jit::ir`, with every rewrite the kernels get: constant folding, common
+//! subexpressions, hoisting, strength reduction, skipped checks), an
+//! instruction on the centre side once per pixel and one on the neighbour
+//! side at every tap. Operators weigh what the operator table says
+//! (`UnaryOp::cost` and friends), the cheaper forms the lowering gives some of
+//! them what they compute ([`CostModel::instruction`]); the form decides the
+//! taps. How well it ranks measured times is reported with every front
+//! (`pareto.json`, docs/BENCHMARKS.md).
 //!
 //! The weights are the operator table's unless a [`CostModel`] measured on a
 //! device replaces them: `filterjit bench` measures one (`bench.json`'s
@@ -17,6 +20,8 @@ use std::collections::{BTreeMap, HashSet};
 
 use serde::{Deserialize, Serialize};
 
+use crate::jit::ir::{self, Op, Side};
+use crate::jit::LowerOptions;
 use crate::lang::{BinaryOp, Expr, PairOp, UnaryOp};
 use crate::pipeline::{FilterPipeline, Form, OUTLIER_RADIUS};
 
@@ -68,6 +73,25 @@ impl CostModel {
     }
     fn pair(&self, op: PairOp) -> f64 {
         self.operators.get(op.name()).copied().unwrap_or(op.cost())
+    }
+
+    /// The weight of one instruction of a lowered kernel body: an operator
+    /// its own, and each cheaper form the lowering gives an operator what it
+    /// computes instead.
+    pub fn instruction(&self, op: &Op) -> f64 {
+        match *op {
+            Op::Unary(op, _) => self.unary(op),
+            Op::Binary(op, ..) => self.binary(op),
+            Op::Pair(op, ..) => self.pair(op),
+            // A plain subtraction or absolute value, without saturation.
+            Op::NegInRange(_) | Op::AbsInRange(_) => self.binary(BinaryOp::Sub),
+            // A product: `x * x`, `x * (1/c)`.
+            Op::Square(_) | Op::Scale(..) => self.binary(BinaryOp::Mul),
+            // The squared distance: `distance2` without its square root (never cheaper than a dot product).
+            Op::Distance2Squared(..) => {
+                (self.pair(PairOp::Distance2) - self.unary(UnaryOp::Sqrt)).max(self.pair(PairOp::Dot))
+            }
+        }
     }
 
     /// A model read from `path`: a bare model, or `bench.json` (its `cost_model`).
@@ -125,49 +149,19 @@ impl ExprCost {
         Self::with(expr, &CostModel::table())
     }
 
+    /// What the kernel body the JIT builds for `expr` costs: each
+    /// instruction where it runs, and a load per centre variance it reads.
     pub fn with(expr: &Expr, model: &CostModel) -> ExprCost {
-        let mut cost = ExprCost::default();
-        let mut seen = HashSet::new();
-        walk(expr, model, &mut seen, &mut cost);
+        let body = ir::Body::of(expr, LowerOptions::ALL);
+        let mut cost = ExprCost { per_pixel: body.centre_loads() as f64, per_tap: 0.0 };
+        for inst in &body.insts {
+            let own = model.instruction(&inst.op);
+            match inst.side {
+                Side::Centre => cost.per_pixel += own,
+                Side::Neighbour => cost.per_tap += own,
+            }
+        }
         cost
-    }
-}
-
-fn is_constant(e: &Expr) -> bool {
-    let mut constant = true;
-    e.visit(&mut |n| constant &= !matches!(n, Expr::Pair(..) | Expr::Var(_)));
-    constant
-}
-
-fn reads_neighbour(e: &Expr) -> bool {
-    let mut found = false;
-    e.visit(&mut |n| found |= matches!(n, Expr::Pair(..)));
-    found
-}
-
-fn walk(e: &Expr, model: &CostModel, seen: &mut HashSet<String>, cost: &mut ExprCost) {
-    if is_constant(e) || !seen.insert(e.to_string()) {
-        return;
-    }
-    let own = match e {
-        Expr::Const(_) => 0.0,
-        // A centre load.
-        Expr::Var(_) => 1.0,
-        Expr::Pair(op, ..) => model.pair(*op),
-        Expr::Unary(op, a) => {
-            walk(a, model, seen, cost);
-            model.unary(*op)
-        }
-        Expr::Binary(op, a, b) => {
-            walk(a, model, seen, cost);
-            walk(b, model, seen, cost);
-            model.binary(*op)
-        }
-    };
-    if reads_neighbour(e) {
-        cost.per_tap += own;
-    } else {
-        cost.per_pixel += own;
     }
 }
 
@@ -246,6 +240,27 @@ mod tests {
         assert_eq!(c.per_pixel, 1.0);
         // The same subexpression twice costs once, plus the add.
         assert_eq!(e("distance2(color) + distance2(color)").per_tap, 6.0 + 1.0);
+    }
+
+    /// The model prices what the lowering emits, not the tree as written.
+    #[test]
+    fn strength_reduced_forms_cost_what_the_kernel_runs() {
+        let e = |s: &str| ExprCost::of(&parse_expr(s).unwrap());
+        let table = CostModel::table();
+        // One squared-distance instruction: no square root, no `pow`.
+        let squared = e("pow(distance2(normal), 2)");
+        let no_root = (PairOp::Distance2.cost() - UnaryOp::Sqrt.cost()).max(PairOp::Dot.cost());
+        assert_eq!(squared.per_tap, no_root);
+        assert!(squared.per_tap < PairOp::Distance2.cost() + BinaryOp::Pow.cost());
+        // `x / 4` is a product by 0.25; `pow(x, 2)` of anything a product.
+        assert_eq!(e("distance1(color) / 4").per_tap, PairOp::Distance1.cost() + BinaryOp::Mul.cost());
+        assert_eq!(e("pow(distance1(color), 2)").per_tap, PairOp::Distance1.cost() + BinaryOp::Mul.cost());
+        // Each instruction of the lowered body is charged once, where it runs.
+        let expr = parse_expr("exp(-(distance2(color) / (0.5 + colorVariance)))").unwrap();
+        let body = crate::jit::ir::Body::of(&expr, LowerOptions::ALL);
+        let charged: f64 = body.insts.iter().map(|i| table.instruction(&i.op)).sum::<f64>() + 1.0;
+        let c = ExprCost::of(&expr);
+        assert_eq!(c.per_pixel + c.per_tap, charged);
     }
 
     #[test]

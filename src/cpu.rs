@@ -14,13 +14,7 @@ pub struct CpuFiltered {
     pub flags: Vec<u32>,
 }
 
-/// Missing scene data for a terminal the expression reads.
-#[derive(Debug, thiserror::Error)]
-#[error("scene `{scene}` has no data for `{name}`")]
-pub struct MissingData {
-    pub scene: String,
-    pub name: String,
-}
+use crate::scene::MissingInput;
 
 /// Values one weight evaluation reads.
 struct Pixels<'a> {
@@ -71,27 +65,14 @@ fn eval(expr: &Expr, px: &Pixels<'_>, flags: &mut u32) -> f64 {
     }
 }
 
-/// Check that the scene has every input of `expr`.
-pub fn check_inputs(expr: &Expr, scene: &Scene) -> Result<(), MissingData> {
-    let missing = |name: &str| MissingData { scene: scene.name.clone(), name: name.to_string() };
-    for f in expr.features() {
-        if f.needs_data() && scene.feature(f).is_none() {
-            return Err(missing(f.name()));
-        }
-    }
-    for v in expr.bound_variables() {
-        if scene.variance(v).is_none() && v.from_prepass() {
-            return Err(missing(&format!("{v} (what the outlier pre-pass measures: a pipeline with outliers=k)")));
-        }
-        if scene.variance(v).is_none() {
-            return Err(missing(v.name()));
-        }
-    }
-    Ok(())
+/// Check that the scene has every input of `expr` (what a pre-pass measured
+/// is among its variances once `prepass` has run).
+pub fn check_inputs(expr: &Expr, scene: &Scene) -> Result<(), MissingInput> {
+    crate::scene::Needs::of(expr, false).check(scene, false)
 }
 
 /// Filter `scene` with weight expression `expr` over a (2r+1)² window.
-pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, MissingData> {
+pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, MissingInput> {
     check_inputs(expr, scene)?;
     let r = radius as i64;
     let offsets: Vec<(i64, i64, f64)> = (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (dx, dy, 1.0))).collect();
@@ -163,13 +144,13 @@ pub struct Prepared {
 }
 
 /// The pre-pass of `pipeline` (outliers, then demodulation) on `scene`'s colour.
-pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, MissingData> {
+pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, MissingInput> {
     let (w, h) = (scene.width as i64, scene.height as i64);
     let f64s = |c: [f32; 3]| c.map(|v| v as f64);
     let modulation = match (pipeline.demodulate, &scene.albedo) {
         (false, _) => None,
         (true, Some(albedo)) => Some(albedo.iter().map(|a| pipeline::modulation(f64s(*a))).collect::<Vec<_>>()),
-        (true, None) => return Err(MissingData { scene: scene.name.clone(), name: "albedo (for demodulate)".into() }),
+        (true, None) => return Err(MissingInput { scene: scene.name.clone(), missing: crate::scene::Missing::Albedo }),
     };
     let r = pipeline::OUTLIER_RADIUS as i64;
     let mut color = Vec::with_capacity(scene.pixels());
@@ -219,7 +200,7 @@ pub fn filter_pipeline(
     scene: &Scene,
     pipeline: &FilterPipeline,
     radius: u32,
-) -> Result<CpuFiltered, MissingData> {
+) -> Result<CpuFiltered, MissingInput> {
     let prepared = prepass(scene, pipeline)?;
     let mut working = scene.clone();
     working.color = prepared.color;

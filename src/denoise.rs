@@ -13,8 +13,8 @@ use crate::gpu::{Filtered, Gpu, SceneBuffers};
 use crate::jit;
 use crate::lang::{Expr, Feature, ScalarVar};
 use crate::pipeline::FilterPipeline;
-use crate::scene::Request;
-use crate::Scene;
+use crate::scene::Scene;
+use crate::scene::{Holds, Needs, Request};
 
 /// The shipped filters a render gets when none is asked for, best first: by
 /// mean relMSE over OIDN's (colour + albedo + normal) on the public Mitsuba
@@ -109,18 +109,15 @@ impl Choice {
     }
 
     /// The inputs this filter reads that `provided` lacks, by name (the
-    /// albedo under `texture`, which demodulation divides by).
+    /// albedo under `texture`, which demodulation divides by): `scene::Needs`'s rule.
     pub fn missing(&self, provided: &Provided) -> Vec<String> {
-        let mut missing: Vec<String> =
-            self.expr.features().difference(&provided.features).map(|f| f.name().to_string()).collect();
-        if self.pipeline.demodulate
-            && !provided.features.contains(&Feature::Texture)
-            && !missing.iter().any(|m| m == Feature::Texture.name())
-        {
-            missing.push(format!("{} (the albedo `demodulate` divides by)", Feature::Texture.name()));
-        }
-        missing.extend(self.expr.stored_variables().difference(&provided.variances).map(|v| v.name().to_string()));
-        missing
+        let holds = Holds {
+            features: &provided.features,
+            variances: &provided.variances,
+            measured: self.pipeline.outliers.is_some(),
+            albedo: provided.features.contains(&Feature::Texture),
+        };
+        Needs::of(&self.expr, self.pipeline.demodulate).missing(holds).iter().map(|m| m.to_string()).collect()
     }
 
     /// What a scene must hold for this filter (its reference too, for errors).

@@ -34,6 +34,8 @@ pub struct Environment {
     /// says (Open MPI's mpirun and srun: `OMPI_COMM_WORLD_SIZE`; MPICH's
     /// hydra: `PMI_SIZE`); 1 without one.
     pub launched_ranks: usize,
+    /// Where temporary files go: `$TMPDIR`, else `/tmp`.
+    pub scratch: PathBuf,
 }
 
 impl Environment {
@@ -52,15 +54,23 @@ impl Environment {
             },
             name: text(ADAPTER).filter(|n| !n.is_empty()),
         };
+        let scratch = var("TMPDIR").map_or_else(|| PathBuf::from("/tmp"), PathBuf::from);
         let cache = match (var(CACHE), var("XDG_CACHE_HOME"), var("HOME")) {
             (Some(dir), _, _) => PathBuf::from(dir),
             (None, Some(dir), _) => PathBuf::from(dir).join("filterjit"),
             (None, None, Some(home)) => PathBuf::from(home).join(".cache/filterjit"),
-            (None, None, None) => std::env::temp_dir().join("filterjit-cache"),
+            (None, None, None) => scratch.join("filterjit-cache"),
         };
         let launched_ranks =
             ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE"].iter().find_map(|v| text(v)?.parse().ok()).unwrap_or(1);
-        Ok(Environment { adapter, cache, oidn: var(OIDN).map(PathBuf::from), path: var("PATH"), launched_ranks })
+        Ok(Environment {
+            adapter,
+            cache,
+            oidn: var(OIDN).map(PathBuf::from),
+            path: var("PATH"),
+            launched_ranks,
+            scratch,
+        })
     }
 }
 

@@ -31,6 +31,9 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
+            if let Some(flag) = cli::flag_for(&e) {
+                eprintln!("hint: {flag}");
+            }
             ExitCode::FAILURE
         }
     }

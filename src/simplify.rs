@@ -544,9 +544,12 @@ pub fn instantiate_with(pattern: &str, values: &[(&str, &Expr)]) -> Expr {
     build(ast, Id::from(ast.as_ref().len() - 1), values)
 }
 
-/// What extraction minimises: the operator table's kernel cost plus a
-/// tenth per node (literals cost only that: they are folded into the code),
-/// counted in tenths so that sums are exact and ties stay ties.
+/// What extraction minimises, node by node (egg's extractor sees one node
+/// and its children's costs): the operator table's weights plus a tenth per
+/// node (literals cost only that: they are folded into the code), counted in
+/// tenths so that sums are exact and ties stay ties. A guide to the
+/// cheapest form; whether the form found is kept is decided by
+/// [`kernel_cost`], which prices the lowered kernel.
 struct KernelCost;
 
 impl CostFunction<Node> for KernelCost {
@@ -605,8 +608,11 @@ pub fn simplify(expr: &Expr) -> Expr {
     let (_, best) = Extractor::new(&runner.egraph, KernelCost).find_best(root);
     let last = Id::from(best.as_ref().len() - 1);
     let simplified = from_rec(&best, last);
-    // Ties keep the original, so an already simple expression prints as written.
-    if kernel_cost(&simplified) < kernel_cost(expr) {
+    // The lowered kernel's cost decides; where it ties (literal subtrees fold
+    // away in both), the shorter form, for people; full ties keep the original,
+    // so an already simple expression prints as written.
+    let key = |e: &Expr| (kernel_cost(e), e.len());
+    if key(&simplified) < key(expr) {
         simplified
     } else {
         expr.clone()
@@ -636,16 +642,11 @@ pub fn facts(expr: &Expr) -> Facts {
     egraph[root].data.clone()
 }
 
-/// The cost extraction minimises, of a whole expression, in units of one add.
+/// What the kernel for `expr` costs per pixel in a 3×3 window, in units of
+/// one add, priced on the program that runs (`cost::ExprCost`, from the
+/// lowered body): `simplify` keeps a form only where this is lower.
 pub fn kernel_cost(expr: &Expr) -> f64 {
-    let mut rec = RecExpr::default();
-    let root = to_rec(expr, &mut rec);
-    let mut cost = KernelCost;
-    let mut costs = vec![0u64; rec.as_ref().len()];
-    for (k, node) in rec.as_ref().iter().enumerate() {
-        costs[k] = cost.cost(node, |id| costs[usize::from(id)]);
-    }
-    costs[usize::from(root)] as f64 / 10.0
+    crate::cost::model(expr, &crate::pipeline::FilterPipeline::WINDOW, 1)
 }
 
 #[cfg(test)]

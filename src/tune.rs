@@ -11,7 +11,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use anyhow::Result;
 use serde::Serialize;
 
-use crate::evolve::GpuEvaluator;
+use crate::fitness::Scorer;
 use crate::lang::{parse_expr, Expr, Feature};
 
 /// The terms of the cross-bilateral filter, in the order of its formula.
@@ -78,7 +78,7 @@ const FACTORS: [f64; 6] = [0.35, 0.5, 0.7, 1.4, 2.0, 2.8];
 
 /// Tune the sigmas of the terms the evaluator's scenes provide, starting from
 /// the hand-set values; `sweeps` passes over the five sigmas.
-pub fn tune(evaluator: &mut GpuEvaluator<'_>, sweeps: usize, on_step: &mut dyn FnMut(&Sigmas, f64)) -> Result<Tuned> {
+pub fn tune(evaluator: &mut Scorer<'_>, sweeps: usize, on_step: &mut dyn FnMut(&Sigmas, f64)) -> Result<Tuned> {
     let available: Vec<Feature> = TERMS
         .iter()
         .copied()
@@ -97,7 +97,7 @@ pub fn tune(evaluator: &mut GpuEvaluator<'_>, sweeps: usize, on_step: &mut dyn F
 /// hand-set filter of any form, such as the SVGF-style `@svgfAtrous`. The
 /// literals are named `c1`, `c2`, … in pre-order.
 pub fn tune_literals(
-    evaluator: &mut GpuEvaluator<'_>,
+    evaluator: &mut Scorer<'_>,
     start: &Expr,
     sweeps: usize,
     on_step: &mut dyn FnMut(&Sigmas, f64),
@@ -142,7 +142,7 @@ pub fn with_literals(e: &Expr, values: &mut impl Iterator<Item = f64>) -> Expr {
 /// [`FACTORS`] (three significant digits), all of a step's candidates
 /// compiled and scored as one batch; `sweeps` passes, or until one gains nothing.
 fn descend(
-    evaluator: &mut GpuEvaluator<'_>,
+    evaluator: &mut Scorer<'_>,
     start: &[f64],
     build: &dyn Fn(&[f64]) -> Expr,
     named: &dyn Fn(&[f64]) -> Sigmas,
@@ -150,7 +150,7 @@ fn descend(
     on_step: &mut dyn FnMut(&Sigmas, f64),
 ) -> Result<Tuned> {
     let mut memo: BTreeMap<String, f64> = BTreeMap::new();
-    let mut score = |evaluator: &mut GpuEvaluator<'_>, candidates: &[Vec<f64>]| -> Result<Vec<f64>> {
+    let mut score = |evaluator: &mut Scorer<'_>, candidates: &[Vec<f64>]| -> Result<Vec<f64>> {
         let exprs: Vec<Expr> = candidates.iter().map(|c| build(c)).collect();
         let texts: Vec<String> = exprs.iter().map(Expr::to_string).collect();
         let fresh: BTreeMap<&String, &Expr> =
@@ -161,7 +161,7 @@ fn descend(
             for (text, result) in fresh.keys().zip(evaluator.errors(&batch)?) {
                 let fitness = match result {
                     Ok(per_scene) if per_scene.iter().all(|s| s.flags == 0 && s.relmse.is_finite()) => {
-                        crate::evolve::normalised_error(&per_scene, &noisy)
+                        crate::fitness::normalised_error(&per_scene, &noisy)
                     }
                     _ => f64::INFINITY,
                 };

@@ -43,6 +43,13 @@ fn only_the_edge_reads_or_sets_the_environment() {
     readers.sort();
     readers.dedup();
     assert_eq!(readers, ["environment.rs", "main.rs"], "the library reads no environment variable");
+    // `temp_dir()` reads TMPDIR: the edge's `Environment::scratch` says where temporary files go.
+    let temp_dir_readers: Vec<String> = sources()
+        .into_iter()
+        .filter(|(_, text)| code_of(text).iter().any(|l| l.contains("temp_dir()")))
+        .map(|(path, _)| path)
+        .collect();
+    assert!(temp_dir_readers.is_empty(), "outside tests, {temp_dir_readers:?} read TMPDIR through temp_dir()");
 }
 
 #[test]
@@ -91,4 +98,203 @@ fn the_python_binding_is_thin() {
         assert!(lines.is_empty(), "python/src/lib.rs uses `{needle}`: {lines:?}");
     }
     assert!(binding.contains("scene::prepare(") && binding.contains("filterjit::denoise::filter("));
+}
+
+/// A file's code without its comments and without its `#[cfg(test)]`
+/// module (tests may reach anything they check).
+fn code_of(text: &str) -> Vec<&str> {
+    let mut lines = Vec::new();
+    let mut previous = "";
+    for line in text.lines() {
+        let trimmed = line.trim_start();
+        if previous == "#[cfg(test)]" && trimmed.starts_with("mod ") {
+            lines.pop();
+            break;
+        }
+        previous = trimmed;
+        if !trimmed.starts_with("//") {
+            lines.push(line);
+        }
+    }
+    lines
+}
+
+/// The names a line reaches through `prefix` (`crate::`, `super::`):
+/// `prefix name` and each name of `prefix {a, b::c}`.
+fn reached(line: &str, prefix: &str) -> Vec<String> {
+    let mut names = Vec::new();
+    let mut rest = line;
+    while let Some(at) = rest.find(prefix) {
+        // `crate::` inside `filterjit::crate::` cannot occur; `super::` inside `super::super::` is the outer one.
+        rest = &rest[at + prefix.len()..];
+        if let Some(group) = rest.strip_prefix('{') {
+            let inner = &group[..group.find('}').unwrap_or(group.len())];
+            for item in inner.split(',') {
+                let name: String = item.trim().chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+                if !name.is_empty() {
+                    names.push(name);
+                }
+            }
+        } else {
+            let name: String = rest.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+            if !name.is_empty() {
+                names.push(name);
+            }
+        }
+    }
+    names
+}
+
+/// ARCHITECTURE.md's layer table: each top-level module and its layer (0 lowest).
+fn layers() -> std::collections::BTreeMap<String, usize> {
+    let text = std::fs::read_to_string(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("ARCHITECTURE.md")).unwrap();
+    let section = text.split("\n## Layers").nth(1).expect("ARCHITECTURE.md has a `## Layers` section");
+    let section = section.split("\n## ").next().unwrap();
+    let mut out = std::collections::BTreeMap::new();
+    for row in section.lines().filter(|l| l.starts_with("| ")) {
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        let Ok(layer) = cells[1].parse::<usize>() else { continue };
+        for module in cells[3].split(',') {
+            let module = module.trim().trim_matches('`');
+            assert!(out.insert(module.to_string(), layer).is_none(), "`{module}` is in two layers");
+        }
+    }
+    out
+}
+
+/// The top-level modules `lib.rs` declares.
+fn top_level_modules() -> Vec<String> {
+    let lib = sources().into_iter().find(|(p, _)| p == "lib.rs").unwrap().1;
+    lib.lines().filter_map(|l| l.strip_prefix("pub mod ")).map(|l| l.trim_end_matches(';').to_string()).collect()
+}
+
+/// Which top-level modules each top-level module names (`crate::x`).
+fn module_graph() -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    let modules = top_level_modules();
+    let mut graph: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> =
+        modules.iter().map(|m| (m.clone(), Default::default())).collect();
+    for (path, text) in sources() {
+        let owner = path.split('/').next().unwrap().trim_end_matches(".rs").to_string();
+        if !modules.contains(&owner) {
+            continue; // lib.rs, main.rs and the binary's cli/
+        }
+        for line in code_of(&text) {
+            for name in reached(line, "crate::") {
+                assert!(
+                    modules.contains(&name),
+                    "src/{path} names `crate::{name}`: name items by their module, not by the crate root's re-exports"
+                );
+                if name != owner {
+                    graph.get_mut(&owner).unwrap().insert(name);
+                }
+            }
+        }
+    }
+    graph
+}
+
+/// A cycle in `graph`, if it has one.
+fn cycle(graph: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>) -> Option<Vec<String>> {
+    fn visit(
+        node: &str,
+        graph: &std::collections::BTreeMap<String, std::collections::BTreeSet<String>>,
+        state: &mut std::collections::BTreeMap<String, u8>,
+        path: &mut Vec<String>,
+    ) -> Option<Vec<String>> {
+        match state.get(node) {
+            Some(2) => return None,
+            Some(1) => {
+                let start = path.iter().position(|n| n == node).unwrap();
+                let mut found = path[start..].to_vec();
+                found.push(node.to_string());
+                return Some(found);
+            }
+            _ => {}
+        }
+        state.insert(node.to_string(), 1);
+        path.push(node.to_string());
+        for next in graph.get(node).into_iter().flatten() {
+            if let Some(found) = visit(next, graph, state, path) {
+                return Some(found);
+            }
+        }
+        path.pop();
+        state.insert(node.to_string(), 2);
+        None
+    }
+    let mut state = Default::default();
+    graph.keys().find_map(|node| visit(node, graph, &mut state, &mut Vec::new()))
+}
+
+#[test]
+fn every_module_has_a_layer_and_imports_go_down() {
+    let layers = layers();
+    let modules = top_level_modules();
+    for module in &modules {
+        assert!(layers.contains_key(module), "src/{module} is in no layer of ARCHITECTURE.md's table");
+    }
+    for module in layers.keys() {
+        assert!(
+            modules.contains(module) || module == "cli",
+            "ARCHITECTURE.md's layers name `{module}`, which lib.rs does not declare"
+        );
+    }
+    let graph = module_graph();
+    let mut upward = Vec::new();
+    for (from, names) in &graph {
+        for to in names {
+            if layers[to] > layers[from] {
+                upward.push(format!("{from} (layer {}) → {to} (layer {})", layers[from], layers[to]));
+            }
+        }
+    }
+    assert!(upward.is_empty(), "imports that go up the layer table:\n{}", upward.join("\n"));
+    assert_eq!(cycle(&graph), None, "a cycle between top-level modules");
+}
+
+#[test]
+fn the_jit_files_import_each_other_without_a_cycle() {
+    let files: Vec<(String, String)> = sources()
+        .into_iter()
+        .filter_map(|(p, t)| Some((p.strip_prefix("jit/")?.strip_suffix(".rs")?.to_string(), t)))
+        .collect();
+    let siblings: Vec<&String> = files.iter().map(|(f, _)| f).filter(|f| *f != "mod").collect();
+    // What `jit/mod.rs` re-exports, by the file that defines it.
+    let mut defined_in = std::collections::BTreeMap::new();
+    let facade = &files.iter().find(|(f, _)| f == "mod").unwrap().1;
+    for line in facade.lines().filter_map(|l| l.trim().strip_prefix("pub use ")) {
+        let (file, items) = line.split_once("::").unwrap();
+        for item in items.trim_matches(|c| "{};".contains(c)).split(',') {
+            defined_in.insert(item.trim().to_string(), file.to_string());
+        }
+    }
+    let mut graph: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
+    for (file, text) in files.iter().filter(|(f, _)| f != "mod") {
+        let edges = graph.entry(file.clone()).or_default();
+        for line in code_of(text) {
+            let names = reached(line, "super::").into_iter().chain(reached(line, "crate::jit::"));
+            for name in names {
+                let target = if siblings.contains(&&name) { Some(name) } else { defined_in.get(&name).cloned() };
+                if let Some(target) = target.filter(|t| t != file) {
+                    edges.insert(target);
+                }
+            }
+        }
+    }
+    assert_eq!(cycle(&graph), None, "a cycle between files of src/jit: {graph:?}");
+}
+
+/// Files that each do one thing stay small enough to read: the search's and
+/// the scorer's files, and the lowering, by their non-test lines.
+#[test]
+fn the_search_the_scorer_and_the_lowering_stay_small() {
+    for (path, text) in sources() {
+        let lines = code_of(&text).len();
+        let limit = match path.as_str() {
+            "jit/lower.rs" => 500,
+            p if p.starts_with("evolve/") || p.starts_with("fitness/") || p.starts_with("bench/") => 400,
+            _ => continue,
+        };
+        assert!(lines <= limit, "src/{path} has {lines} non-test lines (at most {limit})");
+    }
 }

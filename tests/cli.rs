@@ -335,3 +335,44 @@ fn a_closed_pipe_ends_the_program_quietly() {
     let stderr = text(&output.stderr);
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+/// Text however deep or long ends with a positioned error and a non-zero
+/// exit, typed on the command line or read from a named-expression file.
+#[test]
+fn expressions_too_deep_for_any_pass_end_with_an_error_not_a_crash() {
+    let deep = format!("{}distance2(normal){}", "exp(".repeat(4_000), ")".repeat(4_000));
+    let run = filterjit(&["check", &deep]);
+    let stderr = text(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "stderr:\n{stderr}");
+    assert!(stderr.contains("nests deeper than 256") && stderr.contains("1:1028"), "{stderr}");
+
+    let dir = std::env::temp_dir().join(format!("filterjit-cli-deep-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = dir.join("hall_of_fame.txt");
+    let long = vec!["colorVariance"; 20_000].join(" + ");
+    std::fs::write(&file, format!("# a sum of 20,000 terms\nlong = {long}\nfine = exp(-distance2(normal))\n")).unwrap();
+    for command in ["check", "compile", "simplify"] {
+        let run = filterjit(&[command, &format!("@{}:long", file.display())]);
+        let stderr = text(&run.stderr);
+        assert_eq!(run.status.code(), Some(1), "{command}: stderr:\n{stderr}");
+        assert!(stderr.contains("nests deeper than 256"), "{command}: {stderr}");
+    }
+    let run = filterjit(&["check", &format!("@{}:fine", file.display())]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A data error names the scene and what it lacks; the command line then
+/// names the flag that changes the outcome.
+#[test]
+fn a_missing_channel_is_a_data_error_and_the_cli_names_the_flag() {
+    let out = std::env::temp_dir().join(format!("filterjit-cli-absent-{}.exr", std::process::id()));
+    // The Mitsuba sample has no direct-illumination channel, which @thesis1 reads.
+    let sample = mitsuba_sample();
+    let run = filterjit(&["filter", "--expr", "@thesis1", sample.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let stderr = text(&run.stderr);
+    assert_eq!(run.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("has no `directIllumination`"), "{stderr}");
+    assert!(stderr.contains("hint: `filterjit filter --absent zero`"), "{stderr}");
+    assert!(!out.exists(), "nothing written");
+}

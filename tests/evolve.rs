@@ -3,7 +3,8 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use filterjit::evolve::{self, GpuEvaluator, RunConfig, RunOptions};
+use filterjit::evolve::{self, RunConfig, RunOptions};
+use filterjit::fitness::{self, Scorer};
 use filterjit::gp::{Evaluator, Settings};
 use filterjit::lang::{parse_expr, Feature};
 use filterjit::render::{self, RenderSettings};
@@ -67,7 +68,7 @@ pub(crate) fn run(
     resume: bool,
     stop_after: Option<u32>,
 ) -> Option<evolve::Summary> {
-    try_run(dir, settings, config, resume, stop_after, evolve::Tiles::On, evolve::Fusion::Members(8)).unwrap()
+    try_run(dir, settings, config, resume, stop_after, fitness::Tiles::On, fitness::Fusion::Members(8)).unwrap()
 }
 
 /// A run with the given tiles and fusion (results are the same with any).
@@ -77,8 +78,8 @@ fn try_run(
     config: RunConfig,
     resume: bool,
     stop_after: Option<u32>,
-    tiles: evolve::Tiles,
-    fusion: evolve::Fusion,
+    tiles: fitness::Tiles,
+    fusion: fitness::Fusion,
 ) -> anyhow::Result<Option<evolve::Summary>> {
     let gpu = gpu();
     evolve::run(
@@ -120,7 +121,7 @@ fn runs_are_deterministic_and_resume_exactly() {
     // The same seed and inputs: the same run, bit for bit, also without
     // workgroup tiles and with a kernel per individual instead of eight.
     let b = temp_dir("b");
-    try_run(&b, small(), config(training, test), false, None, evolve::Tiles::Off, evolve::Fusion::Members(1))
+    try_run(&b, small(), config(training, test), false, None, fitness::Tiles::Off, fitness::Fusion::Members(1))
         .unwrap()
         .expect("finished");
     let state = |dir: &Path| {
@@ -140,8 +141,9 @@ fn runs_are_deterministic_and_resume_exactly() {
     assert_eq!(read(c.join(evolve::LOG_FILE)).lines().count(), 5);
 
     // Starting over an existing run, or resuming with other settings, is refused.
-    let err = try_run(&a, small(), config(training, test), false, None, evolve::Tiles::On, evolve::Fusion::Members(8))
-        .unwrap_err();
+    let err =
+        try_run(&a, small(), config(training, test), false, None, fitness::Tiles::On, fitness::Fusion::Members(8))
+            .unwrap_err();
     assert!(err.to_string().contains("--resume"), "{err}");
     let err = try_run(
         &a,
@@ -149,8 +151,8 @@ fn runs_are_deterministic_and_resume_exactly() {
         config(training, test),
         true,
         None,
-        evolve::Tiles::On,
-        evolve::Fusion::Auto,
+        fitness::Tiles::On,
+        fitness::Fusion::Auto,
     )
     .unwrap_err();
     assert!(err.to_string().contains("other settings"), "{err}");
@@ -235,7 +237,7 @@ fn invalid_individuals_get_the_worst_fitness_and_a_reason() {
     let (training, _) = datasets();
     let request = scene::Request::for_expr(&parse_expr("distance2(color)").unwrap());
     let scenes = vec![scene::load(training, &request).unwrap()];
-    let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
+    let mut evaluator = Scorer::new(&gpu, scenes, &fitness::Settings::window(2, 2)).unwrap();
     let exprs: Vec<_> = ["sqrt(distance2(color) - 1)", "exp(-distance2(color))", "asin(2 + distance2(color))", "1"]
         .iter()
         .map(|t| parse_expr(t).unwrap())
@@ -442,7 +444,7 @@ fn the_cost_model_is_measured_on_the_device_and_kept_by_the_run() {
 fn a_run_on_fitness_tiles_is_rescored_on_whole_images() {
     let (training, test) = datasets();
     let dir = temp_dir("fitness-tiles");
-    let tiles: filterjit::fitness_tiles::TileSampling = "2x8".parse().unwrap();
+    let tiles: fitness::TileSampling = "2x8".parse().unwrap();
     let config = RunConfig { fitness_tiles: Some(tiles), ..config(training, test) };
     let settings = Settings { generations: 2, ..small() };
     let summary = run(&dir, settings, config, false, None).expect("finished");
@@ -531,16 +533,18 @@ fn the_search_reads_only_the_features_it_is_given() {
         features: Some(["color".to_string(), "directIllumination".to_string()].into()),
         ..config
     };
-    let (tiles, fusion) = (evolve::Tiles::Off, evolve::Fusion::Auto);
-    let error = try_run(&temp_dir("features-missing"), small(), lacking.clone(), false, None, tiles, fusion)
-        .unwrap_err()
-        .to_string();
-    assert!(error.contains("--features") && error.contains("directIllumination"), "{error}");
+    let (tiles, fusion) = (fitness::Tiles::Off, fitness::Fusion::Auto);
+    use filterjit::evolve::TerminalError;
+    let error =
+        try_run(&temp_dir("features-missing"), small(), lacking.clone(), false, None, tiles, fusion).unwrap_err();
+    let typed = error.downcast_ref::<TerminalError>();
+    assert!(matches!(typed, Some(TerminalError::NotProvided(n)) if n == "directIllumination"), "{error}");
     // What the outlier rule measures comes with the pipeline: named without one, it is refused as such.
     let measure = RunConfig { features: Some(["color".to_string(), "clampedShare".to_string()].into()), ..lacking };
-    let error =
-        try_run(&temp_dir("features-measure"), small(), measure, false, None, tiles, fusion).unwrap_err().to_string();
-    assert!(error.contains("clampedShare") && error.contains("outliers=K"), "{error}");
+    let error = try_run(&temp_dir("features-measure"), small(), measure, false, None, tiles, fusion).unwrap_err();
+    let typed = error.downcast_ref::<TerminalError>();
+    assert!(matches!(typed, Some(TerminalError::NeedsOutliers(n)) if n == "clampedShare"), "{error}");
+    assert!(error.to_string().contains("outliers=K"), "{error}");
 }
 
 /// `--fitness-relative-to E --fitness-pool worst`: fitness is the largest
@@ -549,7 +553,7 @@ fn the_search_reads_only_the_features_it_is_given() {
 /// from the per-scene errors.
 #[test]
 fn fitness_relative_to_a_baseline_pools_the_worst_scene() {
-    use filterjit::fitness_rule::{FitnessRule, Pool};
+    use filterjit::fitness::{FitnessRule, Pool};
     let (training, test) = datasets();
     let dir = temp_dir("fitness-rule");
     let base = config(training, test);
@@ -579,12 +583,13 @@ fn fitness_relative_to_a_baseline_pools_the_worst_scene() {
         ..Default::default()
     };
     let scenes: Vec<_> = [training, test].iter().map(|d| scene::load(d, &request).unwrap()).collect();
-    let mut evaluator = GpuEvaluator::new(&gpu, scenes, base.radius, 2).unwrap();
+    let mut evaluator = Scorer::new(&gpu, scenes.clone(), &fitness::Settings::window(base.radius, 2)).unwrap();
     let errors = evaluator.errors(&exprs).unwrap();
     let (best, seed) = (errors[0].as_ref().unwrap(), errors[1].as_ref().unwrap());
     let worst = best.iter().zip(seed).map(|(b, s)| b.relmse / s.relmse).fold(0.0, f64::max);
     assert!((summary.best.fitness.value - worst).abs() <= 1e-12 * worst, "{} vs {worst}", summary.best.fitness.value);
-    evaluator.set_fitness_rule(&rule).unwrap();
+    let mut evaluator =
+        Scorer::new(&gpu, scenes, &fitness::Settings { rule, ..fitness::Settings::window(base.radius, 2) }).unwrap();
     let seed = filterjit::gp::Candidate { expr: exprs[1].clone(), radius: None };
     assert_eq!(evaluator.evaluate(&[seed]).unwrap()[0].value, 1.0, "the baseline itself scores 1");
 }
@@ -603,7 +608,8 @@ fn scoring_leaves_what_others_cached_on_a_shared_device() {
     assert_eq!(device.cached_pipelines(), 1);
     let expr = parse_expr("exp(-distance2(color))").unwrap();
     let scenes = vec![scene::load(training, &scene::Request::for_expr(&expr)).unwrap()];
-    let mut evaluator = GpuEvaluator::with_devices(&device, scenes, 2, FilterPipeline::WINDOW, 1, 1).unwrap();
+    let scoring = fitness::Settings { devices: Some(1), ..fitness::Settings::window(2, 1) };
+    let mut evaluator = Scorer::new(&device, scenes, &scoring).unwrap();
     assert!(evaluator.errors(&[expr]).unwrap()[0].is_ok());
     assert_eq!(device.cached_pipelines(), 1, "the filter kernel cached before scoring is still there");
 }
@@ -640,8 +646,8 @@ fn elites_keep_the_best_filter_found() {
             on_report: &mut |_| {},
             on_render: &mut |_, _| {},
             baselines: Vec::new(),
-            tiles: evolve::Tiles::Off,
-            fusion: evolve::Fusion::Auto,
+            tiles: fitness::Tiles::Off,
+            fusion: fitness::Fusion::Auto,
             cache: crate::common::environment().cache.clone(),
         },
     )

@@ -93,3 +93,53 @@ fn every_shipped_expression_is_valid() {
         parse_expr(text).unwrap_or_else(|e| panic!("@{name}:\n{e}"));
     }
 }
+
+/// `exp(` nested `depth` deep around a pair operator: `depth + 1` levels as the parser counts them.
+fn nested(depth: usize) -> String {
+    format!("{}distance2(normal){}", "exp(".repeat(depth), ")".repeat(depth))
+}
+
+/// A sum of `terms` terms: `terms - 1` operators in a chain.
+fn long_sum(terms: usize) -> String {
+    vec!["colorVariance"; terms].join(" + ")
+}
+
+/// At the depth limit every pass works, on a test thread's 2 MiB stack;
+/// one level past it the parser says where, and nothing recurses further.
+#[test]
+fn expressions_at_the_depth_limit_go_through_every_pass() {
+    use filterjit::lang::MAX_DEPTH;
+    let scene = crate::common::synthetic_scene(8, 8, 1);
+    for text in [nested(MAX_DEPTH - 1), long_sum(MAX_DEPTH + 1)] {
+        let expr = parse_expr(&text).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(expr.depth(), MAX_DEPTH);
+        assert_eq!(parse_expr(&expr.to_string()).unwrap(), expr, "print → parse round-trips");
+        filterjit::jit::compile(&expr).unwrap();
+        let simplified = filterjit::simplify::simplify(&expr);
+        parse_expr(&simplified.to_string()).unwrap();
+        filterjit::cpu::filter(&expr, &scene, 1).unwrap();
+        filterjit::lang::latex(&expr);
+        filterjit::cost::model(&expr, &filterjit::pipeline::FilterPipeline::WINDOW, 2);
+    }
+}
+
+#[test]
+fn expressions_past_the_depth_limit_fail_with_a_position_not_a_crash() {
+    use filterjit::lang::MAX_DEPTH;
+    let cases = [
+        // One level past the limit: the call that opens it.
+        (nested(MAX_DEPTH), 1 + 4 * MAX_DEPTH + "distance2".len()),
+        // The operator past the limit in a long chain (the 20,000 terms).
+        (long_sum(20_000), 1 + MAX_DEPTH * "colorVariance + ".len() + "colorVariance ".len()),
+        // Far past it: stopped before the parser recurses (4,000 and 50,000 deep).
+        (nested(4_000), 1 + 4 * MAX_DEPTH + 3),
+        (nested(50_000), 1 + 4 * MAX_DEPTH + 3),
+        (format!("{}1", "-".repeat(10_000)), 1 + MAX_DEPTH),
+    ];
+    for (text, column) in cases {
+        let err = parse_expr(&text).unwrap_err();
+        assert_eq!(err.kind, ExprErrorKind::TooDeep, "{}", err.message);
+        assert_eq!((err.line, err.column), (1, column), "{}…", &text[..40]);
+        assert!(err.message.contains(&MAX_DEPTH.to_string()), "{}", err.message);
+    }
+}

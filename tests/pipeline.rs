@@ -205,7 +205,7 @@ fn a_kernel_runs_only_on_scenes_prepared_for_its_shape() {
     let mut plain = scene.clone();
     plain.albedo = None;
     let error = SceneBuffers::for_pipeline(&gpu, &plain, &pipeline("demodulate,window")).err().unwrap().to_string();
-    assert!(error.contains("without its albedo"), "{error}");
+    assert!(error.contains("has no `texture` (the albedo `demodulate` divides by)"), "{error}");
 }
 
 /// Kernels run as trusted modules (wgpu's run-time bounds checks and loop
@@ -296,8 +296,7 @@ fn fused_fitness_kernels_score_each_member_as_its_own_kernel() {
 /// cover a scene give its whole-image error, through every pipeline stage.
 #[test]
 fn fitness_tiles_covering_a_scene_give_its_whole_image_error() {
-    use filterjit::evolve::GpuEvaluator;
-    use filterjit::fitness_tiles::TileSampling;
+    use filterjit::fitness::{FitnessTiles, Scorer, Settings, TileSampling};
     let gpu = gpu();
     let exprs: Vec<Expr> = [
         "exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3 + distance2(pixel) / 4))",
@@ -310,9 +309,11 @@ fn fitness_tiles_covering_a_scene_give_its_whole_image_error() {
     let scenes = vec![scene_with_albedo(48, 40, 9), scene_with_albedo(32, 24, 10)];
     for (text, radius) in [("window", 2), ("outliers=2,demodulate,atrous=3", 2)] {
         let p = pipeline(text);
-        let mut whole = GpuEvaluator::with_devices(&gpu, scenes.clone(), radius, p, 1, 1).unwrap();
+        let whole_images = Settings { devices: Some(1), ..Settings::for_pipeline(radius, p, 1) };
+        let on_tiles = |sampling| Settings { tiles: Some(FitnessTiles { sampling, seed: 3 }), ..whole_images.clone() };
+        let mut whole = Scorer::new(&gpu, scenes.clone(), &whole_images).unwrap();
         let every_cell = TileSampling { count: 1000, size: 8 };
-        let mut tiled = GpuEvaluator::on_tiles(&gpu, scenes.clone(), every_cell, 3, radius, p, 1).unwrap();
+        let mut tiled = Scorer::new(&gpu, scenes.clone(), &on_tiles(every_cell)).unwrap();
         assert!(tiled.on_tiles_only() && !whole.on_tiles_only());
         let close = |a: f64, b: f64| (a - b).abs() <= 1e-9 * a.abs().max(b.abs()).max(1e-30);
         for (a, b) in whole.noisy_relmse().iter().zip(tiled.noisy_relmse()) {
@@ -330,8 +331,7 @@ fn fitness_tiles_covering_a_scene_give_its_whole_image_error() {
         // The square-root member flags on these scenes; the check above compared something.
         assert_ne!(w[2].as_ref().unwrap()[0].flags, 0);
         // A few tiles are a sample, not the whole.
-        let mut sampled =
-            GpuEvaluator::on_tiles(&gpu, scenes.clone(), TileSampling { count: 3, size: 8 }, 3, radius, p, 1).unwrap();
+        let mut sampled = Scorer::new(&gpu, scenes.clone(), &on_tiles(TileSampling { count: 3, size: 8 })).unwrap();
         let s = sampled.errors(&exprs[..1]).unwrap();
         assert_ne!(s[0].as_ref().unwrap()[0].relmse, w[0].as_ref().unwrap()[0].relmse, "{text}: three tiles of thirty");
     }
@@ -378,4 +378,33 @@ fn the_outlier_rule_s_measures_are_terminals() {
     assert!(error.contains("clampedShare") && error.contains("outliers=k"), "{error}");
     let error = cpu::filter_pipeline(&expr, &scene, &plain, 2).unwrap_err().to_string();
     assert!(error.contains("clampedShare") && error.contains("outlier pre-pass"), "{error}");
+}
+
+/// A scene that lacks an input is the user's data error, named as such
+/// (scene and input), by one rule on the device and on the CPU alike.
+#[test]
+fn a_missing_input_is_a_data_error_naming_scene_and_input() {
+    use filterjit::gpu::GpuError;
+    use filterjit::lang::Feature;
+    use filterjit::scene::{Missing, MissingInput};
+    let gpu = gpu();
+    let mut scene = synthetic_scene(16, 16, 3);
+    scene.features.remove(&Feature::Normal);
+    scene.name = "lacking".into();
+    let expr = parse_expr("exp(-distance2(normal))").unwrap();
+    let want = MissingInput { scene: "lacking".into(), missing: Missing::Feature(Feature::Normal) };
+    let kernel = jit::compile(&expr).unwrap();
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
+    match gpu.filter(&kernel, &mut buffers, &scene, 2) {
+        Err(GpuError::MissingInput(got)) => assert_eq!(got, want),
+        other => panic!("not a data error: {:?}", other.map(|_| ())),
+    }
+    assert_eq!(cpu::filter(&expr, &scene, 2).err(), Some(want.clone()));
+    // What the outlier pre-pass measures is missing without outliers (or the scene's own), and says so.
+    scene.variances.remove(&ScalarVar::LocalStd);
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
+    let measured = parse_expr("exp(-localStd)").unwrap();
+    let err = gpu.filter(&jit::compile(&measured).unwrap(), &mut buffers, &scene, 2).unwrap_err();
+    assert!(matches!(&err, GpuError::MissingInput(m) if m.missing == Missing::Measured(ScalarVar::LocalStd)), "{err}");
+    assert!(err.to_string().contains("outliers=k"), "{err}");
 }

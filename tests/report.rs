@@ -4,7 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use filterjit::evolve::GpuEvaluator;
+use filterjit::fitness::{Scorer, Settings};
 use filterjit::lang::Feature;
 use filterjit::tune::{self, Sigmas};
 
@@ -188,7 +188,7 @@ fn the_report_runs_oidn_as_the_peer_through_its_program() {
 #[test]
 fn the_real_oidn_denoises_the_mitsuba_sample() {
     let env = crate::common::environment();
-    let program = match filterjit::report::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()) {
+    let program = match filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()) {
         Ok(oidn) => oidn.program,
         Err(why) if std::env::var_os("FILTERJIT_REQUIRE_OIDN").is_some() => panic!("OIDN is required here: {why}"),
         Err(why) => {
@@ -213,7 +213,7 @@ fn the_real_oidn_denoises_the_mitsuba_sample() {
 fn tuning_improves_on_the_hand_set_sigmas_and_reports_what_it_found() {
     let gpu = gpu();
     let scenes = vec![synthetic_scene(24, 20, 5), synthetic_scene(20, 24, 6)];
-    let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
+    let mut evaluator = Scorer::new(&gpu, scenes, &Settings::window(2, 2)).unwrap();
     let mut steps = 0;
     let tuned = tune::tune(&mut evaluator, 1, &mut |_, _| steps += 1).unwrap();
     assert!(steps >= 6, "one report per sigma and one at the start");

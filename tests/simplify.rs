@@ -197,7 +197,7 @@ fn a_factor_a_hair_below_one_does_not_narrow_a_range_forever() {
 
 #[test]
 fn simplified_expressions_score_the_same_fitness_on_built_in_scenes() {
-    use filterjit::evolve::GpuEvaluator;
+    use filterjit::fitness::{Scorer, Settings};
     use filterjit::gp::Evaluator;
     let gpu = crate::common::gpu();
     let (training, test) = crate::evolve::datasets();
@@ -212,7 +212,7 @@ fn simplified_expressions_score_the_same_fitness_on_built_in_scenes() {
         request.variances.extend(e.variables());
     }
     let scenes = [training, test].iter().map(|d| filterjit::scene::load(d, &request).unwrap()).collect::<Vec<_>>();
-    let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
+    let mut evaluator = Scorer::new(&gpu, scenes, &Settings::window(2, 2)).unwrap();
     let before = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&raw)).unwrap();
     let after = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&simplified)).unwrap();
     for ((r, b), a) in raw.iter().zip(&before).zip(&after) {
@@ -228,7 +228,7 @@ fn simplified_expressions_score_the_same_fitness_on_built_in_scenes() {
 
 #[test]
 fn a_run_that_simplifies_offspring_has_a_hall_of_fame_whose_simplified_forms_score_the_same() {
-    use filterjit::evolve::GpuEvaluator;
+    use filterjit::fitness::{Scorer, Settings};
     use filterjit::gp::Evaluator;
     let (training, test) = crate::evolve::datasets();
     let dir = crate::evolve::temp_dir("simplify-offspring");
@@ -246,7 +246,7 @@ fn a_run_that_simplifies_offspring_has_a_hall_of_fame_whose_simplified_forms_sco
     }
     let gpu = crate::common::gpu();
     let scenes = vec![filterjit::scene::load(training, &request).unwrap()];
-    let mut evaluator = GpuEvaluator::new(&gpu, scenes, 2, 2).unwrap();
+    let mut evaluator = Scorer::new(&gpu, scenes, &Settings::window(2, 2)).unwrap();
     let before = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&raw)).unwrap();
     let after = evaluator.evaluate(&filterjit::gp::Candidate::at_run_radius(&simplified)).unwrap();
     for ((r, b), a) in raw.iter().zip(&before).zip(&after) {

@@ -145,7 +145,7 @@ pub(crate) enum Command {
         generation_radius: u32,
         /// Individuals per fitness kernel, as `evolve --fuse` (auto: 12 on software adapters, 1 on hardware).
         #[arg(long, default_value = "auto")]
-        fuse: filterjit::evolve::Fusion,
+        fuse: filterjit::fitness::Fusion,
         #[arg(short, long, default_value = "bench.json")]
         output: PathBuf,
         /// Leave out Intel Open Image Denoise's whole-frame time even where its
@@ -369,8 +369,8 @@ pub(crate) struct EvolveArgs {
     #[arg(long, default_value = "@crossBilateral")]
     pub(crate) baseline: Vec<String>,
     /// Stage fitness kernels' windows in workgroup memory: auto = on hardware GPUs, off on software adapters (same results either way).
-    #[arg(long, value_enum, default_value_t = filterjit::evolve::Tiles::Auto)]
-    pub(crate) tiles: filterjit::evolve::Tiles,
+    #[arg(long, value_enum, default_value_t = filterjit::fitness::Tiles::Auto)]
+    pub(crate) tiles: filterjit::fitness::Tiles,
     /// The weights of the modelled cost that `--objectives error,cost` trades
     /// against error, as `filterjit bench` measured them on this device
     /// (its `bench.json`, or a file holding just its `cost_model`) [quick,
@@ -383,7 +383,7 @@ pub(crate) struct EvolveArgs {
     /// then costs about what one on small scenes does. The hall of fame is
     /// scored on whole images at the end [default: whole images].
     #[arg(long, value_name = "COUNTxSIZE")]
-    pub(crate) fitness_tiles: Option<filterjit::fitness_tiles::TileSampling>,
+    pub(crate) fitness_tiles: Option<filterjit::fitness::TileSampling>,
     /// The only features and variances the search may read, e.g.
     /// `color,pixel,normal,texture,worldPosition,depth` for filters meant for
     /// Mitsuba renders (no direct illumination, secondary albedo or per-feature
@@ -403,10 +403,10 @@ pub(crate) struct EvolveArgs {
     /// scene's loss against the baseline in full [quick, thesis: mean;
     /// realtime: guarded]. Kept in the checkpoint.
     #[arg(long, value_name = "mean|worst|guarded")]
-    pub(crate) fitness_pool: Option<filterjit::fitness_rule::Pool>,
+    pub(crate) fitness_pool: Option<filterjit::fitness::Pool>,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
-    pub(crate) fuse: filterjit::evolve::Fusion,
+    pub(crate) fuse: filterjit::fitness::Fusion,
     /// Share the islands among the ranks of the MPI job this process was
     /// started in (`mpirun -n 4 filterjit evolve --mpi …`; a filterjit built
     /// with `--features mpi`; docs/DISTRIBUTED.md). Same seed, same result as one process.

@@ -233,13 +233,13 @@ struct PresetValues {
     elites: usize,
     features: &'static [&'static str],
     relative_to: Option<&'static str>,
-    pool: filterjit::fitness_rule::Pool,
+    pool: filterjit::fitness::Pool,
     cost_model: fn() -> filterjit::cost::CostModel,
 }
 
 impl PresetValues {
     fn of(preset: Preset) -> PresetValues {
-        use filterjit::fitness_rule::Pool;
+        use filterjit::fitness::Pool;
         use filterjit::gp::Objectives;
         let base = filterjit::gp::Settings::default();
         let thesis = PresetValues {
@@ -352,7 +352,7 @@ fn run_settings(args: &EvolveArgs) -> Result<(filterjit::gp::Settings, filterjit
         },
         fitness_tiles: args.fitness_tiles,
         features: (!features.is_empty()).then(|| features.into_iter().collect()),
-        fitness: filterjit::fitness_rule::FitnessRule {
+        fitness: filterjit::fitness::FitnessRule {
             relative_to: relative_to.map(resolve_expr).transpose()?.map(|e| e.to_string()),
             pool: args.fitness_pool.unwrap_or(preset.pool),
         },
@@ -381,7 +381,7 @@ mod tests {
         let svgf = resolve_expr("@svgfAtrous").unwrap().to_string();
         assert_eq!(config.seed_expr, svgf);
         assert_eq!(config.fitness.relative_to, Some(svgf));
-        assert_eq!(config.fitness.pool, filterjit::fitness_rule::Pool::Guarded);
+        assert_eq!(config.fitness.pool, filterjit::fitness::Pool::Guarded);
         assert_eq!(config.cost_model, filterjit::cost::CostModel::lavapipe());
         let features = config.features.expect("a restricted terminal set");
         assert!(features.contains("clampedShare") && !features.contains("directIllumination"), "{features:?}");
@@ -394,7 +394,7 @@ mod tests {
     fn flags_override_the_preset_and_the_quick_preset_keeps_the_thesis_rules() {
         let (settings, config) = settings_of(&["--preset", "realtime", "--elites", "0", "--fitness-pool", "mean"]);
         assert_eq!(settings.elites, 0);
-        assert_eq!(config.fitness.pool, filterjit::fitness_rule::Pool::Mean);
+        assert_eq!(config.fitness.pool, filterjit::fitness::Pool::Mean);
         let (settings, config) = settings_of(&[]);
         assert_eq!((settings.island_size, settings.generations, settings.elites), (25, 15, 0));
         assert_eq!(settings.objectives, filterjit::gp::Objectives::Error);

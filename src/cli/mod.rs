@@ -4,6 +4,9 @@
 
 mod args;
 mod evolve;
+mod hints;
+
+pub(crate) use hints::flag_for;
 mod report;
 
 use std::path::{Path, PathBuf};
@@ -191,6 +194,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                 generation_radius,
                 seed: 0,
                 fusion: fuse,
+                scratch: env.scratch.clone(),
             };
             bench(env, size, &settings, no_oidn, &output)
         }
@@ -432,8 +436,7 @@ pub(crate) fn bench(
     output: &Path,
 ) -> Result<()> {
     let gpu = gpu::Gpu::open(&env.adapter)?;
-    let peer =
-        if no_oidn { None } else { filterjit::report::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
+    let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
     let scene_at = |gpu: &gpu::Gpu, w: u32, h: u32| -> Result<filterjit::Scene> {
         let d = render::builtin("glossy-floor").expect("built in")?;
         let rs = render::RenderSettings { width: w, height: h, spp: 4, reference_spp: 64, seed: 0 };

@@ -76,12 +76,12 @@ pub(crate) fn tune_on_training(
     context: &SceneContext,
     start: Option<&lang::Expr>,
 ) -> Result<filterjit::tune::Tuned> {
-    use filterjit::evolve as ev;
     let datasets = datasets::resolve(gpu, &context.training, &context.render, &env.cache, &mut render_progress())?;
     let (features, variances) = datasets::common_terminals(&datasets)?;
     let scenes = datasets::load_all(&datasets, &features, &variances, &context.pipeline)?;
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let mut evaluator = ev::GpuEvaluator::for_pipeline(gpu, scenes, context.radius, context.pipeline, threads)?;
+    let scoring = filterjit::fitness::Settings::for_pipeline(context.radius, context.pipeline, threads);
+    let mut evaluator = filterjit::fitness::Scorer::new(gpu, scenes, &scoring)?;
     eprintln!(
         "tune      {} on {} ({}x{}, radius {}, pipeline {})",
         match start {
@@ -220,7 +220,7 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
         crop: args.crop,
         timing_size: args.timing_size,
     };
-    let oidn = match (args.no_oidn, report::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref())) {
+    let oidn = match (args.no_oidn, filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref())) {
         (true, _) => None,
         (false, Ok(oidn)) => {
             eprintln!("peer      Intel Open Image Denoise: {}", oidn.program.display());

@@ -483,12 +483,18 @@ impl<'e> Engine<'e> {
         Mutation::Delete
     }
 
+    /// Whether an offspring is within the length limit and the depth any
+    /// expression may have (the parser's, so that it can be stored and read back).
+    fn fits(&self, e: &Expr) -> bool {
+        e.len() <= self.settings.max_length && e.depth() <= crate::lang::MAX_DEPTH
+    }
+
     /// A mutation of `e` within the length limit; `e` itself when none is found.
     fn mutated(&self, e: &Expr, rng: &mut Rng) -> Expr {
         for _ in 0..10 {
             let kind = self.pick_mutation(rng);
             if let Some(m) = mutate(e, kind, &self.terminals, &self.codebook, rng) {
-                if m.len() <= self.settings.max_length {
+                if self.fits(&m) {
                     return m;
                 }
             }
@@ -624,7 +630,7 @@ impl<'e> Engine<'e> {
                     if new.len() == replicated + crossed {
                         break;
                     }
-                    let child = if child.len() <= self.settings.max_length { child } else { parent };
+                    let child = if self.fits(&child) { child } else { parent };
                     let child = if rng.chance(self.settings.crossover_mutation) {
                         self.mutated(&child, &mut rng)
                     } else {

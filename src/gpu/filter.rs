@@ -9,7 +9,7 @@ use super::{Gpu, GpuError, PipelineTiming};
 use crate::jit::{AtrousParams, Input, Params, Role, Shape, ValidatedKernel, WORKGROUP};
 use crate::lang::ScalarVar;
 use crate::pipeline::FilterPipeline;
-use crate::scene::Scene;
+use crate::scene::{Missing, MissingInput, Scene};
 
 /// Upper bound on weight evaluations in one dispatch. Large images and radii
 /// are split into bands of rows so that no single dispatch runs long enough to
@@ -112,10 +112,8 @@ impl SceneBuffers {
             let albedo = match (&scene.albedo, pipeline.demodulate) {
                 (Some(albedo), true) => Some(rgba(albedo)),
                 (None, true) => {
-                    return Err(GpuError::Runtime {
-                        during: "demodulating",
-                        message: format!("scene `{}` was loaded without its albedo", scene.name),
-                    })
+                    let missing = MissingInput { scene: scene.name.clone(), missing: Missing::Albedo };
+                    return Err(GpuError::MissingInput(missing));
                 }
                 (_, false) => None,
             };
@@ -160,38 +158,40 @@ impl SceneBuffers {
         self.prepass_dispatch
     }
 
+    /// Every input of `kernel` that `scene` lacks, checked before any is bound
+    /// (`scene::Needs`, the one rule): a data error naming scene and input.
+    pub(super) fn check_inputs(&self, kernel: &ValidatedKernel, scene: &Scene) -> Result<(), GpuError> {
+        for expr in &kernel.source().exprs {
+            crate::scene::Needs::of(expr, false).check(scene, self.pipeline.outliers.is_some())?;
+        }
+        Ok(())
+    }
+
+    /// What `scene` lacks of `input` (what the pre-pass measures is there with outliers).
+    fn lacks(&self, scene: &Scene, input: Input) -> MissingInput {
+        let missing = match input {
+            Input::Feature(f) => Missing::Feature(f),
+            Input::Variance(v) if v.from_prepass() => Missing::Measured(v),
+            Input::Variance(v) => Missing::Variance(v),
+        };
+        MissingInput { scene: scene.name.clone(), missing }
+    }
+
     /// A kernel runs on buffers prepared for a pipeline of its shape.
     pub(super) fn check_shape(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
         let (wanted, got) = (Shape::of(&self.pipeline), kernel.source().shape);
         if kernel.source().kind == crate::jit::KernelKind::Probe || wanted == got {
             return Ok(());
         }
-        Err(GpuError::Runtime {
-            during: "binding inputs",
-            message: format!(
-                "the kernel for `{}` has shape {got:?}, but the scene was prepared for pipeline `{}`",
-                kernel.source().canonical,
-                self.pipeline
-            ),
-        })
+        Err(GpuError::Shape { expression: kernel.source().canonical.clone(), shape: got, pipeline: self.pipeline })
     }
 
+    /// Upload `input` of `scene` unless it is on the device already.
     pub(super) fn ensure(&mut self, gpu: &Gpu, scene: &Scene, input: Input) -> Result<(), GpuError> {
         if self.inputs.contains_key(&input) {
             return Ok(());
         }
-        let missing = || {
-            GpuError::Runtime {
-            during: "binding inputs",
-            message: match input {
-                Input::Variance(v) if v.from_prepass() => format!(
-                    "`{v}` is what the outlier pre-pass measures: filter through a pipeline with `outliers=k` (this one is `{}`)",
-                    self.pipeline
-                ),
-                _ => format!("scene `{}` has no `{}`", scene.name, input.describe()),
-            },
-        }
-        };
+        let missing = || GpuError::MissingInput(self.lacks(scene, input));
         let data: Vec<f32> = match input {
             Input::Feature(f) => {
                 let values = scene.feature(f).ok_or_else(missing)?;
@@ -249,6 +249,7 @@ impl Gpu {
     ) -> Result<Filtered, GpuError> {
         super::check_radius(kernel, radius)?;
         buffers.check_shape(kernel)?;
+        buffers.check_inputs(kernel, scene)?;
         let (pipeline, timing) = self.pipeline(kernel)?;
         let _turn = self.gl_turn();
         for (_, input) in kernel.source().interface.inputs() {

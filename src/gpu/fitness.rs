@@ -76,10 +76,8 @@ impl FitnessScene {
 
     /// A scene prepared for `pipeline`: its pre-pass runs here, once.
     pub fn for_pipeline(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
-        let reference = scene.reference.as_ref().ok_or_else(|| GpuError::Runtime {
-            during: "preparing fitness",
-            message: format!("scene `{}` has no reference image", scene.name),
-        })?;
+        let reference =
+            scene.reference.as_ref().ok_or_else(|| GpuError::MissingReference { scene: scene.name.clone() })?;
         let rgba: Vec<[f32; 4]> = reference.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
         let reference = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("reference"),
@@ -217,6 +215,7 @@ impl Gpu {
         let most = members.iter().copied().max().unwrap_or(1);
         for k in kernels {
             for (fs, scene) in scenes.iter_mut().zip(data) {
+                fs.buffers.check_inputs(k, scene)?;
                 for (_, input) in k.source().interface.inputs() {
                     fs.buffers.ensure(self, scene, input)?;
                 }

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
 pub use fitness::{FitnessScene, Region, SceneError as FitnessError};
 pub use raw::{RawBuffer, RawKernel};
-pub use trace::{TraceScene, PATHTRACE_WGSL};
+pub use trace::{TraceBand, TraceInputs, TraceScene, PATHTRACE_WGSL};
 
 use crate::jit::interface::{Resource, TexelFormat};
 use crate::jit::{Access, BindingInterface, KernelKey, OutputFormat, Role, Slot, ValidatedKernel, ValidatedModule};
@@ -44,6 +44,13 @@ pub enum GpuError {
     Pipeline { expression: String, message: String, wgsl: String },
     #[error("the GPU failed while {during}: {message}")]
     Runtime { during: &'static str, message: String },
+    /// The user's data lacks an input: not the device's failure.
+    #[error(transparent)]
+    MissingInput(#[from] crate::scene::MissingInput),
+    #[error("scene `{scene}` has no reference image, which scoring compares with")]
+    MissingReference { scene: String },
+    #[error("the kernel for `{expression}` has shape {shape:?}, but the scene was prepared for pipeline `{pipeline}`")]
+    Shape { expression: String, shape: crate::jit::Shape, pipeline: crate::pipeline::FilterPipeline },
     #[error("the kernel for `{expression}` stages tiles for radius {tiled}; it cannot filter with radius {radius}")]
     TileRadius { expression: String, tiled: u32, radius: u32 },
 }

@@ -8,7 +8,6 @@ use wgpu::util::DeviceExt;
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::own_params;
 use crate::jit::ValidatedModule;
-use crate::render::packed::{PackedScene, TraceParams, SUMS_PER_PIXEL};
 
 /// The path tracer's source.
 pub const PATHTRACE_WGSL: &str = include_str!("../../templates/pathtrace.wgsl");
@@ -24,6 +23,28 @@ fn module() -> Result<&'static ValidatedModule, GpuError> {
             message: message.clone(),
             wgsl: String::new(),
         })
+}
+
+/// A scene's buffers as the tracer reads them, laid out by the renderer
+/// (`render::packed`): the device knows their bindings, not their format.
+pub struct TraceInputs<'a> {
+    pub prims: &'a [u8],
+    pub materials: &'a [u8],
+    /// May be empty (a scene lit by its environment only).
+    pub lights: &'a [u8],
+}
+
+/// One band of rows to trace.
+#[derive(Clone, Copy, Debug)]
+pub struct TraceBand {
+    /// The image's size, as the tracer's parameters also say.
+    pub width: u32,
+    pub height: u32,
+    /// The first row, as the tracer's parameters also say.
+    pub row_offset: u32,
+    pub rows: u32,
+    /// The `f32` sums the tracer writes per pixel.
+    pub sums_per_pixel: usize,
 }
 
 /// A scene uploaded for tracing.
@@ -44,8 +65,8 @@ impl Gpu {
         Ok(self.tracer.get_or_init(|| pipeline))
     }
 
-    /// Upload a packed scene.
-    pub fn upload_trace_scene(&self, scene: &PackedScene) -> TraceScene {
+    /// Upload a scene's tracer buffers.
+    pub fn upload_trace_scene(&self, scene: &TraceInputs<'_>) -> TraceScene {
         let storage = |label, bytes: &[u8]| {
             self.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -54,37 +75,38 @@ impl Gpu {
             })
         };
         // Empty storage buffers are not allowed: keep at least one element.
-        let lights: Vec<u32> = if scene.lights.is_empty() { vec![0] } else { scene.lights.clone() };
+        let lights: &[u8] = if scene.lights.is_empty() { &[0; 4] } else { scene.lights };
         TraceScene {
-            prims: storage("prims", bytemuck::cast_slice(&scene.prims)),
-            materials: storage("materials", bytemuck::cast_slice(&scene.materials)),
-            lights: storage("lights", bytemuck::cast_slice(&lights)),
+            prims: storage("prims", scene.prims),
+            materials: storage("materials", scene.materials),
+            lights: storage("lights", lights),
         }
     }
 
-    /// Trace `params.sample_count` samples for rows `params.row_offset ..
-    /// + rows`; returns `SUMS_PER_PIXEL` sums per pixel of those rows.
-    pub fn trace(&self, scene: &TraceScene, params: &TraceParams, rows: u32) -> Result<Vec<f32>, GpuError> {
+    /// Trace the band's rows with the tracer's parameters `params` (its
+    /// uniform's bytes); returns `band.sums_per_pixel` sums per pixel of those rows.
+    pub fn trace(&self, scene: &TraceScene, params: &[u8], band: TraceBand) -> Result<Vec<f32>, GpuError> {
         let pipeline = self.trace_pipeline()?;
         let _turn = self.gl_turn();
         let device = self.device();
-        let pixels = (params.width * params.height) as u64;
-        let size = pixels * SUMS_PER_PIXEL as u64 * 4;
+        let TraceBand { width, height, row_offset, rows, sums_per_pixel } = band;
+        let row_bytes = width as u64 * sums_per_pixel as u64 * 4;
+        let size = height as u64 * row_bytes;
         let sums = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sums"),
             size,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let first = params.row_offset as u64 * params.width as u64 * SUMS_PER_PIXEL as u64 * 4;
-        let band = rows as u64 * params.width as u64 * SUMS_PER_PIXEL as u64 * 4;
+        let first = row_offset as u64 * row_bytes;
+        let band = rows as u64 * row_bytes;
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sums readback"),
             size: band,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let uniform = self.params_buffer(own_params(), "trace params", bytemuck::bytes_of(params));
+        let uniform = self.params_buffer(own_params(), "trace params", params);
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         // pathtrace.wgsl declares params, prims, materials, lights, sums in this order.
         let resources = [&uniform, &scene.prims, &scene.materials, &scene.lights, &sums];
@@ -95,7 +117,7 @@ impl Gpu {
                 encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
             pass.set_pipeline(&pipeline.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(params.width.div_ceil(8), rows.div_ceil(8), 1);
+            pass.dispatch_workgroups(width.div_ceil(8), rows.div_ceil(8), 1);
         }
         encoder.copy_buffer_to_buffer(&sums, first, &staging, 0, band);
         let bytes = self.finish_and_read(encoder, scope, "path tracing", &staging)?;

@@ -8,7 +8,7 @@
 
 use serde::Serialize;
 
-use super::lower::{Input, KernelKind, KernelLayout, OutputFormat, Shape};
+use super::kernel::{Input, KernelKind, KernelLayout, OutputFormat, Shape};
 use crate::lang::ScalarVar;
 
 /// What a binding is for.

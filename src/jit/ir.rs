@@ -21,7 +21,7 @@
 use std::collections::{BTreeSet, HashMap};
 
 use super::helpers::Helper;
-use super::lower::LowerOptions;
+use super::kernel::LowerOptions;
 use crate::lang::{BinaryOp, Expr, Feature, PairOp, ScalarVar, UnaryOp};
 use crate::semantics;
 
@@ -125,6 +125,23 @@ impl Body {
         let mut builder = Builder { options, insts: Vec::new(), known: HashMap::new() };
         let result = builder.build(expr);
         Body { insts: builder.insts, result }
+    }
+
+    /// How many distinct variances the body loads at the centre.
+    pub fn centre_loads(&self) -> usize {
+        let mut vars: Vec<ScalarVar> = self
+            .insts
+            .iter()
+            .flat_map(|i| i.op.operands())
+            .chain(std::iter::once(self.result))
+            .filter_map(|o| match o {
+                Operand::Var(v) => Some(v),
+                _ => None,
+            })
+            .collect();
+        vars.sort();
+        vars.dedup();
+        vars.len()
     }
 
     /// The helpers the instructions call (their dependencies aside).
@@ -300,7 +317,7 @@ impl Builder {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::parse_expr;
+    use crate::lang::parse_expr;
 
     fn body(text: &str, options: LowerOptions) -> Body {
         Body::of(&parse_expr(text).unwrap(), options)

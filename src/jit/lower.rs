@@ -7,262 +7,16 @@
 use std::collections::BTreeSet;
 use std::sync::OnceLock;
 
-use serde::Serialize;
-
+use super::context::{BindingView, KernelContext, MemberCode, Tile, TileArray};
 use super::helpers;
 use super::interface::{BindingInterface, Element, Role};
 use super::ir::{self, feature_ident, var_ident};
-use crate::lang::{Expr, Feature, FeatureSource, ScalarVar};
-use crate::pipeline::Stencil;
+use super::kernel::{
+    wgsl_f32, Input, KernelKind, KernelLayout, LowerOptions, Shape, TEMPLATE_VERSION, WORKGROUP,
+    WORKGROUP_STORAGE_BUDGET,
+};
+use crate::lang::{Expr, Feature, ScalarVar};
 use crate::semantics;
-
-/// Bumped whenever the template or the lowering changes what a kernel computes
-/// or how it binds its inputs; part of every pipeline-cache key.
-pub const TEMPLATE_VERSION: u32 = 4;
-
-/// Workgroup shape of every filter kernel.
-pub const WORKGROUP: [u32; 2] = [8, 8];
-
-/// Per-pixel data a kernel reads, besides the colour every kernel reads.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum Input {
-    /// A stored feature or a gradient (never `color` or `pixel`).
-    Feature(Feature),
-    /// A per-pixel scalar variance.
-    Variance(ScalarVar),
-}
-
-impl Input {
-    /// Number of f32 components per pixel in the bound buffer.
-    pub fn components(self) -> usize {
-        match self {
-            Input::Feature(f) if f.dimension() == 1 => 1,
-            Input::Feature(_) => 4,
-            Input::Variance(_) => 1,
-        }
-    }
-
-    pub fn describe(self) -> String {
-        match self {
-            Input::Feature(f) => f.name().to_string(),
-            Input::Variance(v) => v.name().to_string(),
-        }
-    }
-
-    /// Whether the input is normalised (features and variances, scaled by
-    /// their 99.9th percentile); what the outlier pre-pass measures is in the
-    /// colour's own units, like the colour.
-    pub fn is_normalised(self) -> bool {
-        !matches!(self, Input::Variance(v) if v.from_prepass())
-    }
-}
-
-/// The per-pixel inputs a kernel reads besides the colour, in a canonical
-/// order; [`BindingInterface::of`] gives them their slots.
-#[derive(Clone, Debug, PartialEq, Eq, Hash)]
-pub struct KernelLayout {
-    pub inputs: Vec<Input>,
-}
-
-impl KernelLayout {
-    /// Exactly the inputs `expr` reads, in a canonical order.
-    pub fn of(expr: &Expr) -> Self {
-        Self::of_all(std::slice::from_ref(expr))
-    }
-
-    /// Exactly the inputs any of `exprs` reads (a fused kernel's), in a canonical order.
-    pub fn of_all(exprs: &[Expr]) -> Self {
-        let mut inputs = BTreeSet::new();
-        for expr in exprs {
-            for f in expr.features() {
-                if matches!(f.source(), FeatureSource::Stored(_) | FeatureSource::Gradient(_)) && f != Feature::Color {
-                    inputs.insert(Input::Feature(f));
-                }
-            }
-            for v in expr.bound_variables() {
-                inputs.insert(Input::Variance(v));
-            }
-        }
-        KernelLayout { inputs: inputs.into_iter().collect() }
-    }
-
-    pub fn describe(&self) -> String {
-        self.inputs.iter().map(|i| i.describe()).collect::<Vec<_>>().join(",")
-    }
-}
-
-/// What a kernel computes. Both kinds share the binding interface.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
-pub enum KernelKind {
-    /// The filter: f_i = Σ_j w_ij c_j / Σ_j w_ij.
-    #[default]
-    Filter,
-    /// The raw weight w_ii per pixel, for testing operator semantics.
-    Probe,
-    /// The filter's relMSE terms and domain errors per pixel (binding 2 the
-    /// terms, 3 the flags, member-major; the reference after the inputs),
-    /// reduced per workgroup by `jit::reduce`'s kernel. One kernel may score
-    /// several expressions ([`lower_fused`]).
-    Fitness,
-    /// The filter as a standalone shader for other programs: inputs are
-    /// sampled textures normalised in the shader by scales from the uniform,
-    /// the result goes to a storage texture of the given format
-    /// (`templates/export.wgsl.tera`, examples/README.md).
-    Export(OutputFormat),
-}
-
-/// What surrounds the weight in a kernel (`crate::pipeline`): whether it is
-/// one à-trous pass (dispatched once per pass with [`super::AtrousParams`])
-/// or the window, and whether the result is multiplied back by the albedo.
-/// The outlier and demodulation pre-pass is a kernel of its own (`jit::prepass`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
-pub struct Shape {
-    pub atrous: bool,
-    pub remodulate: bool,
-    /// The à-trous pass's taps (the default, and unused, for a window).
-    pub stencil: Stencil,
-}
-
-impl Shape {
-    /// The thesis's kernel: one window pass, nothing multiplied back.
-    pub const WINDOW: Shape = Shape { atrous: false, remodulate: false, stencil: Stencil::Cubic5 };
-
-    /// The kernel shape of a pipeline's form.
-    pub fn of(pipeline: &crate::pipeline::FilterPipeline) -> Shape {
-        Shape { atrous: pipeline.is_atrous(), remodulate: pipeline.demodulate, stencil: pipeline.stencil() }
-    }
-
-    /// A stable name, for cache keys.
-    pub fn encode(self) -> String {
-        let stencil = match self.stencil {
-            Stencil::Cubic5 => "",
-            Stencil::Linear3 => " stencil=3x3",
-        };
-        format!("atrous={} remodulate={}{stencil}", self.atrous, self.remodulate)
-    }
-}
-
-/// Texel format of an exported shader's output storage texture.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default, clap::ValueEnum, Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum OutputFormat {
-    /// Half floats: what engines keep HDR colour in; about 3 decimal digits.
-    #[default]
-    Rgba16float,
-    /// Full floats: matches `filterjit filter` to f32 rounding.
-    Rgba32float,
-}
-
-impl OutputFormat {
-    /// The WGSL texel format name.
-    pub fn wgsl(self) -> &'static str {
-        match self {
-            OutputFormat::Rgba16float => "rgba16float",
-            OutputFormat::Rgba32float => "rgba32float",
-        }
-    }
-}
-
-impl KernelKind {
-    fn template(self) -> &'static str {
-        match self {
-            KernelKind::Filter => FILTER_TEMPLATE,
-            KernelKind::Probe => PROBE_TEMPLATE,
-            KernelKind::Fitness => FITNESS_TEMPLATE,
-            KernelKind::Export(_) => EXPORT_TEMPLATE,
-        }
-    }
-
-    /// The `templates/ops.wgsl` helpers the kind's template calls itself:
-    /// the probe saturates its raw value with `fj_fin`.
-    pub(crate) fn template_helpers(self) -> &'static [&'static str] {
-        match self {
-            KernelKind::Probe => &["fj_fin"],
-            KernelKind::Filter | KernelKind::Fitness | KernelKind::Export(_) => &[],
-        }
-    }
-
-    /// A stable name of the kind, for cache keys.
-    pub fn encode(self) -> String {
-        match self {
-            KernelKind::Filter => "filter".into(),
-            KernelKind::Probe => "probe".into(),
-            KernelKind::Fitness => "fitness".into(),
-            KernelKind::Export(format) => format!("export-{}", format.wgsl()),
-        }
-    }
-
-    /// Whether the kernel reads its inputs from textures (else from storage buffers).
-    pub fn reads_textures(self) -> bool {
-        matches!(self, KernelKind::Export(_))
-    }
-}
-
-/// What the lowering may do beyond a literal translation. Every switch keeps
-/// the kernel's results (tests compare each against the plain kernel); the
-/// benchmark shows what each is worth.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct LowerOptions {
-    /// Evaluate operators whose operands are all literals at compile time
-    /// (not those that would raise a domain error).
-    pub fold_constants: bool,
-    /// Compute identical subexpressions once (`distance2(normal)` used twice).
-    pub common_subexpressions: bool,
-    /// Compute terms that depend only on the centre pixel once per pixel,
-    /// outside the neighbour loop.
-    pub hoist_centre_terms: bool,
-    /// Square by multiplying: pow(x, 2) becomes x·x, and pow(distance2(f), 2)
-    /// the squared distance without its square root; division by a literal
-    /// becomes multiplication by its reciprocal (no zero guard needed).
-    pub strength_reduction: bool,
-    /// Leave out saturation an operand has already had: every operator's
-    /// result and every literal is already in range (saturated and flushed,
-    /// docs/SEMANTICS.md), so negating it, taking its absolute value or
-    /// clamping the final weight at zero needs no second pass through
-    /// `fj_fin`. (Variances are read raw, so they keep the full helpers.)
-    pub skip_redundant_checks: bool,
-    /// Stage the colour and neighbour features of each workgroup's window in
-    /// workgroup memory, for this window radius (the kernel then runs only
-    /// with it). Applied to filter and fitness kernels when the tile fits in
-    /// [`WORKGROUP_STORAGE_BUDGET`]; see [`KernelSource::tile_radius`].
-    pub tile_radius: Option<u32>,
-}
-
-impl LowerOptions {
-    /// Everything on: what filterjit uses.
-    pub const ALL: LowerOptions = LowerOptions {
-        fold_constants: true,
-        common_subexpressions: true,
-        hoist_centre_terms: true,
-        strength_reduction: true,
-        skip_redundant_checks: true,
-        tile_radius: None,
-    };
-    /// A literal translation: one SSA value per node, all inside the loop.
-    pub const NONE: LowerOptions = LowerOptions {
-        fold_constants: false,
-        common_subexpressions: false,
-        hoist_centre_terms: false,
-        strength_reduction: false,
-        skip_redundant_checks: false,
-        tile_radius: None,
-    };
-
-    /// These options with workgroup tiles for `radius`.
-    pub const fn with_tiles(self, radius: u32) -> Self {
-        LowerOptions { tile_radius: Some(radius), ..self }
-    }
-}
-
-/// Bytes of workgroup memory a tile may take: WebGPU's guaranteed 16 KiB
-/// (`maxComputeWorkgroupStorageSize`), less the fitness kernel's reduction arrays.
-pub const WORKGROUP_STORAGE_BUDGET: usize = 16384 - 1024;
-
-impl Default for LowerOptions {
-    fn default() -> Self {
-        LowerOptions::ALL
-    }
-}
 
 /// WGSL text of a kernel, not yet validated.
 #[derive(Clone, Debug)]
@@ -331,23 +85,6 @@ pub fn lower_fused(exprs: &[Expr], options: LowerOptions, shape: Shape) -> Resul
     lower_members(exprs, KernelKind::Fitness, options, shape)
 }
 
-/// One member's code in a kernel: its hoisted per-pixel values, its
-/// per-neighbour values and the weight expression, for the templates.
-#[derive(Serialize)]
-struct MemberCode {
-    index: usize,
-    /// What the member's names end in: nothing in a kernel of one.
-    suffix: String,
-    centre_lines: Vec<String>,
-    neighbour_lines: Vec<String>,
-    /// The SSA value (or literal) of the expression; the weight clamps it.
-    result: String,
-    weight: String,
-    /// The `templates/ops.wgsl` helpers the member's code calls.
-    #[serde(skip)]
-    helpers: BTreeSet<String>,
-}
-
 fn lower_members(
     exprs: &[Expr],
     kind: KernelKind,
@@ -399,15 +136,6 @@ fn lower_members(
     let neighbour_lines: Vec<String> = shared_neighbour_lines.iter().chain(&first.neighbour_lines).cloned().collect();
     let weight = first.weight.clone();
 
-    /// An input binding as the templates' header comments describe it.
-    #[derive(Serialize)]
-    struct BindingView {
-        index: u32,
-        element: &'static str,
-        describes: String,
-        /// Index into the exported shader's `params.scale` (normalised inputs only).
-        scale_index: Option<usize>,
-    }
     let mut scales = 0..;
     let bindings: Vec<BindingView> = interface
         .inputs()
@@ -421,69 +149,52 @@ fn lower_members(
 
     let canonicals: Vec<String> = exprs.iter().map(|e| e.canonical()).collect();
     let canonical = canonicals.join("; ");
-    let mut context = tera::Context::new();
-    context.insert("crate_version", env!("CARGO_PKG_VERSION"));
-    context.insert("template_version", &TEMPLATE_VERSION);
-    context.insert("expression", &canonical);
-    context.insert("expressions", &canonicals);
-    context.insert("length", &exprs.iter().map(|e| e.len()).sum::<usize>());
     let needs = members
         .iter()
         .flat_map(|m| m.helpers.iter().cloned())
         .chain(kind.template_helpers().iter().map(|h| h.to_string()));
-    context.insert("ops", &helpers::link(needs));
-    context.insert("weight", &weight);
-    context.insert("result", &first.result);
-    context.insert("members", &members);
-    context.insert("fused", &fused);
-    context.insert("shared_centre_lines", &shared_centre_lines);
-    context.insert("shared_neighbour_lines", &shared_neighbour_lines);
-    context.insert("scales", &bindings.iter().filter(|b| b.scale_index.is_some()).count());
-    context.insert("bindings", &bindings);
-    context.insert("declarations", &interface.declarations());
-    context.insert("relmse_epsilon", &format!("{:?}", crate::metrics::RELMSE_EPSILON as f32));
-    context.insert("params_struct", &interface.params_struct());
-    context.insert("workgroup_x", &WORKGROUP[0]);
-    context.insert("workgroup_y", &WORKGROUP[1]);
-    context.insert("centre_lines", &centre_lines);
-    context.insert("neighbour_lines", &neighbour_lines);
-    if let KernelKind::Export(format) = kind {
-        context.insert("output_format", format.wgsl());
-    }
-    context.insert("tile", &tile);
-    context.insert("atrous", &shape.atrous);
-    context.insert("remodulate", &shape.remodulate);
-    context.insert("shaped", &(shape != Shape::WINDOW));
     let carried = Input::Variance(ScalarVar::ColorVariance);
     let carry_variance = shape.atrous && layout.inputs.contains(&carried);
-    context.insert("carry_variance", &carry_variance);
-    if carry_variance {
-        context.insert("neighbour_variance", &Loads::of(&interface).carried_variance_at_neighbour());
-        context.insert("centre_variance", &var_ident(ScalarVar::ColorVariance));
-    }
-    context.insert("atrous_half", &shape.stencil.half_width());
-    let stencil: Vec<String> = shape.stencil.weights().iter().copied().map(wgsl_f32).collect();
-    context.insert("stencil", &stencil);
-    let wgsl = templates().render(kind.template(), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
-    let tile_radius = tile.map(|t| t.radius);
+    let tile_radius = tile.as_ref().map(|t| t.radius);
+    let context = KernelContext {
+        crate_version: env!("CARGO_PKG_VERSION"),
+        template_version: TEMPLATE_VERSION,
+        expression: canonical.clone(),
+        length: exprs.iter().map(|e| e.len()).sum(),
+        expressions: canonicals,
+        ops: helpers::link(needs),
+        weight,
+        result: first.result.clone(),
+        fused,
+        shared_centre_lines,
+        shared_neighbour_lines,
+        scales: bindings.iter().filter(|b| b.scale_index.is_some()).count(),
+        bindings,
+        declarations: interface.declarations(),
+        relmse_epsilon: wgsl_f32(crate::metrics::RELMSE_EPSILON),
+        params_struct: interface.params_struct(),
+        workgroup_x: WORKGROUP[0],
+        workgroup_y: WORKGROUP[1],
+        centre_lines,
+        neighbour_lines,
+        output_format: match kind {
+            KernelKind::Export(format) => Some(format.wgsl()),
+            _ => None,
+        },
+        tile,
+        atrous: shape.atrous,
+        remodulate: shape.remodulate,
+        shaped: shape != Shape::WINDOW,
+        carry_variance,
+        neighbour_variance: carry_variance.then(|| loads.carried_variance_at_neighbour()),
+        centre_variance: carry_variance.then(|| var_ident(ScalarVar::ColorVariance)),
+        atrous_half: shape.stencil.half_width(),
+        stencil: shape.stencil.weights().iter().copied().map(wgsl_f32).collect(),
+        members,
+    };
+    let context = tera::Context::from_serialize(&context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
+    let wgsl = templates().render(template_of(kind), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
     Ok(KernelSource { kind, options, shape, exprs: exprs.to_vec(), canonical, layout, interface, tile_radius, wgsl })
-}
-
-/// A workgroup tile: the (8 + 2r)² window of colour and neighbour features
-/// that a workgroup's invocations read, for `templates/tile_decl.wgsl.tera`.
-#[derive(Serialize)]
-struct Tile {
-    radius: u32,
-    width: u32,
-    count: u32,
-    arrays: Vec<TileArray>,
-}
-
-#[derive(Serialize)]
-struct TileArray {
-    ident: String,
-    source: String,
-    element: &'static str,
 }
 
 impl Tile {
@@ -528,6 +239,16 @@ fn in_range(e: &Expr) -> bool {
     !matches!(e, Expr::Var(_))
 }
 
+/// The template a kernel of `kind` renders.
+fn template_of(kind: KernelKind) -> &'static str {
+    match kind {
+        KernelKind::Filter => FILTER_TEMPLATE,
+        KernelKind::Probe => PROBE_TEMPLATE,
+        KernelKind::Fitness => FITNESS_TEMPLATE,
+        KernelKind::Export(_) => EXPORT_TEMPLATE,
+    }
+}
+
 const FILTER_TEMPLATE: &str = "filter.wgsl";
 const PROBE_TEMPLATE: &str = "probe.wgsl";
 const FITNESS_TEMPLATE: &str = "fitness.wgsl";
@@ -555,11 +276,6 @@ fn templates() -> &'static tera::Tera {
             .expect("built-in export template parses");
         tera
     })
-}
-
-/// WGSL spelling of an f32 literal (always with a `.` or an exponent).
-pub fn wgsl_f32(value: f64) -> String {
-    format!("{:?}", value as f32)
 }
 
 /// How loads are spelled in a kernel of one kind; names come from its interface.
@@ -716,7 +432,8 @@ fn neighbour_loads(exprs: &[Expr], loads: &Loads<'_>) -> Vec<String> {
 
 #[cfg(test)]
 mod tests {
-    use super::{KernelKind, OutputFormat, OPS_WGSL};
+    use super::OPS_WGSL;
+    use crate::jit::{KernelKind, OutputFormat};
     use crate::semantics;
 
     /// A template calls only the library helpers its kind declares

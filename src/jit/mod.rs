@@ -1,9 +1,11 @@
 //! The JIT: typed expression → WGSL (lower) → naga-validated kernel (validate).
 //! Nothing here talks to wgpu; [`crate::gpu`] turns a [`ValidatedKernel`] into a pipeline.
 
+mod context;
 pub mod helpers;
 pub mod interface;
 pub mod ir;
+pub mod kernel;
 pub mod lower;
 pub mod prepass;
 pub mod reduce;
@@ -11,10 +13,11 @@ pub mod validate;
 
 pub use helpers::Helper;
 pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot};
-pub use lower::{
-    lower, lower_fused, lower_kind, lower_shaped, lower_with, Input, KernelKind, KernelLayout, KernelSource,
-    LowerError, LowerOptions, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP,
+pub use kernel::{
+    wgsl_f32, Input, KernelKind, KernelLayout, LowerOptions, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP,
+    WORKGROUP_STORAGE_BUDGET,
 };
+pub use lower::{lower, lower_fused, lower_kind, lower_shaped, lower_with, KernelSource, LowerError};
 pub use prepass::{prepass_module, prepass_wgsl, PrepassParams};
 pub use reduce::{reduce_module, reduce_wgsl, ReduceParams};
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};

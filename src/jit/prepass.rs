@@ -3,8 +3,7 @@
 //! `templates/prepass.wgsl.tera` with the constants `crate::pipeline` owns.
 
 use super::interface::BindingInterface;
-use super::lower::OutputFormat;
-use super::lower::{wgsl_f32, TEMPLATE_VERSION, WORKGROUP};
+use super::kernel::{wgsl_f32, OutputFormat, TEMPLATE_VERSION, WORKGROUP};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 use crate::pipeline::{self, FilterPipeline};
 

@@ -5,7 +5,7 @@
 //! software drivers, and the tree is the same for every member, fused or not.
 
 use super::interface::BindingInterface;
-use super::lower::{TEMPLATE_VERSION, WORKGROUP};
+use super::kernel::{TEMPLATE_VERSION, WORKGROUP};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 
 /// The reduction's uniform (`struct Params` of its module; fields in [`BindingInterface::reduce`]).

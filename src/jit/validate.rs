@@ -5,7 +5,8 @@ use sha2::{Digest, Sha256};
 
 use super::interface::TexelFormat;
 use super::interface::{Access, Slot};
-use super::lower::{KernelSource, OutputFormat, TEMPLATE_VERSION, WORKGROUP};
+use super::kernel::{OutputFormat, TEMPLATE_VERSION, WORKGROUP};
+use super::lower::KernelSource;
 
 /// A kernel whose WGSL naga has parsed and validated.
 #[derive(Debug)]

@@ -17,6 +17,8 @@ pub enum ExprErrorKind {
     Type,
     /// A literal outside the representable range.
     Literal,
+    /// Operators nested deeper than [`super::parse::MAX_DEPTH`].
+    TooDeep,
 }
 
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]

@@ -50,6 +50,17 @@ impl Expr {
         false
     }
 
+    /// How deeply operators nest, as the parser counts it against
+    /// [`super::parse::MAX_DEPTH`]: each operator is one level above its operands.
+    pub fn depth(&self) -> usize {
+        match self {
+            Expr::Const(_) | Expr::Var(_) => 0,
+            Expr::Pair(..) => 1,
+            Expr::Unary(_, a) => 1 + a.depth(),
+            Expr::Binary(_, a, b) => 1 + a.depth().max(b.depth()),
+        }
+    }
+
     /// Every vector terminal the expression reads.
     pub fn features(&self) -> BTreeSet<Feature> {
         let mut out = BTreeSet::new();

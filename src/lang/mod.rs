@@ -14,3 +14,4 @@ pub use error::{ExprError, ExprErrorKind};
 pub use expr::{terminal_usage, Expr};
 pub use latex::latex;
 pub use ops::{BinaryOp, Feature, FeatureSource, PairOp, ScalarVar, Type, UnaryOp};
+pub use parse::MAX_DEPTH;

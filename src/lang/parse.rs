@@ -5,11 +5,11 @@
 
 use std::sync::OnceLock;
 
-use pest::iterators::{Pair, Pairs};
+use pest::iterators::Pair;
 use pest::pratt_parser::{Assoc, Op, PrattParser};
 use pest::Parser;
 
-use super::error::ExprError;
+use super::error::{ExprError, ExprErrorKind};
 use super::ops::{BinaryOp, Fixity};
 
 #[derive(pest_derive::Parser)]
@@ -88,17 +88,74 @@ fn rule_infix(rule: Rule) -> Option<BinaryOp> {
     BinaryOp::ALL.iter().copied().find(|op| matches!(op.fixity(), Fixity::Infix { .. }) && infix_rule(*op) == rule)
 }
 
+/// The deepest expression filterjit accepts: operators nested in one
+/// another (a call's arguments, a parenthesis, each operator of a chain such
+/// as a sum of many terms). Every pass over an expression (checker, printer,
+/// lowering, CPU evaluator, simplifier, GP operators) recurses over it, so
+/// the depth is bounded once, here, where text becomes a tree, and the
+/// search keeps its offspring within it. Far beyond any useful weight (the
+/// thesis's trees are under 20 deep); well within a 2 MiB thread stack in a
+/// debug build (`tests/lang.rs` runs every pass at the limit).
+pub const MAX_DEPTH: usize = 256;
+
+/// Parentheses and prefix minus signs nested deeper than this stop the
+/// parse before pest's own recursion sees them.
+const MAX_NESTING: usize = MAX_DEPTH;
+
 /// Parse an expression's text into a syntax tree.
 pub fn parse(source: &str) -> Result<Syntax, ExprError> {
+    check_nesting(source)?;
     let mut pairs = ExprParser::parse(Rule::weight, source).map_err(|e| ExprError::from_pest(e, source))?;
     let weight = pairs.next().expect("weight rule matched");
     let expr = weight.into_inner().next().expect("weight holds an expr");
-    lower_expr(expr.into_inner(), source)
+    lower_expr(expr, source, 0)
 }
 
-fn lower_expr(pairs: Pairs<'_, Rule>, source: &str) -> Result<Syntax, ExprError> {
+/// An error at the first parenthesis or minus sign nested past [`MAX_NESTING`].
+fn check_nesting(source: &str) -> Result<(), ExprError> {
+    let (mut open, mut minus_run) = (0usize, 0usize);
+    for (at, c) in source.char_indices() {
+        match c {
+            '(' => open += 1,
+            ')' => open = open.saturating_sub(1),
+            _ => {}
+        }
+        match c {
+            '-' => minus_run += 1,
+            c if c.is_whitespace() => {}
+            _ => minus_run = 0,
+        }
+        if open + minus_run > MAX_NESTING {
+            let span = Span { start: at, end: at + c.len_utf8() };
+            return Err(too_deep(source, span));
+        }
+    }
+    Ok(())
+}
+
+fn too_deep(source: &str, span: Span) -> ExprError {
+    ExprError::with_kind(
+        ExprErrorKind::TooDeep,
+        source,
+        span,
+        format!("the expression nests deeper than {MAX_DEPTH} operators here; filterjit accepts at most {MAX_DEPTH}"),
+    )
+}
+
+/// An `expr` pair's tree, `depth` operators below the root: its operators
+/// (infix and prefix) each add at most one level to its operands'.
+fn lower_expr(expr: Pair<'_, Rule>, source: &str, depth: usize) -> Result<Syntax, ExprError> {
+    let pairs = expr.into_inner();
+    let is_operator = |p: &Pair<'_, Rule>| !matches!(p.as_rule(), Rule::call | Rule::number | Rule::name | Rule::expr);
+    let operators = pairs.clone().filter(is_operator).count();
+    if depth + operators > MAX_DEPTH {
+        // The first operator past the limit.
+        let past = pairs.clone().filter(is_operator).nth(MAX_DEPTH.saturating_sub(depth)).expect("past the limit");
+        return Err(too_deep(source, Span::from(past.as_span())));
+    }
+    let depth = depth + operators;
     pratt()
-        .map_primary(|p| lower_primary(p, source))
+        .map_primary(|p| lower_primary(p, source, depth))
         .map_prefix(|op, rhs| {
             let rhs = rhs?;
             let span = Span { start: op.as_span().start(), end: rhs.span().end };
@@ -113,7 +170,7 @@ fn lower_expr(pairs: Pairs<'_, Rule>, source: &str) -> Result<Syntax, ExprError>
         .parse(pairs)
 }
 
-fn lower_primary(pair: Pair<'_, Rule>, source: &str) -> Result<Syntax, ExprError> {
+fn lower_primary(pair: Pair<'_, Rule>, source: &str, depth: usize) -> Result<Syntax, ExprError> {
     let span = Span::from(pair.as_span());
     match pair.as_rule() {
         Rule::number => {
@@ -124,11 +181,14 @@ fn lower_primary(pair: Pair<'_, Rule>, source: &str) -> Result<Syntax, ExprError
             Ok(Syntax::Number(value, span))
         }
         Rule::name => Ok(Syntax::Name(pair.as_str().to_string(), span)),
-        Rule::expr => lower_expr(pair.into_inner(), source),
+        Rule::expr => lower_expr(pair, source, depth),
         Rule::call => {
             let mut inner = pair.into_inner();
             let name = inner.next().expect("call has a name");
-            let args = inner.map(|arg| lower_expr(arg.into_inner(), source)).collect::<Result<Vec<_>, _>>()?;
+            if depth + 1 > MAX_DEPTH {
+                return Err(too_deep(source, span));
+            }
+            let args = inner.map(|arg| lower_expr(arg, source, depth + 1)).collect::<Result<Vec<_>, _>>()?;
             Ok(Syntax::Call { name: name.as_str().to_string(), name_span: name.as_span().into(), args, span })
         }
         other => unreachable!("unexpected primary rule {other:?}"),

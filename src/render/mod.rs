@@ -15,7 +15,7 @@ use std::time::Instant;
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 
-use crate::gpu::{Gpu, GpuError};
+use crate::gpu::{Gpu, GpuError, TraceBand};
 use crate::metrics::RELMSE_EPSILON;
 pub use description::{Description, DescriptionError, Split};
 use packed::{TraceParams, SUMS_PER_PIXEL, VALUES_PER_SAMPLE};
@@ -157,7 +157,7 @@ pub fn render(
     check(settings)?;
     let start = Instant::now();
     let packed = packed::pack(d);
-    let scene = gpu.upload_trace_scene(&packed);
+    let scene = gpu.upload_trace_scene(&packed.inputs());
     let (pos, forward, right, up) = packed::camera(d, settings.width, settings.height);
     let base = TraceParams {
         width: settings.width,
@@ -201,7 +201,14 @@ pub fn render(
                     row_offset: row,
                     ..base
                 };
-                let out = gpu.trace(&scene, &params, band)?;
+                let rows = TraceBand {
+                    width: settings.width,
+                    height: settings.height,
+                    row_offset: row,
+                    rows: band,
+                    sums_per_pixel: SUMS_PER_PIXEL,
+                };
+                let out = gpu.trace(&scene, bytemuck::bytes_of(&params), rows)?;
                 let start = row as usize * settings.width as usize * SUMS_PER_PIXEL;
                 for (acc, v) in sums[start..start + out.len()].iter_mut().zip(&out) {
                     *acc += *v as f64;

@@ -55,6 +55,17 @@ pub struct PackedScene {
     pub lights: Vec<u32>,
 }
 
+impl PackedScene {
+    /// The tracer's buffers, as bytes.
+    pub fn inputs(&self) -> crate::gpu::TraceInputs<'_> {
+        crate::gpu::TraceInputs {
+            prims: bytemuck::cast_slice(&self.prims),
+            materials: bytemuck::cast_slice(&self.materials),
+            lights: bytemuck::cast_slice(&self.lights),
+        }
+    }
+}
+
 fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
     [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
 }

@@ -9,7 +9,6 @@
 //! Pareto front (SVG), tone-mapped crops (PNG), a chart of feature usage, and
 //! `index.html` tying them together.
 
-pub mod oidn;
 mod pages;
 pub mod plot;
 
@@ -26,7 +25,7 @@ use crate::lang::Expr;
 use crate::pipeline::FilterPipeline;
 use crate::scene::{self, Request, Scene};
 use crate::tune::Tuned;
-use crate::{io, jit, metrics, preview};
+use crate::{io, jit, metrics, oidn, preview};
 
 /// Where a method comes from, for the reader of the report.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
@@ -228,7 +227,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             normalised: Some(1.0),
             ..Cell::default()
         });
-        let timing_scene = tile(&scene, settings.timing_size);
+        let timing_scene = scene.tiled(settings.timing_size);
         // Buffers per pipeline: each pipeline's pre-pass runs once per scene.
         let mut prepared: BTreeMap<String, (SceneBuffers, SceneBuffers, f64)> = BTreeMap::new();
         for (method, kernel) in methods.iter().zip(&kernels) {
@@ -391,22 +390,6 @@ struct Timing<'a> {
     prepass_ms: f64,
 }
 
-/// `scene` repeated to at least `side` pixels each way (colour, features and
-/// variances; no reference): the same content statistics, a larger dispatch.
-pub fn tile(scene: &Scene, side: usize) -> Scene {
-    let (w, h) = (scene.width, scene.height);
-    let (tw, th) = (w.max(side), h.max(side));
-    fn tiled<T: Copy>(data: &[T], (w, h): (usize, usize), (tw, th): (usize, usize)) -> Vec<T> {
-        (0..th).flat_map(|y| (0..tw).map(move |x| data[(y % h) * w + x % w])).collect()
-    }
-    let mut out = Scene::from_color(format!("{} (tiled)", scene.name), tw, th, tiled(&scene.color, (w, h), (tw, th)));
-    out.spp = scene.spp;
-    out.features = scene.features.iter().map(|(f, v)| (*f, tiled(v, (w, h), (tw, th)))).collect();
-    out.variances = scene.variances.iter().map(|(k, v)| (*k, tiled(v, (w, h), (tw, th)))).collect();
-    out.albedo = scene.albedo.as_ref().map(|a| tiled(a, (w, h), (tw, th)));
-    out
-}
-
 /// Filter the scene for the errors; time the filter on the timing scene: one
 /// warm-up dispatch (it compiles the pipeline), then `repeats` timed ones,
 /// each with the pipeline's pre-pass: a frame's device time.
@@ -546,7 +529,7 @@ mod tests {
 
     #[test]
     fn feature_usage_counts_each_occurrence() {
-        let e = crate::parse_expr("distance2(normal) + dot(normal, texture) + wpVariance").unwrap();
+        let e = crate::lang::parse_expr("distance2(normal) + dot(normal, texture) + wpVariance").unwrap();
         let usage = feature_usage(&[e]);
         assert_eq!(usage["normal"], 2);
         assert_eq!(usage["texture"], 1);

@@ -4,9 +4,11 @@
 pub mod exr_io;
 pub mod import;
 mod load;
+mod needs;
 pub mod preprocess;
 
 pub use load::{load, prepare};
+pub use needs::{Holds, Missing, MissingInput, Needs};
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -23,8 +25,7 @@ pub enum SceneError {
     #[error("{}: no channel `{channel}` (the file has: {})", file.display(), available.join(", "))]
     MissingChannel { file: PathBuf, channel: String, available: Vec<String> },
     #[error("scene `{scene}` has no `{feature}` ({origin} provides: {}); \
-             the expression needs it. Use an expression without it, or have absent inputs read as 0 \
-             (`--absent zero`)", provided.join(", "))]
+             the expression needs it. Use an expression without it, or have absent inputs read as 0", provided.join(", "))]
     MissingFeature { scene: String, feature: String, origin: Origin, provided: Vec<String> },
     #[error(
         "scene `{scene}` has no albedo ({origin} has no texture/albedo); \
@@ -194,6 +195,22 @@ impl Scene {
 
     pub fn variance(&self, v: ScalarVar) -> Option<&[f32]> {
         self.variances.get(&v).map(Vec::as_slice)
+    }
+
+    /// This scene repeated to at least `side` pixels each way (colour, features and
+    /// variances; no reference): the same content statistics, a larger dispatch.
+    pub fn tiled(&self, side: usize) -> Scene {
+        let (w, h) = (self.width, self.height);
+        let (tw, th) = (w.max(side), h.max(side));
+        fn tiled<T: Copy>(data: &[T], (w, h): (usize, usize), (tw, th): (usize, usize)) -> Vec<T> {
+            (0..th).flat_map(|y| (0..tw).map(move |x| data[(y % h) * w + x % w])).collect()
+        }
+        let mut out = Scene::from_color(format!("{} (tiled)", self.name), tw, th, tiled(&self.color, (w, h), (tw, th)));
+        out.spp = self.spp;
+        out.features = self.features.iter().map(|(f, v)| (*f, tiled(v, (w, h), (tw, th)))).collect();
+        out.variances = self.variances.iter().map(|(k, v)| (*k, tiled(v, (w, h), (tw, th)))).collect();
+        out.albedo = self.albedo.as_ref().map(|a| tiled(a, (w, h), (tw, th)));
+        out
     }
 
     /// The `width`×`height` pixels from (`x`, `y`) of every image the scene

@@ -1,0 +1,188 @@
+//! The filter pipeline's stages and forms, and whole frames of the shipped
+//! à-trous filters against the peer, on a frame of [`FRAME_SIDE`]².
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::timing::{ms, stat, Stat};
+use crate::gpu::{Gpu, SceneBuffers};
+use crate::jit::{self, KernelKind, LowerOptions};
+use crate::lang::{parse_expr, Expr};
+use crate::scene::Scene;
+
+/// One stage or form of the filter pipeline on a frame of [`FRAME_SIDE`]².
+#[derive(Clone, Debug, Serialize)]
+pub struct StageResult {
+    pub stage: String,
+    /// Lower and validate of its kernel (none for the pre-pass: one module for every pipeline).
+    pub lower_validate_ms: Option<f64>,
+    /// Pipeline creation plus the first dispatch, where software drivers compile.
+    pub compile_ms: f64,
+    pub warm_ms: Stat,
+    pub ms_per_mpx: f64,
+}
+
+/// One way to denoise a whole frame of [`FRAME_SIDE`]²: a shipped filter in
+/// the pipeline it is stored with (device time of the pre-pass and every pass
+/// of the form), or OIDN (CPU wall time of each execution, as `oidnDenoise`
+/// reports it).
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameResult {
+    pub method: String,
+    pub pipeline: String,
+    /// Pipeline creation plus the first frame (none for OIDN: its program creates its filter each run).
+    pub compile_ms: Option<f64>,
+    pub warm_ms: Stat,
+    pub ms_per_mpx: f64,
+    /// This method's warm median over OIDN's (none without OIDN).
+    pub over_oidn: Option<f64>,
+}
+
+/// Side of the frame the pipeline's stages are timed on (the size OIDN is compared at).
+pub const FRAME_SIDE: usize = 256;
+
+/// Each stage's and each form's time on a frame of [`FRAME_SIDE`]² (the bench
+/// scene tiled), measured in interleaved rounds: the pre-pass (outliers and
+/// demodulation; the difference between preparing the frame's buffers with it
+/// and without, so uploads cancel), and `@crossBilateral` as a window of
+/// radius 3 and 10 and as 5 à-trous passes.
+pub(super) fn pipeline_stages(gpu: &Gpu, scene: &Scene, repeats: usize) -> anyhow::Result<Vec<StageResult>> {
+    use crate::pipeline::FilterPipeline;
+    let frame = scene.tiled(FRAME_SIDE);
+    let mpx = frame.pixels() as f64 / 1e6;
+    let expr = parse_expr(crate::corpus::lookup("crossBilateral").expect("shipped"))?;
+    let with_prepass: FilterPipeline = "outliers=2,demodulate,window".parse().expect("valid");
+    let mut results = Vec::new();
+
+    let t = Instant::now();
+    SceneBuffers::for_pipeline(gpu, &frame, &with_prepass)?;
+    let compile_ms = ms(t.elapsed());
+    let (mut plain, mut prepared) = (Vec::new(), Vec::new());
+    for _ in 0..repeats.max(1) * 2 {
+        let t = Instant::now();
+        SceneBuffers::for_pipeline(gpu, &frame, &FilterPipeline::WINDOW)?;
+        plain.push(ms(t.elapsed()));
+        let t = Instant::now();
+        SceneBuffers::for_pipeline(gpu, &frame, &with_prepass)?;
+        prepared.push(ms(t.elapsed()));
+    }
+    let difference: Vec<f64> = prepared.iter().zip(&plain).map(|(p, u)| (p - u).max(0.0)).collect();
+    let warm_ms = stat(difference);
+    results.push(StageResult {
+        stage: "pre-pass outliers=2,demodulate".into(),
+        lower_validate_ms: None,
+        compile_ms,
+        ms_per_mpx: warm_ms.median / mpx,
+        warm_ms,
+    });
+
+    let forms: [(&str, FilterPipeline, u32); 3] = [
+        ("window r=3", FilterPipeline::WINDOW, 3),
+        ("window r=10", FilterPipeline::WINDOW, 10),
+        ("atrous=5", "atrous=5".parse().expect("valid"), 2),
+    ];
+    let mut prepared = Vec::new();
+    for (name, pipeline, radius) in forms {
+        let t = Instant::now();
+        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(&pipeline))?;
+        let lower_validate = ms(t.elapsed());
+        let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, &pipeline)?;
+        let t = Instant::now();
+        gpu.filter(&kernel, &mut buffers, &frame, radius)?;
+        prepared.push((name, kernel, buffers, radius, lower_validate, ms(t.elapsed())));
+    }
+    let mut times = vec![Vec::new(); prepared.len()];
+    for _ in 0..repeats.max(1) * 2 {
+        for (k, (_, kernel, buffers, radius, _, _)) in prepared.iter_mut().enumerate() {
+            times[k].push(ms(gpu.filter(kernel, buffers, &frame, *radius)?.dispatch));
+        }
+    }
+    for ((name, _, _, _, lower_validate, compile_ms), times) in prepared.into_iter().zip(times) {
+        let warm_ms = stat(times);
+        results.push(StageResult {
+            stage: name.into(),
+            lower_validate_ms: Some(lower_validate),
+            compile_ms,
+            ms_per_mpx: warm_ms.median / mpx,
+            warm_ms,
+        });
+    }
+    Ok(results)
+}
+
+/// Every shipped filter stored with an à-trous pipeline, as a whole frame
+/// of [`FRAME_SIDE`]² (the bench scene tiled): the pre-pass's dispatch (the
+/// frame's buffers prepared afresh each round, uploads not counted) plus
+/// every pass of the form, in interleaved rounds; then OIDN colour + albedo
+/// + normal on the same frame, where its program is found.
+pub(super) fn whole_frames(
+    gpu: &Gpu,
+    scene: &Scene,
+    repeats: usize,
+    peer: Option<&crate::oidn::Oidn>,
+    scratch: &std::path::Path,
+) -> anyhow::Result<Vec<FrameResult>> {
+    let frame = scene.tiled(FRAME_SIDE);
+    let mpx = frame.pixels() as f64 / 1e6;
+    let shipped: Vec<(String, Expr, crate::pipeline::FilterPipeline)> = crate::corpus::named()
+        .into_iter()
+        .filter_map(|(name, text)| {
+            let pipeline = crate::corpus::pipeline_of(crate::corpus::EXPRESSIONS, name)?.ok()?;
+            pipeline.is_atrous().then(|| Ok((name.to_string(), parse_expr(text)?, pipeline)))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let radius = 2;
+    let mut prepared = Vec::new();
+    for (name, expr, pipeline) in &shipped {
+        let t = Instant::now();
+        let kernel = jit::compile_shaped(expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(pipeline))?;
+        let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
+        gpu.filter(&kernel, &mut buffers, &frame, radius)?;
+        prepared.push((name, pipeline, kernel, ms(t.elapsed())));
+    }
+    let mut times = vec![Vec::new(); prepared.len()];
+    for _ in 0..repeats.max(1) * 2 {
+        for (k, (_, pipeline, kernel, _)) in prepared.iter().enumerate() {
+            let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
+            let prepass = buffers.prepass_time().unwrap_or_default();
+            times[k].push(ms(prepass + gpu.filter(kernel, &mut buffers, &frame, radius)?.dispatch));
+        }
+    }
+    let oidn = match peer {
+        Some(oidn) => {
+            let dir = scratch.join(format!("filterjit-bench-oidn-{}", std::process::id()));
+            let denoised = oidn.denoise(&frame, crate::oidn::Auxiliary::AlbedoNormal, repeats.max(1) * 2, &dir);
+            let _ = std::fs::remove_dir_all(&dir);
+            Some(stat(denoised?.warm_ms))
+        }
+        None => None,
+    };
+    let over = |median: f64| oidn.as_ref().map(|o| median / o.median);
+    let mut results: Vec<FrameResult> = prepared
+        .into_iter()
+        .zip(times)
+        .map(|((name, pipeline, _, compile_ms), times)| {
+            let warm_ms = stat(times);
+            FrameResult {
+                method: format!("@{name}"),
+                pipeline: pipeline.to_string(),
+                compile_ms: Some(compile_ms),
+                ms_per_mpx: warm_ms.median / mpx,
+                over_oidn: over(warm_ms.median),
+                warm_ms,
+            }
+        })
+        .collect();
+    if let Some(warm_ms) = oidn {
+        results.push(FrameResult {
+            method: "OIDN colour+albedo+normal (CPU)".into(),
+            pipeline: "-".into(),
+            compile_ms: None,
+            ms_per_mpx: warm_ms.median / mpx,
+            over_oidn: Some(1.0),
+            warm_ms,
+        });
+    }
+    Ok(results)
+}

@@ -1,0 +1,155 @@
+//! The report as the text table `filterjit bench` prints.
+
+use super::{Report, FRAME_SIDE, THESIS_TABLE_4_1};
+
+pub fn table(r: &Report) -> String {
+    let mut t = String::new();
+    t += &format!(
+        "device  {}\nscene   {} ({}x{}), radius {}, {} repeats per figure (median [min, max])\n\n",
+        r.device, r.scene, r.width, r.height, r.settings.radius, r.settings.repeats
+    );
+    t += "compile latency and throughput per expression (ms)\n";
+    t += &format!(
+        "{:>4} {:>7} {:>8} {:>9} {:>9} {:>10} {:>10} {:>11} {:>9} {:>10}\n",
+        "len", "lower", "validate", "pipeline", "1st disp", "jit", "jit plain", "interpreter", "interp/jit", "Gops/s"
+    );
+    for e in &r.expressions {
+        t += &format!(
+            "{:>4} {:>7.2} {:>8.2} {:>9.2} {:>9.1} {:>10.2} {:>10.2} {:>11} {:>9} {:>10.2}\n",
+            e.length,
+            e.lower_ms,
+            e.validate_ms,
+            e.pipeline_ms,
+            e.first_dispatch_ms,
+            e.jit_ms.median,
+            e.jit_plain_ms.median,
+            e.interpreter_ms.as_ref().map_or("-".into(), |s| format!("{:.2}", s.median)),
+            e.interpreter_ratio.map_or("-".into(), |x| format!("{x:.1}x")),
+            e.gp_ops_per_second / 1e9
+        );
+    }
+    t += &format!(
+        "\nmedian: interpreter / JIT {:.1}x; unoptimised / optimised {:.2}x; {:.3} G weights/s; {:.2} G GP ops/s\n",
+        r.interpreter_ratio_median,
+        r.optimisation_ratio_median,
+        r.weights_per_second_median / 1e9,
+        r.gp_ops_per_second_median / 1e9
+    );
+    t += "what each optimisation is worth (median over the corpus of the variant's time / the default kernel's):\n";
+    for (name, ratio) in &r.variant_ratio_median {
+        let meaning = if name.starts_with('-') { "without" } else { "with" };
+        t += &format!("  {name:<13} {ratio:.3}x  ({meaning} {})\n", name.trim_start_matches(['-', '+']));
+    }
+    let p = &r.population;
+    t += &format!(
+        "\npopulation of {} ({} distinct) compiled together: lower+validate {:.0} ms, pipelines {:.0} ms, first evaluation {:.0} ms => {:.2} ms per individual\n",
+        p.individuals, p.distinct, p.lower_validate_ms, p.pipelines_ms, p.first_evaluation_ms, p.per_individual_ms
+    );
+    t += &format!(
+        "  trusted modules (no run-time checks, the default) {:.2} ms per individual; with wgpu's checks {:.2} ms ({:.2}x)\n",
+        p.per_individual_ms,
+        p.checked_per_individual_ms,
+        p.checked_per_individual_ms / p.per_individual_ms
+    );
+    t += &format!(
+        "  as evolve scores them (every queue): a kernel per individual {:.2} ms per individual; {} per kernel {:.2} ms ({:.2}x faster; results {})\n",
+        p.evolve_single_per_individual_ms,
+        p.fused_members,
+        p.evolve_fused_per_individual_ms,
+        p.evolve_single_per_individual_ms / p.evolve_fused_per_individual_ms,
+        if p.fused_identical { "identical" } else { "DIFFER" }
+    );
+    let c = &r.calibration;
+    t += "\ncost model measured here (units: the operators' weights add up to the operator table's; `evolve --cost-model bench.json`):\n ";
+    for (name, w) in &r.cost_model.operators {
+        t += &format!(" {name} {w:.1}");
+    }
+    t += &format!(
+        "; tap {:.1}\n  rank correlation with the corpus's warm times: operator table {:.3}, measured {:.3}\n",
+        r.cost_model.tap, c.table_rank_correlation, c.measured_rank_correlation
+    );
+    let h = &r.handwritten;
+    t += &format!(
+        "\nbilateral: hand-written {:.3} ms, generated {:.3} ms ({:.2}x), generated with tiles {:.3} ms ({:.2}x), generated unoptimised {:.3} ms ({:.2}x)\n",
+        h.handwritten_ms.median,
+        h.generated_ms.median,
+        h.ratio,
+        h.generated_tiled_ms.median,
+        h.tiled_ratio,
+        h.generated_plain_ms.median,
+        h.plain_ratio
+    );
+    if !r.simplified.is_empty() {
+        t += "\nsimplified against raw (warm dispatch, ms):\n";
+        for s in &r.simplified {
+            t += &format!(
+                "  length {:>3} -> {:>3}: {:.3} -> {:.3} ({:.2}x)\n",
+                s.raw_length, s.simplified_length, s.raw_ms.median, s.simplified_ms.median, s.ratio
+            );
+        }
+    }
+    if !r.stages.is_empty() {
+        t += &format!(
+            "\npipeline stages and forms, one {FRAME_SIDE}x{FRAME_SIDE} frame (@crossBilateral; warm median, ms):\n"
+        );
+        t += &format!(
+            "  {:<32} {:>12} {:>12} {:>10} {:>10}\n",
+            "stage", "lower+val ms", "compile ms", "warm ms", "ms/Mpx"
+        );
+        for s in &r.stages {
+            t += &format!(
+                "  {:<32} {:>12} {:>12.1} {:>10.2} {:>10.1}\n",
+                s.stage,
+                s.lower_validate_ms.map_or("-".into(), |v| format!("{v:.2}")),
+                s.compile_ms,
+                s.warm_ms.median,
+                s.ms_per_mpx
+            );
+        }
+    }
+    if !r.frames.is_empty() {
+        t += &format!(
+            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: device time of pre-pass + passes; OIDN: CPU wall time; warm median [min, max], ms):\n"
+        );
+        t += &format!(
+            "  {:<34} {:<32} {:>10} {:>22} {:>10} {:>8}\n",
+            "method", "pipeline", "compile ms", "warm ms", "ms/Mpx", "/ OIDN"
+        );
+        for f in &r.frames {
+            t += &format!(
+                "  {:<34} {:<32} {:>10} {:>22} {:>10.1} {:>8}\n",
+                f.method,
+                f.pipeline,
+                f.compile_ms.map_or("-".into(), |v| format!("{v:.1}")),
+                format!("{:.2} [{:.2}, {:.2}]", f.warm_ms.median, f.warm_ms.min, f.warm_ms.max),
+                f.ms_per_mpx,
+                f.over_oidn.map_or("-".into(), |v| format!("{v:.2}x")),
+            );
+        }
+        if !r.frames.iter().any(|f| f.compile_ms.is_none()) {
+            t += "  (OIDN's oidnDenoise not found: FILTERJIT_OIDN, PATH or `pip install pyoidn`)\n";
+        }
+    }
+    if !r.generations.is_empty() {
+        t += "\none GP generation (this device) next to the thesis's Table 4.1 (GTX 980 Ti, population 200: another machine)\n";
+        t += &format!(
+            "{:>8} {:>6} {:>10} {:>10} {:>8} {:>9}   {:>12} {:>12}\n",
+            "size", "pop", "compile s", "evaluate s", "gp s", "total s", "thesis GPU s", "thesis CPU s"
+        );
+        for g in &r.generations {
+            let thesis = THESIS_TABLE_4_1.iter().find(|(s, ..)| *s == g.size);
+            t += &format!(
+                "{:>8} {:>6} {:>10.2} {:>10.2} {:>8.3} {:>9.2}   {:>12} {:>12}\n",
+                format!("{0}x{0}", g.size),
+                g.population,
+                g.compile_s,
+                g.evaluate_s,
+                g.gp_s,
+                g.total_s,
+                thesis.map_or("-".into(), |t| format!("{:.3}", t.1)),
+                thesis.map_or("-".into(), |t| format!("{:.1}", t.2))
+            );
+        }
+    }
+    t
+}

@@ -1,0 +1,99 @@
+//! What the kernel templates read, as one typed value. Every key a template
+//! names is a field here: the lowering fills a struct, so a key it forgets or
+//! misspells fails to compile rather than when a template renders.
+
+use std::collections::BTreeSet;
+
+use serde::Serialize;
+
+/// One member's code in a kernel: its hoisted per-pixel values, its
+/// per-neighbour values and the weight expression, for the templates.
+#[derive(Serialize)]
+pub(super) struct MemberCode {
+    pub index: usize,
+    /// What the member's names end in: nothing in a kernel of one.
+    pub suffix: String,
+    pub centre_lines: Vec<String>,
+    pub neighbour_lines: Vec<String>,
+    /// The SSA value (or literal) of the expression; the weight clamps it.
+    pub result: String,
+    pub weight: String,
+    /// The `templates/ops.wgsl` helpers the member's code calls.
+    #[serde(skip)]
+    pub helpers: BTreeSet<String>,
+}
+
+/// An input binding as the templates' header comments describe it.
+#[derive(Serialize)]
+pub(super) struct BindingView {
+    pub index: u32,
+    pub element: &'static str,
+    pub describes: String,
+    /// Index into the exported shader's `params.scale` (normalised inputs only).
+    pub scale_index: Option<usize>,
+}
+
+/// A workgroup tile: the (8 + 2r)² window of colour and neighbour features
+/// that a workgroup's invocations read, for `templates/tile_decl.wgsl.tera`.
+#[derive(Serialize)]
+pub(super) struct Tile {
+    pub radius: u32,
+    pub width: u32,
+    pub count: u32,
+    pub arrays: Vec<TileArray>,
+}
+
+#[derive(Serialize)]
+pub(super) struct TileArray {
+    pub ident: String,
+    pub source: String,
+    pub element: &'static str,
+}
+
+/// Everything a kernel template reads (`templates/*.wgsl.tera`).
+#[derive(Serialize)]
+pub(super) struct KernelContext {
+    pub crate_version: &'static str,
+    pub template_version: u32,
+    /// The members' canonical text joined by `; `, and each member's.
+    pub expression: String,
+    pub expressions: Vec<String>,
+    /// Nodes in all members together.
+    pub length: usize,
+    /// The linked `templates/ops.wgsl` helpers.
+    pub ops: String,
+    /// A kernel of one member, as the single-expression templates read it.
+    pub weight: String,
+    pub result: String,
+    pub centre_lines: Vec<String>,
+    pub neighbour_lines: Vec<String>,
+    /// Every member, for the fused fitness template.
+    pub members: Vec<MemberCode>,
+    pub fused: bool,
+    pub shared_centre_lines: Vec<String>,
+    pub shared_neighbour_lines: Vec<String>,
+    /// How many inputs the exported shader scales (`params.scale`).
+    pub scales: usize,
+    pub bindings: Vec<BindingView>,
+    /// The interface's binding declarations and its `struct Params`.
+    pub declarations: String,
+    pub params_struct: String,
+    pub relmse_epsilon: String,
+    pub workgroup_x: u32,
+    pub workgroup_y: u32,
+    /// An exported shader's texel format.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub output_format: Option<&'static str>,
+    pub tile: Option<Tile>,
+    pub atrous: bool,
+    pub remodulate: bool,
+    pub shaped: bool,
+    /// Whether an à-trous pass carries the colour variance to the next.
+    pub carry_variance: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub neighbour_variance: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub centre_variance: Option<String>,
+    pub atrous_half: i32,
+    pub stencil: Vec<String>,
+}
