@@ -550,17 +550,25 @@ pub fn instantiate_with(pattern: &str, values: &[(&str, &Expr)]) -> Expr {
 /// tenths so that sums are exact and ties stay ties. A guide to the
 /// cheapest form; whether the form found is kept is decided by
 /// [`kernel_cost`], which prices the lowered kernel.
-struct KernelCost;
+struct KernelCost<'a> {
+    /// For the classes' facts: a literal exponent or divisor is what
+    /// strength reduction turns into a product.
+    egraph: &'a EGraph<Node, Semantics>,
+}
 
-impl CostFunction<Node> for KernelCost {
+impl CostFunction<Node> for KernelCost<'_> {
     type Cost = u64;
 
     fn cost<C: FnMut(Id) -> u64>(&mut self, node: &Node, mut costs: C) -> u64 {
+        let constant = |id: &Id| self.egraph[*id].data.constant;
         let own = match node {
             Node::Const(_) => 0.0,
             Node::Var(_) => 1.0,
             Node::Pair(op, ..) => op.cost(),
             Node::Unary(op, _) => op.cost(),
+            // As the lowering emits them (`jit::ir`): `pow(x, 2)` a product, `x / c` a product by 1/c.
+            Node::Binary(BinaryOp::Pow, [_, e]) if constant(e) == Some(2.0) => BinaryOp::Mul.cost(),
+            Node::Binary(BinaryOp::Div, [_, d]) if constant(d).is_some_and(|c| c != 0.0) => BinaryOp::Mul.cost(),
             Node::Binary(op, _) => op.cost(),
         };
         node.fold((own * 10.0).round() as u64 + 1, |sum, id| sum + costs(id))
@@ -605,7 +613,7 @@ pub fn simplify(expr: &Expr) -> Expr {
         .with_expr(&rec)
         .run(&rules());
     let root = runner.roots[0];
-    let (_, best) = Extractor::new(&runner.egraph, KernelCost).find_best(root);
+    let (_, best) = Extractor::new(&runner.egraph, KernelCost { egraph: &runner.egraph }).find_best(root);
     let last = Id::from(best.as_ref().len() - 1);
     let simplified = from_rec(&best, last);
     // The lowered kernel's cost decides; where it ties (literal subtrees fold
