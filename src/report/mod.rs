@@ -78,6 +78,9 @@ pub struct Cell {
     pub mse: Option<f64>,
     /// Mean HDR-FLIP against the reference ([`crate::flip`]): what a person sees, in [0, 1].
     pub flip: Option<f64>,
+    /// The output's mean luminance over the reference's ([`metrics::light`]):
+    /// 1 keeps the image's light; a denoiser must not change it.
+    pub light: Option<f64>,
     /// relMSE / the noisy input's relMSE.
     pub normalised: Option<f64>,
     /// relMSE / the peer's (OIDN colour+albedo+normal) on the same scene, where OIDN ran.
@@ -101,6 +104,9 @@ pub struct MethodInfo {
     /// Means over the scenes it ran on.
     pub mean_relmse: Option<f64>,
     pub mean_flip: Option<f64>,
+    pub mean_light: Option<f64>,
+    /// The scene whose light this method changes most, and its ratio there.
+    pub worst_light: Option<(String, f64)>,
     pub mean_normalised: Option<f64>,
     /// Mean relMSE / the peer's mean relMSE over the same scenes, where OIDN ran on all of them.
     pub mean_vs_peer: Option<f64>,
@@ -224,6 +230,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             relmse_half_spp: noisy.relmse_half_spp,
             mse: Some(noisy.mse),
             flip: Some(flip(&scene.color)),
+            light: noisy.light,
             normalised: Some(1.0),
             ..Cell::default()
         });
@@ -311,6 +318,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                     relmse_half_spp: e.relmse_half_spp,
                     mse: Some(e.mse),
                     flip: Some(flip(&denoised.color)),
+                    light: e.light,
                     normalised: Some(metrics::normalised(e.relmse, noisy.relmse)),
                     ms_per_mpx: Some(times[times.len() / 2] / mpx),
                     ms_per_mpx_range: Some((times[0] / mpx, times[times.len() - 1] / mpx)),
@@ -371,6 +379,11 @@ fn summarise(
         mean_vs_peer,
         mean_relmse: mean(&|c| c.relmse),
         mean_flip: mean(&|c| c.flip),
+        mean_light: mean(&|c| c.light),
+        worst_light: ran
+            .iter()
+            .filter_map(|c| Some((c.scene.clone(), c.light?)))
+            .max_by(|a, b| (a.1 - 1.0).abs().total_cmp(&(b.1 - 1.0).abs())),
         mean_normalised: mean(&|c| c.normalised),
         mean_ms_per_mpx: mean(&|c| c.ms_per_mpx),
         scenes_run: ran.len(),
@@ -424,6 +437,7 @@ fn measure(
         relmse_half_spp: e.relmse_half_spp,
         mse: Some(e.mse),
         flip: Some(crate::flip::hdr_flip(reference, &rgb, scene.width, scene.height).mean()),
+        light: e.light,
         normalised: Some(metrics::normalised(e.relmse, noisy_relmse)),
         ms_per_mpx: Some(per_mpx(times[times.len() / 2])),
         ms_per_mpx_range: Some((per_mpx(times[0]), per_mpx(times[times.len() - 1]))),

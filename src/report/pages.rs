@@ -10,7 +10,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 
 use super::{plot, Cell, Results, NOISY};
-use crate::io;
+use crate::{io, metrics};
 
 /// A scene's or method's name as a file name.
 pub(super) fn file_name(name: &str) -> String {
@@ -37,6 +37,9 @@ struct Page<'a> {
     scenes: Vec<ScenePage>,
     feature_usage: bool,
     expressions: Vec<ExpressionItem>,
+    /// Each method and scene whose light is off by more than [`metrics::LIGHT_TOLERANCE`].
+    light_flags: Vec<String>,
+    light_tolerance: String,
 }
 
 #[derive(Serialize)]
@@ -55,6 +58,9 @@ struct MethodRow {
     relmse: String,
     vs_peer: String,
     flip: String,
+    /// Mean light ratio over the scenes, and the scene furthest from 1.
+    light: String,
+    worst_light: String,
     ms_per_mpx: String,
     scenes_run: usize,
     length: String,
@@ -84,6 +90,8 @@ struct CellRow {
     relmse_half_spp: String,
     mse: String,
     flip: String,
+    /// The light ratio, marked where it is off by more than [`metrics::LIGHT_TOLERANCE`].
+    light: String,
     normalised: String,
     vs_peer: String,
     ms_per_mpx: String,
@@ -131,6 +139,10 @@ impl<'a> Page<'a> {
                     relmse: fmt(m.mean_relmse, 4),
                     vs_peer: fmt(m.mean_vs_peer, 2),
                     flip: fmt(m.mean_flip, 4),
+                    light: fmt(m.mean_light, 3),
+                    worst_light: m.worst_light.as_ref().map_or_else(dash, |(scene, light)| {
+                        format!("{}{} ({scene})", fmt(Some(*light), 3), off(*light))
+                    }),
                     ms_per_mpx: fmt(m.mean_ms_per_mpx, 1),
                     scenes_run: m.scenes_run,
                     length: m.length.map_or_else(dash, |l| l.to_string()),
@@ -167,6 +179,7 @@ impl<'a> Page<'a> {
                                 relmse_half_spp: fmt(c.relmse_half_spp, 5),
                                 mse: fmt(c.mse, 5),
                                 flip: fmt(c.flip, 4),
+                                light: format!("{}{}", fmt(c.light, 3), c.light.map(off).unwrap_or_default()),
                                 normalised: fmt(c.normalised, 4),
                                 vs_peer: fmt(c.vs_peer, 2),
                                 ms_per_mpx: fmt(c.ms_per_mpx, 1),
@@ -181,6 +194,20 @@ impl<'a> Page<'a> {
                 })
                 .collect(),
             feature_usage: results.feature_usage.is_some(),
+            light_flags: results
+                .cells
+                .iter()
+                .filter_map(|c| Some((c, c.light?)))
+                .filter(|(_, light)| !off(*light).is_empty())
+                .map(|(c, light)| {
+                    let change = (light - 1.0) * 100.0;
+                    format!(
+                        "{} on {}: {light:.3} of the reference's mean luminance ({change:+.1} %)",
+                        c.method, c.scene
+                    )
+                })
+                .collect(),
+            light_tolerance: format!("{:.0} %", metrics::LIGHT_TOLERANCE * 100.0),
             expressions: results
                 .methods
                 .iter()
@@ -242,19 +269,30 @@ pub(super) fn write(results: &Results, output: &Path) -> Result<()> {
     Ok(())
 }
 
+/// The mark after a light ratio that changes the image's light by more than
+/// [`metrics::LIGHT_TOLERANCE`]; empty otherwise.
+fn off(light: f64) -> &'static str {
+    if (light - 1.0).abs() > metrics::LIGHT_TOLERANCE {
+        " ⚠"
+    } else {
+        ""
+    }
+}
+
 fn csv(results: &Results) -> String {
-    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,hdr_flip,normalised,relmse_vs_oidn,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable\n");
+    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,hdr_flip,light,normalised,relmse_vs_oidn,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable\n");
     let opt = |v: Option<f64>| v.map(|v| format!("{v:e}")).unwrap_or_default();
     for c in &results.cells {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             c.scene,
             c.method,
             opt(c.relmse),
             opt(c.relmse_half_spp),
             opt(c.mse),
             opt(c.flip),
+            opt(c.light),
             opt(c.normalised),
             opt(c.vs_peer),
             opt(c.ms_per_mpx),
@@ -334,6 +372,8 @@ mod tests {
                 pipeline: None,
                 mean_relmse: Some(0.5),
                 mean_flip: None,
+                mean_light: None,
+                worst_light: None,
                 mean_normalised: Some(1.0),
                 mean_vs_peer: None,
                 mean_ms_per_mpx: None,
@@ -354,5 +394,59 @@ mod tests {
         assert!(html.contains("&lt;s&gt;") && html.contains("<td>noisy</td><td>0.50000</td>"), "{html}");
         let md = page("report.md", &results).unwrap();
         assert!(md.contains("a <fast> & cheap device") && md.contains("| noisy | 0.50000 |"), "{md}");
+    }
+
+    /// The light column and its flags, on a known answer: a method at 0.90
+    /// of the reference's light is flagged, one at 0.99 is not.
+    #[test]
+    fn methods_that_change_the_light_are_flagged() {
+        let cell = |method: &str, light: f64| Cell {
+            scene: "room".into(),
+            method: method.into(),
+            relmse: Some(0.1),
+            light: Some(light),
+            ..Default::default()
+        };
+        let method = |name: &str, light: f64| crate::report::MethodInfo {
+            name: name.into(),
+            origin: Origin::Given,
+            expr: None,
+            length: None,
+            pipeline: None,
+            mean_relmse: Some(0.1),
+            mean_flip: None,
+            mean_light: Some(light),
+            worst_light: Some(("room".into(), light)),
+            mean_normalised: None,
+            mean_vs_peer: None,
+            mean_ms_per_mpx: None,
+            scenes_run: 1,
+        };
+        let results = Results {
+            generator: "filterjit".into(),
+            device: "d".into(),
+            radius: 3,
+            repeats: 1,
+            scenes: vec![SceneInfo {
+                name: "room".into(),
+                path: "room".into(),
+                width: 8,
+                height: 8,
+                spp: Some(4),
+                crop: [0, 0, 8],
+            }],
+            methods: vec![method("dark", 0.9), method("fine", 0.99)],
+            cells: vec![cell("dark", 0.9), cell("fine", 0.99)],
+            baseline: None,
+            feature_usage: None,
+        };
+        let md = page("report.md", &results).unwrap();
+        assert!(md.contains("* dark on room: 0.900 of the reference's mean luminance (-10.0 %)"), "{md}");
+        assert!(!md.contains("fine on room"), "{md}");
+        assert!(md.contains("| 0.900 ⚠ |") && md.contains("| 0.900 ⚠ (room) |"), "{md}");
+        assert!(md.contains("| 0.990 |") && md.contains("| 0.990 (room) |"), "{md}");
+        let html = page("report.html", &results).unwrap();
+        assert!(html.contains("<li>dark on room: 0.900"), "{html}");
+        assert!(csv(&results).lines().nth(1).unwrap().contains(",9e-1,"), "{}", csv(&results));
     }
 }
