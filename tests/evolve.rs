@@ -655,3 +655,33 @@ fn elites_keep_the_best_filter_found() {
     .to_string();
     assert!(error.contains("--elites 7"), "{error}");
 }
+
+/// The light the test table states, on a known answer: a filter that keeps
+/// each pixel as it is keeps the noisy input's light exactly, and a filter
+/// that averages keeps a flat image's.
+#[test]
+fn test_results_state_each_outputs_light() {
+    let (training, test) = datasets();
+    let gpu = gpu();
+    let request =
+        scene::Request { reference: true, ..scene::Request::for_expr(&parse_expr("distance2(color)").unwrap()) };
+    let scenes: Vec<_> = [training, test].iter().map(|d| scene::load(d, &request).unwrap()).collect();
+    let scorer = Scorer::new(&gpu, scenes, &fitness::Settings::window(2, 1)).unwrap();
+    // Only the centre has a weight that is not flushed to zero.
+    let identity = parse_expr("exp(-(distance2(pixel) * 1000))").unwrap();
+    let kept = scorer.light(&identity, 2).unwrap();
+    let noisy = scorer.noisy_light();
+    assert_eq!(kept.len(), 2);
+    for (k, n) in kept.iter().zip(&noisy) {
+        let (k, n) = (k.unwrap(), n.unwrap());
+        assert!((k - n).abs() <= 1e-5 * n, "identity {k} against noisy {n}");
+        assert!(n > 0.0 && n.is_finite());
+    }
+    let results = evolve::test(
+        &mut Scorer::new(&gpu, scorer.into_scenes(), &fitness::Settings::window(2, 1)).unwrap(),
+        &[identity],
+    )
+    .unwrap();
+    assert_eq!(results[0].light, kept);
+    assert_eq!(evolve::mean_light(&results[0].light), Some((kept[0].unwrap() + kept[1].unwrap()) / 2.0));
+}

@@ -9,6 +9,7 @@ use super::timing::{ms, stat, Stat};
 use crate::gpu::{Gpu, SceneBuffers};
 use crate::jit::{self, KernelKind, LowerOptions};
 use crate::lang::{parse_expr, Expr};
+use crate::metrics;
 use crate::scene::Scene;
 
 /// One stage or form of the filter pipeline on a frame of [`FRAME_SIDE`]².
@@ -37,6 +38,9 @@ pub struct FrameResult {
     pub ms_per_mpx: f64,
     /// This method's warm median over OIDN's (none without OIDN).
     pub over_oidn: Option<f64>,
+    /// The output's mean luminance over the reference's, on the bench scene
+    /// itself (the frame is that scene tiled, without a reference).
+    pub light: Option<f64>,
 }
 
 /// Side of the frame the pipeline's stages are timed on (the size OIDN is compared at).
@@ -133,17 +137,21 @@ pub(super) fn whole_frames(
         })
         .collect::<anyhow::Result<_>>()?;
     let radius = 2;
+    let reference = scene.reference.as_ref().expect("the bench scene has a reference");
     let mut prepared = Vec::new();
     for (name, expr, pipeline) in &shipped {
         let t = Instant::now();
         let kernel = jit::compile_shaped(expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(pipeline))?;
         let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
         gpu.filter(&kernel, &mut buffers, &frame, radius)?;
-        prepared.push((name, pipeline, kernel, ms(t.elapsed())));
+        let compile = ms(t.elapsed());
+        let mut on_scene = SceneBuffers::for_pipeline(gpu, scene, pipeline)?;
+        let light = metrics::light(&gpu.filter(&kernel, &mut on_scene, scene, radius)?.rgb(), reference);
+        prepared.push((name, pipeline, kernel, compile, light));
     }
     let mut times = vec![Vec::new(); prepared.len()];
     for _ in 0..repeats.max(1) * 2 {
-        for (k, (_, pipeline, kernel, _)) in prepared.iter().enumerate() {
+        for (k, (_, pipeline, kernel, _, _)) in prepared.iter().enumerate() {
             let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
             let prepass = buffers.prepass_time().unwrap_or_default();
             times[k].push(ms(prepass + gpu.filter(kernel, &mut buffers, &frame, radius)?.dispatch));
@@ -153,16 +161,17 @@ pub(super) fn whole_frames(
         Some(oidn) => {
             let dir = scratch.join(format!("filterjit-bench-oidn-{}", std::process::id()));
             let denoised = oidn.denoise(&frame, crate::oidn::Auxiliary::AlbedoNormal, repeats.max(1) * 2, &dir);
+            let on_scene = oidn.denoise(scene, crate::oidn::Auxiliary::AlbedoNormal, 1, &dir);
             let _ = std::fs::remove_dir_all(&dir);
-            Some(stat(denoised?.warm_ms))
+            Some((stat(denoised?.warm_ms), metrics::light(&on_scene?.color, reference)))
         }
         None => None,
     };
-    let over = |median: f64| oidn.as_ref().map(|o| median / o.median);
+    let over = |median: f64| oidn.as_ref().map(|(o, _)| median / o.median);
     let mut results: Vec<FrameResult> = prepared
         .into_iter()
         .zip(times)
-        .map(|((name, pipeline, _, compile_ms), times)| {
+        .map(|((name, pipeline, _, compile_ms, light), times)| {
             let warm_ms = stat(times);
             FrameResult {
                 method: format!("@{name}"),
@@ -171,10 +180,11 @@ pub(super) fn whole_frames(
                 ms_per_mpx: warm_ms.median / mpx,
                 over_oidn: over(warm_ms.median),
                 warm_ms,
+                light,
             }
         })
         .collect();
-    if let Some(warm_ms) = oidn {
+    if let Some((warm_ms, light)) = oidn {
         results.push(FrameResult {
             method: "OIDN colour+albedo+normal (CPU)".into(),
             pipeline: "-".into(),
@@ -182,6 +192,7 @@ pub(super) fn whole_frames(
             ms_per_mpx: warm_ms.median / mpx,
             over_oidn: Some(1.0),
             warm_ms,
+            light,
         });
     }
     Ok(results)

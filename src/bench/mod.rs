@@ -73,6 +73,8 @@ pub struct Report {
     /// Whole pipelines (pre-pass and form) of the shipped à-trous filters on
     /// the same frame, and the peer, Intel Open Image Denoise, where found.
     pub frames: Vec<FrameResult>,
+    /// The bench scene's noisy input's light, beside the frames' outputs'.
+    pub noisy_light: Option<f64>,
     pub generations: Vec<GenerationResult>,
 }
 
@@ -122,6 +124,10 @@ pub fn run(
         simplified,
         stages,
         frames,
+        noisy_light: crate::metrics::light(
+            &scene.color,
+            scene.reference.as_ref().expect("the bench scene has a reference"),
+        ),
         generations,
     })
 }

@@ -201,6 +201,29 @@ pub(crate) fn evolve_on(
         summary.test_best.normalised,
         summary.test_baselines.iter().map(|b| format!(" {:>12.5}", b.normalised)).collect::<String>()
     );
+    // The light each output keeps: mean luminance over the reference's (1 keeps it).
+    let light = |l: Option<f64>| l.map_or_else(|| format!(" {:>12}", "-"), |l| format!(" {l:>12.3}"));
+    let flag = |l: Option<f64>| l.is_some_and(|l| (l - 1.0).abs() > filterjit::metrics::LIGHT_TOLERANCE);
+    for (k, name) in summary.test_scenes.iter().enumerate() {
+        let row = [summary.test_noisy_light[k], summary.test_seed.light[k], summary.test_best.light[k]]
+            .into_iter()
+            .chain(summary.test_baselines.iter().map(|b| b.light[k]));
+        let row: Vec<Option<f64>> = row.collect();
+        println!(
+            "light     {:<16}{}{}",
+            name,
+            row.iter().map(|l| light(*l)).collect::<String>(),
+            if row[1..].iter().any(|l| flag(*l)) { "   changes the light by more than 3 %" } else { "" }
+        );
+    }
+    let means = [
+        ev::mean_light(&summary.test_noisy_light),
+        ev::mean_light(&summary.test_seed.light),
+        ev::mean_light(&summary.test_best.light),
+    ]
+    .into_iter()
+    .chain(summary.test_baselines.iter().map(|b| ev::mean_light(&b.light)));
+    println!("          {:<16}{}   (mean luminance / the reference's)", "mean", means.map(light).collect::<String>());
     for (name, b) in baseline_names.iter().zip(&summary.test_baselines) {
         println!("          {name} = {}", b.expr);
     }

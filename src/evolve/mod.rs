@@ -20,7 +20,7 @@ use anyhow::Result;
 pub use config::RunConfig;
 pub use front::{time_filters, Front, FrontMember, FRONT_FILE, FRONT_TIMING_SIDE};
 pub use hall::{hall_of_fame_text, Rescored};
-pub use results::{test, test_each, Summary, TestResult};
+pub use results::{mean_light, test, test_each, Summary, TestResult};
 pub use run_dir::{
     append_log, default_run_dir, log_upto, read_checkpoint, write_checkpoint, Checkpoint, CHECKPOINT_FILE,
     DEFAULT_RUN_DIR, FEATURES_FILE, HALL_OF_FAME_FILE, LOG_FILE, SUMMARY_FILE,
@@ -278,6 +278,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         best,
         test_scenes: names,
         test_noisy_relmse: tester.noisy_relmse().to_vec(),
+        test_noisy_light: tester.noisy_light(),
         test_best,
         test_seed,
         test_baselines,

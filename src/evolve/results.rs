@@ -18,6 +18,9 @@ pub struct TestResult {
     pub relmse: Vec<f64>,
     /// Mean over test scenes of relMSE / noisy relMSE.
     pub normalised: f64,
+    /// The output's mean luminance over the reference's, per test scene
+    /// (1 keeps the light; `None` where the reference is black or the filter invalid).
+    pub light: Vec<Option<f64>>,
     pub invalid: Option<String>,
 }
 
@@ -35,6 +38,8 @@ pub struct Summary {
     pub best_simplified: String,
     pub test_scenes: Vec<String>,
     pub test_noisy_relmse: Vec<f64>,
+    /// The noisy inputs' light per test scene.
+    pub test_noisy_light: Vec<Option<f64>>,
     pub test_best: TestResult,
     pub test_seed: TestResult,
     /// Other filters on the same test scenes, for comparison (those whose features the scenes have).
@@ -53,29 +58,36 @@ pub fn test(evaluator: &mut Scorer<'_>, exprs: &[Expr]) -> Result<Vec<TestResult
 pub fn test_each(evaluator: &mut Scorer<'_>, exprs: &[(Expr, u32)]) -> Result<Vec<TestResult>> {
     let errors = evaluator.errors_each(exprs)?;
     let noisy = evaluator.noisy_relmse().to_vec();
-    Ok(exprs
+    exprs
         .iter()
-        .map(|(e, _)| e)
         .zip(errors)
-        .map(|(e, result)| {
+        .map(|((e, radius), result)| {
             let per_scene = match result {
                 Ok(per_scene) => per_scene,
                 Err(reason) => {
-                    return TestResult {
+                    return Ok(TestResult {
                         expr: e.to_string(),
                         relmse: vec![f64::NAN; noisy.len()],
                         normalised: f64::NAN,
+                        light: vec![None; noisy.len()],
                         invalid: Some(reason.to_string()),
-                    }
+                    })
                 }
             };
             let flags = domain_flags(&per_scene);
-            TestResult {
+            Ok(TestResult {
                 expr: e.to_string(),
                 relmse: per_scene.iter().map(|s| s.relmse).collect(),
                 normalised: normalised_error(&per_scene, &noisy),
+                light: evaluator.light(e, *radius)?,
                 invalid: (flags != 0).then(|| semantics::flag::describe(flags).join("; ")),
-            }
+            })
         })
-        .collect())
+        .collect()
+}
+
+/// The mean of the light ratios that exist.
+pub fn mean_light(light: &[Option<f64>]) -> Option<f64> {
+    let known: Vec<f64> = light.iter().flatten().copied().collect();
+    (!known.is_empty()).then(|| known.iter().sum::<f64>() / known.len() as f64)
 }

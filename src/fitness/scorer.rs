@@ -239,6 +239,32 @@ impl<'g> Scorer<'g> {
         &self.noisy
     }
 
+    /// Each whole scene's filtered output's light, `expr` at `radius`
+    /// through the scorer's pipeline on its first device: the mean luminance
+    /// over the reference's ([`crate::metrics::light`]; `None` for a black reference).
+    pub fn light(&self, expr: &Expr, radius: u32) -> Result<Vec<Option<f64>>> {
+        let pipeline = &self.settings.pipeline;
+        let shape = jit::Shape::of(pipeline);
+        let kernel = jit::compile_shaped(expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
+        self.scenes
+            .iter()
+            .map(|scene| {
+                let mut buffers = crate::gpu::SceneBuffers::for_pipeline(self.gpu, scene, pipeline)?;
+                let filtered = self.gpu.filter(&kernel, &mut buffers, scene, radius)?;
+                let reference = scene.reference.as_ref().expect("scored scenes have references");
+                Ok(crate::metrics::light(&filtered.rgb(), reference))
+            })
+            .collect()
+    }
+
+    /// Each scene's noisy input's light.
+    pub fn noisy_light(&self) -> Vec<Option<f64>> {
+        self.scenes
+            .iter()
+            .map(|s| crate::metrics::light(&s.color, s.reference.as_ref().expect("scored scenes have references")))
+            .collect()
+    }
+
     /// The scenes, whole (the scorer's buffers are freed).
     pub fn into_scenes(self) -> Vec<Scene> {
         self.scenes
