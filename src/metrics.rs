@@ -77,6 +77,34 @@ pub fn light<A: Copy + Into<f64>, B: Copy + Into<f64>>(image: &[[A; 3]], referen
     (reference > 0.0).then(|| mean_luminance(image) / reference)
 }
 
+/// How heavy-tailed an image's light is: the two statistics that tell a room
+/// lit through a small opening (most pixels near black, a few carrying most
+/// of the light) from a tamely lit one (docs/SCENES.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Tails {
+    /// The median pixel's luminance over the mean luminance (near 0: the median pixel is black).
+    pub median_over_mean: f64,
+    /// The share of the total luminance that the brightest 1 % of pixels hold.
+    pub top_percent_share: f64,
+}
+
+/// [`Tails`] of an image; `None` when it is black (luminance clamped at 0 per pixel).
+pub fn tails<A: Copy + Into<f64>>(image: &[[A; 3]]) -> Option<Tails> {
+    let mut lum: Vec<f64> =
+        image.iter().map(|c| crate::pipeline::luminance([c[0].into(), c[1].into(), c[2].into()]).max(0.0)).collect();
+    let total: f64 = lum.iter().sum();
+    if lum.is_empty() || total <= 0.0 {
+        return None;
+    }
+    lum.sort_by(|a, b| b.total_cmp(a));
+    let top = lum.len().div_ceil(100);
+    let mean = total / lum.len() as f64;
+    Some(Tails {
+        median_over_mean: lum[lum.len() / 2] / mean,
+        top_percent_share: lum[..top].iter().sum::<f64>() / total,
+    })
+}
+
 /// How far a mean-luminance ratio may stray from 1 before a method is said
 /// to change the image's light (`filter` and `report` flag it).
 pub const LIGHT_TOLERANCE: f64 = 0.03;
@@ -84,6 +112,21 @@ pub const LIGHT_TOLERANCE: f64 = 0.03;
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn tails_tell_a_few_bright_pixels_from_an_even_light() {
+        // 200 pixels: 198 black, 2 carrying everything.
+        let mut image = vec![[0.0f32; 3]; 200];
+        image[7] = [5.0; 3];
+        image[90] = [3.0; 3];
+        let t = tails(&image).unwrap();
+        assert_eq!(t.median_over_mean, 0.0);
+        assert!((t.top_percent_share - 1.0).abs() < 1e-12, "the top 2 pixels hold it all: {t:?}");
+        // Even light: the median is the mean, the top 1 % holds 1 %.
+        let t = tails(&vec![[0.5f32; 3]; 300]).unwrap();
+        assert!((t.median_over_mean - 1.0).abs() < 1e-12 && (t.top_percent_share - 0.01).abs() < 1e-12, "{t:?}");
+        assert_eq!(tails(&vec![[0.0f32; 3]; 10]), None);
+    }
 
     #[test]
     fn relmse_follows_equation_3_5() {

@@ -376,3 +376,24 @@ fn a_missing_channel_is_a_data_error_and_the_cli_names_the_flag() {
     assert!(stderr.contains("hint: `filterjit filter --absent zero`"), "{stderr}");
     assert!(!out.exists(), "nothing written");
 }
+
+/// `scenes --stats` measures how heavy-tailed a scene's light is, for the
+/// noisy input and the reference (median over mean, the top 1 %'s share).
+#[test]
+fn scene_stats_measure_the_light_s_tails() {
+    let cache = crate::common::temp_dir("cli", "stats-cache");
+    let run = Command::new(env!("CARGO_BIN_EXE_filterjit"))
+        .args(["scenes", "--stats", "--size", "16", "cornell"])
+        .env("FILTERJIT_CACHE", &cache)
+        .output()
+        .unwrap();
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "{stdout}\n{}", text(&run.stderr));
+    let row = stdout.lines().find(|l| l.starts_with("cornell")).unwrap_or_else(|| panic!("{stdout}"));
+    let fields: Vec<&str> = row.split_whitespace().collect();
+    // cornell 16x16 4 | noisy median, top 1 % | reference median, top 1 %
+    assert_eq!(&fields[1..3], ["16x16", "4"], "{row}");
+    let median: f64 = fields[3].parse().unwrap();
+    let top: f64 = fields[4].parse().unwrap();
+    assert!((0.0..=1.5).contains(&median) && top > 1.0 && top <= 100.0 && fields[5] == "%", "{row}");
+}

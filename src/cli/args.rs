@@ -163,8 +163,21 @@ pub(crate) enum Command {
     /// (the report's baseline); prints the tuned expression. Sizes and radius
     /// default to --run's, else 64x64, 4 spp, 1024-spp references, radius 5.
     Tune(Box<TuneArgs>),
-    /// List the built-in scenes.
-    Scenes,
+    /// List the built-in scenes; with --stats, how heavy-tailed each one's
+    /// light is (or the named scenes': built-in names, .toml files, datasets).
+    Scenes {
+        /// Render (or find in the cache) and measure: the median pixel's
+        /// luminance over the mean, and the share of the light the brightest
+        /// 1 % of pixels hold, of the noisy input and of the reference.
+        #[arg(long)]
+        stats: bool,
+        /// Size of the renders measured (square), and their samples per pixel.
+        #[arg(long, default_value_t = 64)]
+        size: u32,
+        #[arg(long, default_value_t = 4)]
+        spp: u32,
+        scenes: Vec<String>,
+    },
     /// List the shipped expressions.
     List,
     /// List the GPU adapters and say which one filterjit uses.

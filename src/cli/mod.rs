@@ -198,13 +198,14 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             };
             bench(env, size, &settings, no_oidn, &output)
         }
-        Command::Scenes => {
+        Command::Scenes { stats: false, scenes, .. } if scenes.is_empty() => {
             for (name, _) in render::BUILTIN {
                 let d = render::builtin(name).expect("listed")?;
                 println!("{name:<16} {:<6} {}", format!("{:?}", d.split).to_lowercase(), d.summary);
             }
             Ok(())
         }
+        Command::Scenes { size, spp, scenes, .. } => scene_stats(&env, size, spp, scenes),
         Command::List => {
             for (name, text) in corpus::named() {
                 match corpus::pipeline_of(corpus::EXPRESSIONS, name) {
@@ -425,6 +426,36 @@ pub(crate) fn render(
         meta["reference_residual_relmse"].as_f64().unwrap_or(0.0)
     );
     println!("wrote     {}", dir.display());
+    Ok(())
+}
+
+/// How heavy-tailed each scene's light is, noisy and reference (`scenes --stats`).
+fn scene_stats(env: &Environment, size: u32, spp: u32, scenes: Vec<String>) -> Result<()> {
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let names: Vec<String> =
+        if scenes.is_empty() { render::BUILTIN.iter().map(|(n, _)| n.to_string()).collect() } else { scenes };
+    let settings = render::RenderSettings { width: size, height: size, spp, ..Default::default() };
+    let datasets = datasets::resolve(&gpu, &names, &settings, &env.cache, &mut report::render_progress())?;
+    println!(
+        "{:<28} {:>9} {:>5}   {:>14} {:>12}   {:>14} {:>12}",
+        "scene", "size", "spp", "noisy median", "noisy top 1%", "ref median", "ref top 1%"
+    );
+    let share = |t: Option<metrics::Tails>| match t {
+        Some(t) => (format!("{:.3}", t.median_over_mean), format!("{:.1} %", t.top_percent_share * 100.0)),
+        None => ("black".into(), "-".into()),
+    };
+    for dir in datasets {
+        let scene = scene::load(&dir, &scene::Request { reference: true, ..Default::default() })?;
+        let (nm, nt) = share(metrics::tails(&scene.color));
+        let (rm, rt) = share(scene.reference.as_deref().and_then(metrics::tails));
+        println!(
+            "{:<28} {:>9} {:>5}   {nm:>14} {nt:>12}   {rm:>14} {rt:>12}",
+            scene.name,
+            format!("{}x{}", scene.width, scene.height),
+            scene.spp.map_or("?".into(), |s| s.to_string()),
+        );
+    }
+    println!("(median: the median pixel's luminance over the mean; top 1%: the share of the light the brightest 1 % of pixels hold)");
     Ok(())
 }
 
