@@ -118,3 +118,23 @@ fn bad_scene_files_give_file_and_line() {
     let err = render::describe(file.to_str().unwrap()).unwrap_err().to_string();
     assert!(err.contains("bad.toml") && err.contains("line 3"), "{err}");
 }
+
+/// The built-in training set holds the statistics of a room lit through a
+/// small opening (docs/SCENES.md): at 4 spp the median pixel is black while
+/// the reference is lit throughout, and the brightest 1 % of pixels hold far
+/// more of the light than they do in the reference.
+#[test]
+fn a_built_in_training_scene_has_a_black_noisy_median_under_a_lit_reference() {
+    use filterjit::metrics::tails;
+    let gpu = gpu();
+    let d = render::builtin("skylight-slot").unwrap().unwrap();
+    assert_eq!(d.split, render::Split::Train);
+    let settings = RenderSettings { width: 32, height: 32, spp: 4, reference_spp: 256, seed: 0 };
+    let dir = temp_dir("skylight-slot");
+    render::render(&gpu, &d, &settings, &mut |_, _| {}).unwrap().write(&dir, &d, &settings).unwrap();
+    let scene = scene::load(&dir, &Request { reference: true, ..Default::default() }).unwrap();
+    let (noisy, reference) = (tails(&scene.color).unwrap(), tails(scene.reference.as_ref().unwrap()).unwrap());
+    assert!(noisy.median_over_mean < 0.05, "noisy {noisy:?}");
+    assert!(reference.median_over_mean > 0.3, "reference {reference:?}");
+    assert!(noisy.top_percent_share > 2.0 * reference.top_percent_share, "{noisy:?} against {reference:?}");
+}

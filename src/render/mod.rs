@@ -45,6 +45,7 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("sub-pixel-texture", include_str!("../../scenes/sub-pixel-texture.toml")),
     ("dark-corridor", include_str!("../../scenes/dark-corridor.toml")),
     ("sky-window", include_str!("../../scenes/sky-window.toml")),
+    ("skylight-slot", include_str!("../../scenes/skylight-slot.toml")),
 ];
 
 /// A built-in scene by name.
