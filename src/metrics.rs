@@ -125,7 +125,7 @@ mod tests {
         // Even light: the median is the mean, the top 1 % holds 1 %.
         let t = tails(&vec![[0.5f32; 3]; 300]).unwrap();
         assert!((t.median_over_mean - 1.0).abs() < 1e-12 && (t.top_percent_share - 0.01).abs() < 1e-12, "{t:?}");
-        assert_eq!(tails(&vec![[0.0f32; 3]; 10]), None);
+        assert_eq!(tails(&[[0.0f32; 3]; 10]), None);
     }
 
     #[test]

@@ -205,7 +205,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Scenes { size, spp, scenes, .. } => scene_stats(&env, size, spp, scenes),
+        Command::Scenes { size, spp, scenes, .. } => scene_stats(env, size, spp, scenes),
         Command::List => {
             for (name, text) in corpus::named() {
                 match corpus::pipeline_of(corpus::EXPRESSIONS, name) {
