@@ -88,11 +88,13 @@ pub fn corpus(settings: &BenchSettings) -> Vec<Expr> {
     out
 }
 
-/// The corpus measured, and medians over it.
-pub(super) struct Measured {
+/// The corpus measured, and medians over it (flattened into `bench.json`).
+#[derive(Clone, Debug, Serialize)]
+pub struct CorpusResult {
     pub expressions: Vec<ExpressionResult>,
     pub interpreter_ratio_median: f64,
     pub optimisation_ratio_median: f64,
+    /// Per variant of [`VARIANTS`]: median over the corpus of its time / the default kernel's time.
     pub variant_ratio_median: Vec<(String, f64)>,
     pub weights_per_second_median: f64,
     pub gp_ops_per_second_median: f64,
@@ -104,7 +106,7 @@ pub(super) fn measure(
     buffers: &mut SceneBuffers,
     settings: &BenchSettings,
     progress: &mut dyn FnMut(&str),
-) -> anyhow::Result<Measured> {
+) -> anyhow::Result<CorpusResult> {
     let interpreter_kernel = gpu.raw_kernel(&interpreter::source())?;
     let packed = interpreter::pack(scene);
     let per_pass = weights(scene.width, scene.height, settings.radius);
@@ -171,7 +173,7 @@ pub(super) fn measure(
     let weights_per_second_median = median(expressions.iter().map(|e| e.weights_per_second).collect());
     let gp_ops_per_second_median = median(expressions.iter().map(|e| e.gp_ops_per_second).collect());
 
-    Ok(Measured {
+    Ok(CorpusResult {
         expressions,
         interpreter_ratio_median,
         optimisation_ratio_median,

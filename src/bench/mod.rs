@@ -19,7 +19,7 @@ use crate::gpu::{Gpu, SceneBuffers};
 use crate::scene::Scene;
 
 pub use calibration::{calibrate, CalibrationResult, THESIS_TABLE_4_1};
-pub use expressions::{corpus, ExpressionResult, VARIANTS};
+pub use expressions::{corpus, CorpusResult, ExpressionResult, VARIANTS};
 pub use frames::{FrameResult, StageResult, FRAME_SIDE};
 pub use generation::GenerationResult;
 pub use handwritten::{HandWrittenResult, HANDWRITTEN_BILATERAL};
@@ -55,13 +55,9 @@ pub struct Report {
     pub width: usize,
     pub height: usize,
     pub settings: BenchSettings,
-    pub expressions: Vec<ExpressionResult>,
-    pub interpreter_ratio_median: f64,
-    pub optimisation_ratio_median: f64,
-    /// Per variant of [`VARIANTS`]: median over the corpus of its time / the default kernel's time.
-    pub variant_ratio_median: Vec<(String, f64)>,
-    pub weights_per_second_median: f64,
-    pub gp_ops_per_second_median: f64,
+    /// The corpus of expressions measured one by one.
+    #[serde(flatten)]
+    pub corpus: CorpusResult,
     pub population: PopulationResult,
     /// Per-operator cost weights measured here: `evolve --cost-model bench.json` searches with them.
     pub cost_model: crate::cost::CostModel,
@@ -111,12 +107,7 @@ pub fn run(
         width: scene.width,
         height: scene.height,
         settings: settings.clone(),
-        expressions: measured.expressions,
-        interpreter_ratio_median: measured.interpreter_ratio_median,
-        optimisation_ratio_median: measured.optimisation_ratio_median,
-        variant_ratio_median: measured.variant_ratio_median,
-        weights_per_second_median: measured.weights_per_second_median,
-        gp_ops_per_second_median: measured.gp_ops_per_second_median,
+        corpus: measured,
         population,
         cost_model,
         calibration,

@@ -13,7 +13,7 @@ pub fn table(r: &Report) -> String {
         "{:>4} {:>7} {:>8} {:>9} {:>9} {:>10} {:>10} {:>11} {:>9} {:>10}\n",
         "len", "lower", "validate", "pipeline", "1st disp", "jit", "jit plain", "interpreter", "interp/jit", "Gops/s"
     );
-    for e in &r.expressions {
+    for e in &r.corpus.expressions {
         t += &format!(
             "{:>4} {:>7.2} {:>8.2} {:>9.2} {:>9.1} {:>10.2} {:>10.2} {:>11} {:>9} {:>10.2}\n",
             e.length,
@@ -30,13 +30,13 @@ pub fn table(r: &Report) -> String {
     }
     t += &format!(
         "\nmedian: interpreter / JIT {:.1}x; unoptimised / optimised {:.2}x; {:.3} G weights/s; {:.2} G GP ops/s\n",
-        r.interpreter_ratio_median,
-        r.optimisation_ratio_median,
-        r.weights_per_second_median / 1e9,
-        r.gp_ops_per_second_median / 1e9
+        r.corpus.interpreter_ratio_median,
+        r.corpus.optimisation_ratio_median,
+        r.corpus.weights_per_second_median / 1e9,
+        r.corpus.gp_ops_per_second_median / 1e9
     );
     t += "what each optimisation is worth (median over the corpus of the variant's time / the default kernel's):\n";
-    for (name, ratio) in &r.variant_ratio_median {
+    for (name, ratio) in &r.corpus.variant_ratio_median {
         let meaning = if name.starts_with('-') { "without" } else { "with" };
         t += &format!("  {name:<13} {ratio:.3}x  ({meaning} {})\n", name.trim_start_matches(['-', '+']));
     }
