@@ -167,16 +167,6 @@ impl SceneBuffers {
         Ok(())
     }
 
-    /// What `scene` lacks of `input` (what the pre-pass measures is there with outliers).
-    fn lacks(&self, scene: &Scene, input: Input) -> MissingInput {
-        let missing = match input {
-            Input::Feature(f) => Missing::Feature(f),
-            Input::Variance(v) if v.from_prepass() => Missing::Measured(v),
-            Input::Variance(v) => Missing::Variance(v),
-        };
-        MissingInput { scene: scene.name.clone(), missing }
-    }
-
     /// A kernel runs on buffers prepared for a pipeline of its shape.
     pub(super) fn check_shape(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
         let (wanted, got) = (Shape::of(&self.pipeline), kernel.source().shape);
@@ -186,22 +176,24 @@ impl SceneBuffers {
         Err(GpuError::Shape { expression: kernel.source().canonical.clone(), shape: got, pipeline: self.pipeline })
     }
 
-    /// Upload `input` of `scene` unless it is on the device already.
+    /// Upload `input` of `scene` unless it is on the device already. Callers
+    /// run [`SceneBuffers::check_inputs`] first: an absent input is a data
+    /// error there, never here.
     pub(super) fn ensure(&mut self, gpu: &Gpu, scene: &Scene, input: Input) -> Result<(), GpuError> {
         if self.inputs.contains_key(&input) {
             return Ok(());
         }
-        let missing = || GpuError::MissingInput(self.lacks(scene, input));
+        const CHECKED: &str = "check_inputs found every input the kernel binds";
         let data: Vec<f32> = match input {
             Input::Feature(f) => {
-                let values = scene.feature(f).ok_or_else(missing)?;
+                let values = scene.feature(f).expect(CHECKED);
                 if input.components() == 1 {
                     values.iter().map(|v| v[0]).collect()
                 } else {
                     values.iter().flat_map(|v| [v[0], v[1], v[2], 0.0]).collect()
                 }
             }
-            Input::Variance(v) => scene.variance(v).ok_or_else(missing)?.to_vec(),
+            Input::Variance(v) => scene.variance(v).expect(CHECKED).to_vec(),
         };
         let buffer = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("input"),
