@@ -143,7 +143,8 @@ pub struct Prepared {
     pub local: Option<[Vec<f32>; 3]>,
 }
 
-/// The pre-pass of `pipeline` (outliers, then demodulation) on `scene`'s colour.
+/// The pre-pass of `pipeline` (outliers, what they removed put back spread
+/// with `keep`, then demodulation) on `scene`'s colour.
 pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, MissingInput> {
     let (w, h) = (scene.width as i64, scene.height as i64);
     let f64s = |c: [f32; 3]| c.map(|v| v as f64);
@@ -153,14 +154,14 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
         (true, None) => return Err(MissingInput { scene: scene.name.clone(), missing: crate::scene::Missing::Albedo }),
     };
     let r = pipeline::OUTLIER_RADIUS as i64;
-    let mut color = Vec::with_capacity(scene.pixels());
+    let mut clamped: Vec<[f64; 3]> = Vec::with_capacity(scene.pixels());
     let mut local: [Vec<f32>; 3] = Default::default();
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
             let mut c = f64s(scene.color[i]);
             let mut measured = [0.0f64; 3];
-            if let Some(pipeline::Outliers { k }) = pipeline.outliers {
+            if let Some(pipeline::Outliers { k, .. }) = pipeline.outliers {
                 let neighbours: Vec<f64> = (y - r..=y + r)
                     .flat_map(|yj| (x - r..=x + r).map(move |xj| (xj, yj)))
                     .filter(|&(xj, yj)| (xj, yj) != (x, y) && xj >= 0 && yj >= 0 && xj < w && yj < h)
@@ -182,14 +183,68 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
             for (out, value) in local.iter_mut().zip(measured) {
                 out.push(value as f32);
             }
-            if let Some(m) = &modulation {
-                c = [c[0] / m[i][0], c[1] / m[i][1], c[2] / m[i][2]];
-            }
-            color.push(c.map(|v| v as f32));
+            clamped.push(c);
         }
     }
+    if pipeline.outliers.is_some_and(|o| o.keep) {
+        // Stored as f32 between stages, as on the device.
+        let clamped32: Vec<[f32; 3]> = clamped.iter().map(|c| c.map(|v| v as f32)).collect();
+        let removed: Vec<[f32; 3]> = scene
+            .color
+            .iter()
+            .zip(&clamped32)
+            .map(|(raw, c)| [0, 1, 2].map(|q| (raw[q] as f64 - c[q] as f64) as f32))
+            .collect();
+        let spread = spread(&removed, scene.width, scene.height);
+        for ((c, kept), s) in clamped.iter_mut().zip(&clamped32).zip(&spread) {
+            *c = [0, 1, 2].map(|q| kept[q] as f64 + s[q] as f64);
+        }
+    }
+    let color = clamped
+        .iter()
+        .enumerate()
+        .map(|(i, c)| match &modulation {
+            Some(m) => [c[0] / m[i][0], c[1] / m[i][1], c[2] / m[i][2]].map(|v| v as f32),
+            None => c.map(|v| v as f32),
+        })
+        .collect();
     let modulation = modulation.map(|m| m.into_iter().map(|v| v.map(|x| x as f32)).collect());
     Ok(Prepared { color, modulation, local: pipeline.outliers.map(|_| local) })
+}
+
+/// `keep`'s spread (docs/SEMANTICS.md, "The pipeline"): `pipeline::KEEP_PASSES`
+/// passes in which every pixel hands its value to the stencil's taps inside
+/// the image, in proportion to their weights (`pipeline::spread_share`), so
+/// the image's total is kept exactly. Stored as f32 between passes.
+pub fn spread(image: &[[f32; 3]], width: usize, height: usize) -> Vec<[f32; 3]> {
+    let (w, h) = (width as i64, height as i64);
+    let half = pipeline::KEEP_STENCIL.half_width() as i64;
+    let mut current = image.to_vec();
+    for level in 0..pipeline::KEEP_PASSES {
+        let step = FilterPipeline::step(level) as i64;
+        let mut next = Vec::with_capacity(current.len());
+        for y in 0..h {
+            for x in 0..w {
+                let mut sum = [Neumaier::default(); 3];
+                for dy in -half..=half {
+                    for dx in -half..=half {
+                        // The source j = i - d·step hands i its share for offset d.
+                        let (xj, yj) = (x - dx * step, y - dy * step);
+                        if xj < 0 || yj < 0 || xj >= w || yj >= h {
+                            continue;
+                        }
+                        let share = pipeline::spread_share(xj, dx, step, w) * pipeline::spread_share(yj, dy, step, h);
+                        for (s, v) in sum.iter_mut().zip(current[(yj * w + xj) as usize]) {
+                            s.add(share * v as f64);
+                        }
+                    }
+                }
+                next.push(sum.map(|s| s.total() as f32));
+            }
+        }
+        current = next;
+    }
+    current
 }
 
 /// Filter `scene` with `expr` through the whole `pipeline` (docs/SEMANTICS.md,

@@ -18,11 +18,20 @@ use crate::scene::{Holds, Needs, Request};
 
 /// The shipped filters a render gets when none is asked for, best first: by
 /// mean relMSE over OIDN's (colour + albedo + normal) on the public Mitsuba
-/// renders (docs/BENCHMARKS.md: 1.54×, 1.96×, 2.08×, 2.13×), then the window
+/// renders (docs/BENCHMARKS.md: 1.54×, 1.96×, 2.08×, 2.13×; `evolvedAtrous3x3Keep`,
+/// the same weight with the clamp's light kept, below `evolvedAtrous3x3` on
+/// all five renders' mean, "Keeping what the clamp removes"), then the window
 /// filters. The first whose inputs a render has is taken; `bilateral` reads
 /// colour alone, so there always is one.
-pub const SHIPPED_BY_QUALITY: &[&str] =
-    &["evolvedAtrous3x3", "evolvedAtrous128", "svgfAtrous", "crossBilateralAtrous", "crossBilateralTuned", "bilateral"];
+pub const SHIPPED_BY_QUALITY: &[&str] = &[
+    "evolvedAtrous3x3Keep",
+    "evolvedAtrous3x3",
+    "evolvedAtrous128",
+    "svgfAtrous",
+    "crossBilateralAtrous",
+    "crossBilateralTuned",
+    "bilateral",
+];
 
 /// The window radius of a filter that states none.
 pub const DEFAULT_RADIUS: u32 = 5;
@@ -171,14 +180,14 @@ mod tests {
         let best = Choice::best_for(&all).unwrap();
         assert_eq!(best.name.as_deref(), Some(SHIPPED_BY_QUALITY[0]));
         assert!(best.missing(&all).is_empty());
-        assert_eq!(best.pipeline.to_string(), "outliers=2,demodulate,atrous3x3=4");
+        assert_eq!(best.pipeline.to_string(), "outliers=2,keep,demodulate,atrous3x3=4");
 
         // Without a variance, a filter that needs none; the message says what was passed over.
         let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
         let chosen = Choice::best_for(&no_variance).unwrap();
         assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
         let because = chosen.chosen_because.unwrap();
-        assert!(because.contains("@evolvedAtrous3x3 needs colorVariance"), "{because}");
+        assert!(because.contains("@evolvedAtrous3x3Keep needs colorVariance"), "{because}");
 
         // Demodulation needs the albedo even where the weight does not read it.
         let no_albedo = provided(&[Normal, WorldPosition, Depth], &[ScalarVar::ColorVariance]);

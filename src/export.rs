@@ -201,6 +201,9 @@ pub enum ExportError {
     Compile(#[from] jit::CompileError),
     #[error("naga's {target:?} back end failed: {message}")]
     Backend { target: Target, message: String },
+    /// A stage filterjit runs but does not yet export.
+    #[error("pipeline `{pipeline}`: its `{stage}` stage is not exported yet; filter with filterjit, or export the pipeline without it")]
+    Unsupported { pipeline: String, stage: &'static str },
 }
 
 /// What the texture of an input must hold.
@@ -305,6 +308,9 @@ pub fn export_pipeline(
     target: Target,
     format: OutputFormat,
 ) -> Result<Exported, ExportError> {
+    if pipeline.outliers.is_some_and(|o| o.keep) {
+        return Err(ExportError::Unsupported { pipeline: pipeline.to_string(), stage: "keep" });
+    }
     let shape = jit::Shape::of(pipeline);
     let kernel = jit::compile_shaped(expr, KernelKind::Export(format), jit::LowerOptions::default(), shape)?;
     let interface = &kernel.source().interface;

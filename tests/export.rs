@@ -214,6 +214,16 @@ fn the_manifest_names_exactly_the_inputs_the_expression_reads() {
     assert_eq!(bilateral.uniform.size_bytes, 16);
 }
 
+#[test]
+fn a_stage_not_yet_exported_is_refused_by_name() {
+    let pipeline: filterjit::pipeline::FilterPipeline = "outliers=2,keep,demodulate,atrous3x3=4".parse().unwrap();
+    let error =
+        filterjit::export::export_pipeline(&named("svgfAtrous"), &pipeline, Target::Wgsl, OutputFormat::Rgba16float)
+            .unwrap_err()
+            .to_string();
+    assert!(error.contains("`keep`") && error.contains("outliers=2,keep,demodulate,atrous3x3=4"), "{error}");
+}
+
 /// A reference compiler from Debian's packages (glslang-tools, spirv-tools;
 /// `.ci/run` installs them). Missing locally: said loudly, not silently passed.
 fn tool(name: &str) -> Option<&'static str> {

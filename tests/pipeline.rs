@@ -43,7 +43,14 @@ fn the_pre_pass_alone_agrees_with_the_cpu() {
     let gpu = gpu();
     let scene = scene_with_albedo(23, 17, 4);
     let expr = parse_expr("1").unwrap();
-    for text in ["outliers=2,window", "outliers=0,window", "demodulate,window", "outliers=1.5,demodulate,window"] {
+    for text in [
+        "outliers=2,window",
+        "outliers=0,window",
+        "demodulate,window",
+        "outliers=1.5,demodulate,window",
+        "outliers=2,keep,window",
+        "outliers=1.5,keep,demodulate,window",
+    ] {
         let p = pipeline(text);
         let on_gpu = gpu_filter(&gpu, &expr, &scene, &p, 0);
         let on_cpu = cpu::filter_pipeline(&expr, &scene, &p, 0).unwrap();
@@ -70,6 +77,39 @@ fn the_outlier_rule_tames_a_firefly_and_keeps_a_flat_image() {
     let gpu = gpu();
     let on_gpu = gpu_filter(&gpu, &parse_expr("1").unwrap(), &scene, &p, 0);
     assert!((on_gpu[40][1] - prepared.color[40][1]).abs() < 1e-5, "GPU {:?}", on_gpu[40]);
+}
+
+#[test]
+fn keep_puts_back_what_the_clamp_removed_spread_around_it() {
+    // Two fireflies on a dim 9x9 image, one in a corner: smaller than the
+    // spread's reach, so every pass hands shares back from the borders.
+    let mut scene = Scene::from_color("fireflies", 9, 9, vec![[0.5, 0.4, 0.3]; 81]);
+    scene.color[40] = [900.0, 800.0, 1000.0];
+    scene.color[0] = [50.0, 60.0, 70.0];
+    let total = |image: &[[f32; 3]]| {
+        image.iter().map(|c| c.map(f64::from)).fold([0.0; 3], |s, c| [0, 1, 2].map(|q| s[q] + c[q]))
+    };
+    let raw = total(&scene.color);
+    let clamped = total(&cpu::prepass(&scene, &pipeline("outliers=2,window")).unwrap().color);
+    let kept = cpu::prepass(&scene, &pipeline("outliers=2,keep,window")).unwrap().color;
+    for q in 0..3 {
+        assert!(clamped[q] < 0.1 * raw[q], "the clamp alone removes most of the light: {clamped:?} of {raw:?}");
+        assert!((total(&kept)[q] - raw[q]).abs() <= 1e-5 * raw[q], "channel {q}: {:?} kept of {raw:?}", total(&kept));
+    }
+    // Spread, not left where it was: the firefly keeps a small part of its light.
+    assert!(kept[40][0] < 0.1 * 900.0 && kept[40][0] > kept[44][0], "{:?} {:?}", kept[40], kept[44]);
+    // The device keeps it too, through the whole pipeline with a weight that keeps every pixel.
+    let gpu = gpu();
+    let on_gpu = gpu_filter(&gpu, &parse_expr("1").unwrap(), &scene, &pipeline("outliers=2,keep,window"), 0);
+    for q in 0..3 {
+        assert!(
+            (total(&on_gpu)[q] - raw[q]).abs() <= 1e-4 * raw[q],
+            "device channel {q}: {:?} of {raw:?}",
+            total(&on_gpu)
+        );
+    }
+    let (fraction, worst) = agree_fraction(&on_gpu, &kept.iter().map(|c| c.map(f64::from)).collect::<Vec<_>>());
+    assert_eq!(fraction, 1.0, "worst relative difference {worst:e}");
 }
 
 #[test]
@@ -112,6 +152,7 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "outliers=2,demodulate,window",
         "outliers=0.5,atrous=2",
         "outliers=2,demodulate,atrous3x3=4",
+        "outliers=2,keep,demodulate,atrous3x3=4",
         "atrous3x3=2",
     ] {
         let p = pipeline(text);
@@ -135,7 +176,13 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
         parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3))").unwrap(),
         parse_expr("exp(-distance2(texture) / 0.1)").unwrap(),
     ];
-    for text in ["outliers=2,demodulate,atrous=4", "atrous=2", "demodulate,window", "outliers=2,atrous3x3=3"] {
+    for text in [
+        "outliers=2,demodulate,atrous=4",
+        "atrous=2",
+        "demodulate,window",
+        "outliers=2,atrous3x3=3",
+        "outliers=2,keep,demodulate,atrous3x3=2",
+    ] {
         let p = pipeline(text);
         let kernels: Vec<_> = exprs
             .iter()

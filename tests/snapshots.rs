@@ -41,6 +41,7 @@ fn pipeline_kernels_match_snapshots() {
     settings().bind(|| {
         insta::assert_snapshot!("pipeline__prepass", jit::prepass_wgsl(None));
         insta::assert_snapshot!("export__prepass", jit::prepass_wgsl(Some(jit::OutputFormat::Rgba32float)));
+        insta::assert_snapshot!("pipeline__spread", jit::spread_wgsl());
         for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying)] {
             for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
                 let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();

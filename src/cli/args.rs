@@ -219,8 +219,8 @@ pub(crate) struct RenderArgs {
     #[arg(long)]
     pub(crate) radius: Option<u32>,
     /// The filter pipeline around the expression: stages separated by commas,
-    /// `outliers=K` (firefly pre-pass), `demodulate` (filter colour/albedo),
-    /// then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3) [window].
+    /// `outliers=K` (firefly pre-pass), `keep` (put back what it clamped, spread),
+    /// `demodulate` (filter colour/albedo), then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3) [window].
     #[arg(long)]
     pub(crate) pipeline: Option<filterjit::pipeline::FilterPipeline>,
 }

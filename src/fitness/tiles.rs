@@ -61,10 +61,14 @@ impl std::str::FromStr for TileSampling {
 }
 
 /// How far from a pixel the whole pipeline reads, in pixels: the outlier
-/// pre-pass's neighbourhood, then the window's radius or the sum of the
+/// pre-pass's neighbourhood (and `keep`'s spread of what it clamps), then the window's radius or the sum of the
 /// à-trous passes' reaches (each pass filters the previous one's output).
 pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
-    let prepass = if pipeline.outliers.is_some() { OUTLIER_RADIUS } else { 0 };
+    let prepass = match pipeline.outliers {
+        Some(outliers) if outliers.keep => OUTLIER_RADIUS + crate::pipeline::keep_reach(),
+        Some(_) => OUTLIER_RADIUS,
+        None => 0,
+    };
     let form = match pipeline.form {
         Form::Window => radius,
         Form::Atrous { passes, .. } => {
@@ -151,13 +155,16 @@ mod tests {
         assert_eq!(halo(&FilterPipeline::WINDOW, 3), 8);
         assert_eq!(halo(&FilterPipeline::WINDOW, 10), 16);
         let atrous = FilterPipeline {
-            outliers: Some(Outliers { k: 2.0 }),
+            outliers: Some(Outliers { k: 2.0, keep: false }),
             demodulate: true,
             form: Form::Atrous { passes: 5, stencil: Default::default() },
         };
         // 2 (pre-pass) + 2 · (1 + 2 + 4 + 8 + 16).
         assert_eq!(reach(&atrous, 3), 64);
         assert_eq!(halo(&atrous, 3), 64);
+        let keep = FilterPipeline { outliers: Some(Outliers { k: 2.0, keep: true }), ..atrous };
+        // The spread of what the clamp removed reaches 31 more.
+        assert_eq!(reach(&keep, 3), 95);
     }
 
     #[test]

@@ -74,6 +74,7 @@ pub struct Gpu {
     pipelines: Mutex<HashMap<KernelKey, Arc<Pipeline>>>,
     tracer: OnceLock<Pipeline>,
     prepass: OnceLock<Pipeline>,
+    spread: OnceLock<Pipeline>,
     reduce: OnceLock<Pipeline>,
     /// Whether kernels keep wgpu's run-time checks ([`Gpu::set_kernel_runtime_checks`]).
     kernel_checks: std::sync::atomic::AtomicBool,
@@ -130,6 +131,7 @@ impl Gpu {
             pipelines: Mutex::new(HashMap::new()),
             tracer: OnceLock::new(),
             prepass: OnceLock::new(),
+            spread: OnceLock::new(),
             reduce: OnceLock::new(),
             kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,

@@ -1,12 +1,13 @@
-//! The pipeline's pre-pass on the device (`jit::prepass`): one pipeline per
-//! device, run once per scene when its buffers are prepared.
+//! The pipeline's pre-pass on the device (`jit::prepass`, then with `keep`
+//! `jit::spread`): one pipeline each per device, run once per scene when its
+//! buffers are prepared.
 
 use std::sync::OnceLock;
 
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
-use crate::jit::{BindingInterface, Input, PrepassParams, Role, ValidatedModule, WORKGROUP};
+use crate::jit::{BindingInterface, Input, PrepassParams, Role, SpreadParams, ValidatedModule, WORKGROUP};
 use crate::lang::ScalarVar;
 use crate::pipeline::FilterPipeline;
 
@@ -17,7 +18,24 @@ fn module() -> Result<&'static ValidatedModule, GpuError> {
     })
 }
 
+fn spread_module() -> Result<&'static ValidatedModule, GpuError> {
+    static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+    MODULE.get_or_init(|| crate::jit::spread_module().map_err(|e| e.to_string())).as_ref().map_err(|message| {
+        GpuError::Pipeline { expression: "<spread>".into(), message: message.clone(), wgsl: String::new() }
+    })
+}
+
 impl Gpu {
+    fn spread_pipeline(&self) -> Result<&Pipeline, GpuError> {
+        if let Some(p) = self.spread.get() {
+            return Ok(p);
+        }
+        let pipeline = self.create_pipeline(spread_module()?, "filterjit spread").map_err(|message| {
+            GpuError::Pipeline { expression: "<spread>".into(), message, wgsl: crate::jit::spread_wgsl() }
+        })?;
+        Ok(self.spread.get_or_init(|| pipeline))
+    }
+
     fn prepass_pipeline(&self) -> Result<&Pipeline, GpuError> {
         if let Some(p) = self.prepass.get() {
             return Ok(p);
@@ -43,6 +61,8 @@ impl Gpu {
         height: u32,
     ) -> Result<Prepared, GpuError> {
         let kernel = self.prepass_pipeline()?;
+        let keep = pipeline.outliers.is_some_and(|o| o.keep);
+        let spread = if keep { Some(self.spread_pipeline()?) } else { None };
         let _turn = self.gl_turn();
         let device = self.device();
         let params = PrepassParams::of(pipeline, width, height);
@@ -66,7 +86,7 @@ impl Gpu {
                 mapped_at_creation: false,
             })
         };
-        let (prepared, modulation) = (make("prepared colour"), make("modulation"));
+        let (mut prepared, modulation) = (make("prepared colour"), make("modulation"));
         let local = ScalarVar::FROM_PREPASS.map(|_| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("pre-pass measure"),
@@ -104,6 +124,40 @@ impl Gpu {
             pass.set_pipeline(&kernel.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
+        }
+        if let Some(spread) = spread {
+            // `keep`: the pre-pass wrote the clamped colour undivided; spread
+            // raw − clamped, then (spread + clamped) / modulation is the colour.
+            let interface = BindingInterface::spread();
+            let mut buffers = [make("spread"), make("spread")];
+            let sequence = SpreadParams::sequence(width, height);
+            let last = sequence.len() - 1;
+            for (n, params) in sequence.iter().enumerate() {
+                let uniform = self.params_buffer(interface.params(), "spread params", bytemuck::bytes_of(params));
+                let (source, target) = (&buffers[(n + 1) % 2], &buffers[n % 2]);
+                let bind_group = self.bind_in_slot_order(
+                    spread,
+                    interface
+                        .bindings
+                        .iter()
+                        .map(|b| match b.role {
+                            Role::Params => uniform.as_entire_binding(),
+                            Role::Color if n == 0 => color.as_entire_binding(),
+                            Role::Color => source.as_entire_binding(),
+                            Role::Image => prepared.as_entire_binding(),
+                            Role::Modulation => modulation.as_entire_binding(),
+                            Role::Output => target.as_entire_binding(),
+                            other => unreachable!("the spread has no {other:?} binding"),
+                        })
+                        .collect(),
+                );
+                let mut pass = encoder.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&spread.pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+                pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
+            }
+            // The finishing dispatch wrote the colour the form filters.
+            std::mem::swap(&mut prepared, &mut buffers[last % 2]);
         }
         self.queue().submit([encoder.finish()]);
         self.wait("running the pre-pass")?;

@@ -360,9 +360,33 @@ impl BindingInterface {
             field("width", "u32", 0, "image width in pixels"),
             field("height", "u32", 4, "image height in pixels"),
             field("k", "f32", 8, "the outlier rule's k: luminance above mean + k * std is clamped"),
-            field("stages", "u32", 12, "bit 0: clamp outliers; bit 1: demodulate by the albedo"),
+            field("stages", "u32", 12, "bit 0: clamp outliers; bit 1: demodulate by the albedo; bit 2: keep (the colour is left undivided for the spread)"),
         ];
         BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+    }
+
+    /// The interface of `keep`'s spread kernel (`jit::spread`): the uniform
+    /// `SpreadParams`, the image it spreads (`Color`), the clamped colour
+    /// (`Image`), the modulation, and its output.
+    pub fn spread() -> BindingInterface {
+        let read = Resource::Storage { element: Element::Vec4F32, writable: false };
+        let bindings = dense(
+            [
+                (Role::Params, own_params(), "params"),
+                (Role::Color, read, "buf_color"),
+                (Role::Image, read, "buf_image"),
+                (Role::Modulation, read, "buf_modulation"),
+                (Role::Output, Resource::Storage { element: Element::Vec4F32, writable: true }, "buf_out"),
+            ]
+            .map(|(role, resource, ident)| (role, resource, ident.to_string())),
+        );
+        let uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("step", "u32", 8, "pixel step between taps: 2^pass"),
+            field("stage", "u32", 12, "0: spread colour - image; 1: spread colour; 2: (colour + image) / modulation"),
+        ];
+        BindingInterface { kind: KernelKind::Filter, bindings, uniform, uniform_bytes: 16 }
     }
 
     /// The interface of the fitness reduction (`jit::reduce`): the uniform

@@ -9,6 +9,7 @@ pub mod kernel;
 pub mod lower;
 pub mod prepass;
 pub mod reduce;
+pub mod spread;
 pub mod validate;
 
 pub use helpers::Helper;
@@ -20,6 +21,7 @@ pub use kernel::{
 pub use lower::{lower, lower_fused, lower_kind, lower_shaped, lower_with, KernelSource, LowerError};
 pub use prepass::{prepass_module, prepass_wgsl, PrepassParams};
 pub use reduce::{reduce_module, reduce_wgsl, ReduceParams};
+pub use spread::{spread_module, spread_wgsl, SpreadParams, SpreadStage};
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 
 /// Lower and validate in one step.

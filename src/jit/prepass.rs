@@ -16,7 +16,8 @@ pub struct PrepassParams {
     pub height: u32,
     /// The outlier rule's k.
     pub k: f32,
-    /// Bit 0: outliers; bit 1: demodulation.
+    /// Bit 0: outliers; bit 1: demodulation; bit 2: `keep`, under which the
+    /// colour is written clamped but undivided (the spread kernel divides it).
     pub stages: u32,
 }
 
@@ -24,7 +25,8 @@ impl PrepassParams {
     pub fn of(pipeline: &FilterPipeline, width: u32, height: u32) -> Self {
         let outliers = pipeline.outliers.map_or(0, |_| 1);
         let demodulate = if pipeline.demodulate { 2 } else { 0 };
-        PrepassParams { width, height, k: pipeline.outliers.map_or(0.0, |o| o.k), stages: outliers | demodulate }
+        let keep = if pipeline.outliers.is_some_and(|o| o.keep) { 4 } else { 0 };
+        PrepassParams { width, height, k: pipeline.outliers.map_or(0.0, |o| o.k), stages: outliers | demodulate | keep }
     }
 }
 

@@ -1,0 +1,72 @@
+//! `keep`'s spread kernel: what the outlier clamp removed, spread over the
+//! neighbourhood and put back before demodulation. One module for every
+//! pipeline, rendered from `templates/spread.wgsl.tera` with the stencil
+//! `crate::pipeline` owns; `cpu::spread` is its reference.
+
+use super::interface::BindingInterface;
+use super::kernel::{wgsl_f32, TEMPLATE_VERSION, WORKGROUP};
+use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
+use crate::pipeline;
+
+/// What one dispatch of the spread kernel does (`params.stage`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u32)]
+pub enum SpreadStage {
+    /// Spread raw colour − clamped colour.
+    First = 0,
+    /// Spread the previous pass's output.
+    Again = 1,
+    /// (spread + clamped) / modulation: the colour the form filters.
+    Finish = 2,
+}
+
+/// The spread kernel's uniform (`struct Params` of its module; fields in [`BindingInterface::spread`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SpreadParams {
+    pub width: u32,
+    pub height: u32,
+    /// Pixel step between taps: 2^pass.
+    pub step: u32,
+    /// A [`SpreadStage`].
+    pub stage: u32,
+}
+
+impl SpreadParams {
+    /// The dispatches of one spread, in order.
+    pub fn sequence(width: u32, height: u32) -> Vec<SpreadParams> {
+        (0..pipeline::KEEP_PASSES)
+            .map(|level| SpreadParams {
+                width,
+                height,
+                step: pipeline::FilterPipeline::step(level),
+                stage: if level == 0 { SpreadStage::First } else { SpreadStage::Again } as u32,
+            })
+            .chain([SpreadParams { width, height, step: 0, stage: SpreadStage::Finish as u32 }])
+            .collect()
+    }
+}
+
+/// The spread kernel's WGSL.
+pub fn spread_wgsl() -> String {
+    let interface = BindingInterface::spread();
+    let mut tera = tera::Tera::default();
+    tera.add_raw_template("spread", include_str!("../../templates/spread.wgsl.tera"))
+        .expect("built-in spread template parses");
+    let mut context = tera::Context::new();
+    context.insert("crate_version", env!("CARGO_PKG_VERSION"));
+    context.insert("template_version", &TEMPLATE_VERSION);
+    context.insert("passes", &pipeline::KEEP_PASSES);
+    context.insert("half", &pipeline::KEEP_STENCIL.half_width());
+    context.insert("stencil", &pipeline::KEEP_STENCIL.weights().iter().map(|h| wgsl_f32(*h)).collect::<Vec<_>>());
+    context.insert("workgroup_x", &WORKGROUP[0]);
+    context.insert("workgroup_y", &WORKGROUP[1]);
+    context.insert("params_struct", &interface.params_struct());
+    context.insert("declarations", &interface.declarations());
+    tera.render("spread", &context).expect("built-in spread template renders")
+}
+
+/// The spread kernel, validated by naga; its bindings are checked against its interface.
+pub fn spread_module() -> Result<ValidatedModule, ValidateError> {
+    validate_with_interface(&spread_wgsl(), "<spread>", &BindingInterface::spread())
+}
