@@ -124,13 +124,6 @@ impl FitnessScene {
     }
 }
 
-fn reduce_module() -> Result<&'static ValidatedModule, GpuError> {
-    static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-    MODULE.get_or_init(|| crate::jit::reduce_module().map_err(|e| e.to_string())).as_ref().map_err(|message| {
-        GpuError::Pipeline { expression: "<fitness reduction>".into(), message: message.clone(), wgsl: String::new() }
-    })
-}
-
 /// A full evaluation, or one workgroup per kernel to make the driver compile.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Pass {
@@ -140,13 +133,9 @@ enum Pass {
 
 impl Gpu {
     fn reduce_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        if let Some(p) = self.reduce.get() {
-            return Ok(p);
-        }
-        let pipeline = self.create_pipeline(reduce_module()?, "filterjit fitness reduction").map_err(|message| {
-            GpuError::Pipeline { expression: "<fitness reduction>".into(), message, wgsl: crate::jit::reduce_wgsl() }
-        })?;
-        Ok(self.reduce.get_or_init(|| pipeline))
+        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+        let validate = || crate::jit::reduce_module().map_err(|e| e.to_string());
+        self.built_in(&self.reduce, &MODULE, "<fitness reduction>", validate, crate::jit::reduce_wgsl)
     }
 
     /// Create the pipelines of `kernels` on up to `threads` threads (cache hits are free).

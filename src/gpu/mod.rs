@@ -227,6 +227,35 @@ impl Gpu {
         Ok((pipeline, PipelineTiming { create, cache_hit: false }))
     }
 
+    /// The pipeline of a built-in kernel (`name`, e.g. `<pre-pass>`): its
+    /// module validated once per process in `module`, its pipeline created
+    /// once per device in `cell`; `wgsl` renders its text for the error when
+    /// the driver refuses it.
+    pub(crate) fn built_in<'a>(
+        &'a self,
+        cell: &'a OnceLock<Pipeline>,
+        module: &'static OnceLock<Result<ValidatedModule, String>>,
+        name: &str,
+        validate: impl FnOnce() -> Result<ValidatedModule, String>,
+        wgsl: impl FnOnce() -> String,
+    ) -> Result<&'a Pipeline, GpuError> {
+        if let Some(p) = cell.get() {
+            return Ok(p);
+        }
+        let validated = module.get_or_init(validate).as_ref().map_err(|message| GpuError::Pipeline {
+            expression: name.into(),
+            message: message.clone(),
+            wgsl: String::new(),
+        })?;
+        let label = format!("filterjit {}", name.trim_matches(|c| c == '<' || c == '>'));
+        let pipeline = self.create_pipeline(validated, &label).map_err(|message| GpuError::Pipeline {
+            expression: name.into(),
+            message,
+            wgsl: wgsl(),
+        })?;
+        Ok(cell.get_or_init(|| pipeline))
+    }
+
     /// A compute pipeline (entry point `main`) from a validated module, with
     /// an explicit layout made from the module's slots, inside a validation
     /// error scope; the error's text on failure.

@@ -11,41 +11,17 @@ use crate::jit::{BindingInterface, Input, PrepassParams, Role, SpreadParams, Val
 use crate::lang::ScalarVar;
 use crate::pipeline::FilterPipeline;
 
-fn module() -> Result<&'static ValidatedModule, GpuError> {
-    static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-    MODULE.get_or_init(|| crate::jit::prepass_module(None).map_err(|e| e.to_string())).as_ref().map_err(|message| {
-        GpuError::Pipeline { expression: "<pre-pass>".into(), message: message.clone(), wgsl: String::new() }
-    })
-}
-
-fn spread_module() -> Result<&'static ValidatedModule, GpuError> {
-    static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-    MODULE.get_or_init(|| crate::jit::spread_module().map_err(|e| e.to_string())).as_ref().map_err(|message| {
-        GpuError::Pipeline { expression: "<spread>".into(), message: message.clone(), wgsl: String::new() }
-    })
-}
-
 impl Gpu {
-    fn spread_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        if let Some(p) = self.spread.get() {
-            return Ok(p);
-        }
-        let pipeline = self.create_pipeline(spread_module()?, "filterjit spread").map_err(|message| {
-            GpuError::Pipeline { expression: "<spread>".into(), message, wgsl: crate::jit::spread_wgsl() }
-        })?;
-        Ok(self.spread.get_or_init(|| pipeline))
+    fn prepass_pipeline(&self) -> Result<&Pipeline, GpuError> {
+        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+        let validate = || crate::jit::prepass_module(None).map_err(|e| e.to_string());
+        self.built_in(&self.prepass, &MODULE, "<pre-pass>", validate, || crate::jit::prepass_wgsl(None))
     }
 
-    fn prepass_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        if let Some(p) = self.prepass.get() {
-            return Ok(p);
-        }
-        let pipeline = self.create_pipeline(module()?, "filterjit pre-pass").map_err(|message| GpuError::Pipeline {
-            expression: "<pre-pass>".into(),
-            message,
-            wgsl: crate::jit::prepass_wgsl(None),
-        })?;
-        Ok(self.prepass.get_or_init(|| pipeline))
+    fn spread_pipeline(&self) -> Result<&Pipeline, GpuError> {
+        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+        let validate = || crate::jit::spread_module().map_err(|e| e.to_string());
+        self.built_in(&self.spread, &MODULE, "<spread>", validate, crate::jit::spread_wgsl)
     }
 
     /// Run `pipeline`'s pre-pass on `color` (RGBA per pixel; `albedo` the raw

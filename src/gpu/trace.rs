@@ -12,19 +12,6 @@ use crate::jit::ValidatedModule;
 /// The path tracer's source.
 pub const PATHTRACE_WGSL: &str = include_str!("../../templates/pathtrace.wgsl");
 
-/// The tracer's WGSL, parsed and validated once.
-fn module() -> Result<&'static ValidatedModule, GpuError> {
-    static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-    MODULE
-        .get_or_init(|| crate::jit::validate_module(PATHTRACE_WGSL, "<path tracer>").map_err(|e| e.to_string()))
-        .as_ref()
-        .map_err(|message| GpuError::Pipeline {
-            expression: "<path tracer>".into(),
-            message: message.clone(),
-            wgsl: String::new(),
-        })
-}
-
 /// A scene's buffers as the tracer reads them, laid out by the renderer
 /// (`render::packed`): the device knows their bindings, not their format.
 pub struct TraceInputs<'a> {
@@ -56,13 +43,9 @@ pub struct TraceScene {
 
 impl Gpu {
     fn trace_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        if let Some(p) = self.tracer.get() {
-            return Ok(p);
-        }
-        let pipeline = self.create_pipeline(module()?, "filterjit path tracer").map_err(|message| {
-            GpuError::Pipeline { expression: "<path tracer>".into(), message, wgsl: String::new() }
-        })?;
-        Ok(self.tracer.get_or_init(|| pipeline))
+        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+        let validate = || crate::jit::validate_module(PATHTRACE_WGSL, "<path tracer>").map_err(|e| e.to_string());
+        self.built_in(&self.tracer, &MODULE, "<path tracer>", validate, String::new)
     }
 
     /// Upload a scene's tracer buffers.
