@@ -6,6 +6,8 @@
 //! are naga's back ends run on the validated module, so every target computes
 //! what the WGSL computes. examples/README.md describes the interface.
 
+use std::collections::BTreeMap;
+
 use serde::Serialize;
 
 use crate::jit::interface::{BindingInterface, Resource, UniformField};
@@ -68,12 +70,14 @@ impl Code {
     }
 }
 
-/// An exported filter: the form's shader, the pre-pass's where the pipeline
-/// has one, and the manifest of both.
+/// An exported filter: the form's shader, the pre-pass's and the spread's
+/// where the pipeline has them, and the manifest of all.
 #[derive(Clone, Debug)]
 pub struct Exported {
     pub code: Code,
     pub prepass: Option<Code>,
+    /// `keep`'s spread (`outliers=k,keep,…`).
+    pub spread: Option<Code>,
     pub manifest: Manifest,
 }
 
@@ -110,11 +114,18 @@ pub struct Manifest {
     /// The pre-pass shader, dispatched once before the form, where the pipeline has one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub prepass: Option<Stage>,
+    /// `keep`'s spread shader, dispatched after the pre-pass as its
+    /// `sequence` says, where the pipeline keeps what its clamp removed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spread: Option<Stage>,
+    /// The image the form's first pass filters: `color` (the noisy colour),
+    /// `prepared` (the pre-pass's) or `kept` (the spread's).
+    pub filters: String,
     /// What runs in which order and which image each binding is, in words.
     pub order: Vec<String>,
 }
 
-/// A shader of the pipeline besides the form's (the pre-pass).
+/// A shader of the pipeline besides the form's (the pre-pass, the spread).
 #[derive(Clone, Debug, Serialize)]
 pub struct Stage {
     /// The shader's file, beside this manifest (set by whoever writes the files).
@@ -123,8 +134,24 @@ pub struct Stage {
     pub dispatch: String,
     pub uniform: Uniform,
     /// Values for the uniform's fields other than width and height.
-    pub uniform_values: std::collections::BTreeMap<String, f64>,
+    pub uniform_values: BTreeMap<String, f64>,
     pub bindings: Vec<Binding>,
+    /// Its dispatches in order, where there are several (the spread); a
+    /// stage without one is dispatched once, its images named by role.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sequence: Vec<StageDispatch>,
+}
+
+/// One dispatch of a stage's shader.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageDispatch {
+    /// Values for the uniform's fields other than width and height.
+    pub uniform_values: BTreeMap<String, f64>,
+    /// The image each binding role reads or writes: `color` (the noisy
+    /// colour), the pre-pass's `prepared` and `modulation`, or a texture of
+    /// the stage's own (`spread0`, `spread1`, `kept`), made in the format of
+    /// the storage binding that first writes it.
+    pub images: BTreeMap<String, String>,
 }
 
 /// Sampled textures per shader stage every WebGPU device allows.
@@ -201,9 +228,6 @@ pub enum ExportError {
     Compile(#[from] jit::CompileError),
     #[error("naga's {target:?} back end failed: {message}")]
     Backend { target: Target, message: String },
-    /// A stage filterjit runs but does not yet export.
-    #[error("pipeline `{pipeline}`: its `{stage}` stage is not exported yet; filter with filterjit, or export the pipeline without it")]
-    Unsupported { pipeline: String, stage: &'static str },
 }
 
 /// What the texture of an input must hold.
@@ -308,9 +332,6 @@ pub fn export_pipeline(
     target: Target,
     format: OutputFormat,
 ) -> Result<Exported, ExportError> {
-    if pipeline.outliers.is_some_and(|o| o.keep) {
-        return Err(ExportError::Unsupported { pipeline: pipeline.to_string(), stage: "keep" });
-    }
     let shape = jit::Shape::of(pipeline);
     let kernel = jit::compile_shaped(expr, KernelKind::Export(format), jit::LowerOptions::default(), shape)?;
     let interface = &kernel.source().interface;
@@ -335,7 +356,32 @@ pub fn export_pipeline(
                 uniform_values: [("k".to_string(), params.k as f64), ("stages".to_string(), params.stages as f64)]
                     .into(),
                 bindings: bindings(&interface, target, format, Stages::Prepass),
+                sequence: Vec::new(),
             });
+            manifest.filters = "prepared".into();
+            Some(code)
+        }
+    };
+    let spread = match pipeline.outliers.is_some_and(|o| o.keep) {
+        false => None,
+        true => {
+            let interface = jit::BindingInterface::spread(Some(format));
+            let module = jit::spread_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (code, entry_point) = translate(&module, &jit::spread_wgsl(Some(format)), &interface, target)?;
+            manifest.spread = Some(Stage {
+                file: String::new(),
+                entry_point,
+                dispatch: manifest.dispatch.clone(),
+                uniform: Uniform {
+                    binding: interface.slot(Role::Params),
+                    size_bytes: interface.uniform_bytes,
+                    fields: interface.uniform.clone(),
+                },
+                uniform_values: BTreeMap::new(),
+                bindings: bindings(&interface, target, format, Stages::Spread),
+                sequence: spread_sequence(),
+            });
+            manifest.filters = "kept".into();
             Some(code)
         }
     };
@@ -344,7 +390,44 @@ pub fn export_pipeline(
         Code::Text(text) if target != Target::Wgsl => Code::Text(header(&manifest, &text)),
         other => other,
     };
-    Ok(Exported { code: with_header(code), prepass: prepass.map(with_header), manifest })
+    Ok(Exported {
+        code: with_header(code),
+        prepass: prepass.map(with_header),
+        spread: spread.map(with_header),
+        manifest,
+    })
+}
+
+/// The spread's dispatches (`jit::SpreadParams::sequence`) with the images
+/// each binds: the first spreads the noisy colour minus the clamped
+/// `prepared`, later ones the previous output (ping-ponged between `spread0`
+/// and `spread1`), and the last writes `kept`, the colour the form filters.
+fn spread_sequence() -> Vec<StageDispatch> {
+    let sequence = jit::SpreadParams::sequence(0, 0);
+    let last = sequence.len() - 1;
+    sequence
+        .iter()
+        .enumerate()
+        .map(|(n, params)| {
+            let source = match n {
+                0 => "color".to_string(),
+                n => format!("spread{}", (n - 1) % 2),
+            };
+            let target = if n == last { "kept".to_string() } else { format!("spread{}", n % 2) };
+            StageDispatch {
+                uniform_values: [("step".to_string(), params.step as f64), ("stage".to_string(), params.stage as f64)]
+                    .into(),
+                images: [
+                    ("color", source),
+                    ("image", "prepared".into()),
+                    ("modulation", "modulation".into()),
+                    ("output", target),
+                ]
+                .map(|(role, image)| (role.to_string(), image))
+                .into(),
+            }
+        })
+        .collect()
 }
 
 /// Which shader a binding list is of.
@@ -352,6 +435,7 @@ pub fn export_pipeline(
 enum Stages {
     Form,
     Prepass,
+    Spread,
 }
 
 /// The steps a host takes per frame, in words.
@@ -366,6 +450,15 @@ fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
             stage.uniform_values["k"], stage.uniform_values["stages"]
         ));
         colour = "`prepared`";
+    }
+    if let Some(stage) = &manifest.spread {
+        steps.push(format!(
+            "spread (`keep`), {} dispatches of the spread shader as its `sequence` says (uniform `step` and `stage`, \
+             the image each role binds): what the clamp removed (the noisy colour minus `prepared`) is handed out \
+             over the neighbourhood, then added back and divided by `modulation`; writes `kept` (rgba32float)",
+            stage.sequence.len()
+        ));
+        colour = "`kept`";
     }
     if manifest.passes == 1 {
         steps.push(format!(
@@ -397,6 +490,24 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
             let (role, components, content, scale) = match (b.role, stage) {
                 (Role::Params, _) => ("params".into(), "", "the Params struct of the uniform section".into(), None),
                 (Role::Color, Stages::Prepass) => ("color".into(), "xyz", "noisy colour, linear RGB".into(), None),
+                (Role::Color, Stages::Spread) => (
+                    "color".into(),
+                    "xyz",
+                    "what this dispatch spreads: the noisy colour in the first, the previous dispatch's output after"
+                        .into(),
+                    None,
+                ),
+                (Role::Image, Stages::Spread) => {
+                    ("image".into(), "xyz", "the pre-pass's `prepared`: the clamped colour, undivided".into(), None)
+                }
+                (Role::Output, Stages::Spread) => (
+                    "output".into(),
+                    "xyzw",
+                    "the spread so far, or in the last dispatch the colour the form filters; written with \
+                     textureStore; format rgba32float"
+                        .into(),
+                    None,
+                ),
                 (Role::Color, Stages::Form) => {
                     ("color".into(), "xyzw", "noisy colour, linear RGB; alpha is copied to the output".into(), None)
                 }
@@ -413,7 +524,7 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                 (Role::Modulation, Stages::Prepass) => {
                     ("modulation".into(), "xyzw", written("the albedo divided out, 1 without demodulation"), None)
                 }
-                (Role::Modulation, Stages::Form) => {
+                (Role::Modulation, Stages::Form | Stages::Spread) => {
                     ("modulation".into(), "xyz", "the pre-pass's `modulation`, multiplied back".into(), None)
                 }
                 (Role::VarianceOut, _) => (
@@ -498,6 +609,8 @@ fn manifest(
             crate::pipeline::Form::Atrous { passes, .. } => passes,
         },
         prepass: None,
+        spread: None,
+        filters: "color".into(),
         order: Vec::new(),
     }
 }

@@ -60,7 +60,7 @@ fn compare(expr: &Expr, scene: &Scene, radius: u32, format: OutputFormat) -> f64
     let manifest = serde_json::to_value(&exported.manifest).unwrap();
     let gpu = gpu(); // first: it quiets Mesa's device-select layer for the whole process
     let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
-    let shaders = host::Shaders { form: wgsl.clone(), prepass: None };
+    let shaders = host::Shaders { form: wgsl.clone(), prepass: None, spread: None };
     let ours = host::filter(&device, &queue, &shaders, &manifest, &frame_of(scene, &manifest), radius)
         .unwrap_or_else(|e| panic!("the exported shader of `{expr}` fails in plain wgpu: {e}"));
 
@@ -135,6 +135,9 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         (carrying, "demodulate,window"),
         (named("bilateral"), "atrous=2"),
         (named("crossBilateral"), "outliers=2,demodulate,atrous3x3=4"),
+        // What the clamp removed, kept: the spread's dispatches between the pre-pass and the form.
+        (named("evolvedAtrous3x3"), "outliers=2,keep,demodulate,atrous3x3=4"),
+        (named("crossBilateral"), "outliers=1.5,keep,atrous=2"),
         // What the outlier rule measured, from the exported pre-pass's packed `local` texture.
         (
             parse_expr("exp(-(distance2(normal) * 4 + clampedShare * 8 + localStd / (localMean + 0.1)))").unwrap(),
@@ -160,7 +163,18 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         for b in exported.manifest.bindings.iter().filter(|b| measures.contains(&b.role.as_str())) {
             assert_eq!((b.image, b.scale_index), (Some("local"), None), "{b:?}: read raw from the pre-pass's `local`");
         }
-        let shaders = host::Shaders { form: text_of(&exported.code), prepass: exported.prepass.as_ref().map(text_of) };
+        assert_eq!(exported.spread.is_some(), text.contains("keep"), "{text}: a spread exactly where it keeps");
+        let filters = match (text.contains("keep"), exported.prepass.is_some()) {
+            (true, _) => "kept",
+            (false, true) => "prepared",
+            (false, false) => "color",
+        };
+        assert_eq!(manifest["filters"], filters, "{text}: the image the form's first pass filters");
+        let shaders = host::Shaders {
+            form: text_of(&exported.code),
+            prepass: exported.prepass.as_ref().map(text_of),
+            spread: exported.spread.as_ref().map(text_of),
+        };
         let mut frame = frame_of(&scene, &manifest);
         frame
             .inputs
@@ -180,20 +194,8 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         assert!(error < 1e-4, "the exported `{text}` pipeline differs from filter by {error:e}");
         let passes = manifest["passes"].as_u64().unwrap();
         assert_eq!(passes, pipeline.passes() as u64);
-        assert_eq!(
-            passes,
-            if text.contains("atrous=5") {
-                5
-            } else if text.contains("atrous3x3=4") {
-                4
-            } else if text.contains("atrous=3") {
-                3
-            } else if text.contains("atrous=2") {
-                2
-            } else {
-                1
-            }
-        );
+        let form = text.rsplit(',').next().unwrap();
+        assert_eq!(passes, form.split_once('=').map_or(1, |(_, k)| k.parse().unwrap()), "{text}");
     }
 }
 
@@ -212,16 +214,6 @@ fn the_manifest_names_exactly_the_inputs_the_expression_reads() {
     let bilateral = export(&named("bilateral"), Target::Wgsl, OutputFormat::Rgba16float).unwrap().manifest;
     assert_eq!(bilateral.bindings.len(), 3);
     assert_eq!(bilateral.uniform.size_bytes, 16);
-}
-
-#[test]
-fn a_stage_not_yet_exported_is_refused_by_name() {
-    let pipeline: filterjit::pipeline::FilterPipeline = "outliers=2,keep,demodulate,atrous3x3=4".parse().unwrap();
-    let error =
-        filterjit::export::export_pipeline(&named("svgfAtrous"), &pipeline, Target::Wgsl, OutputFormat::Rgba16float)
-            .unwrap_err()
-            .to_string();
-    assert!(error.contains("`keep`") && error.contains("outliers=2,keep,demodulate,atrous3x3=4"), "{error}");
 }
 
 /// A reference compiler from Debian's packages (glslang-tools, spirv-tools;
@@ -257,19 +249,23 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
     let alphabet = Alphabet::full();
     let mut rng = Rng::seeded(11);
     exprs.extend((0..12).map(|k| alphabet.of_length(&mut rng, 5 + 10 * k)));
-    // Every expression as a window; the shipped ones also as a whole pipeline (pre-pass and à-trous pass).
+    // Every expression as a window; the shipped ones also as a whole pipeline
+    // (pre-pass and à-trous pass), and one with `keep`'s spread.
     let atrous: filterjit::pipeline::FilterPipeline = "outliers=2,demodulate,atrous=5".parse().unwrap();
+    let keep: filterjit::pipeline::FilterPipeline = "outliers=2,keep,demodulate,atrous3x3=4".parse().unwrap();
     let named = corpus::named().len();
     let cases = exprs
         .iter()
         .map(|e| (e, filterjit::pipeline::FilterPipeline::WINDOW))
-        .chain(exprs[..named].iter().map(|e| (e, atrous)));
+        .chain(exprs[..named].iter().map(|e| (e, atrous)))
+        .chain(exprs[..1].iter().map(|e| (e, keep)));
     for (k, (expr, pipeline)) in cases.enumerate() {
         for target in [Target::Glsl, Target::Hlsl, Target::Spirv, Target::Msl] {
             let exported =
                 filterjit::export::export_pipeline(expr, &pipeline, target, OutputFormat::Rgba16float).unwrap();
-            let shaders =
-                std::iter::once(("", &exported.code)).chain(exported.prepass.as_ref().map(|p| ("prepass", p)));
+            let shaders = std::iter::once(("", &exported.code))
+                .chain(exported.prepass.as_ref().map(|p| ("prepass", p)))
+                .chain(exported.spread.as_ref().map(|p| ("spread", p)));
             for (stage, code) in shaders {
                 let file = dir.join(format!("e{k}{stage}.{}", target.extension()));
                 std::fs::write(&file, code.to_bytes()).unwrap();

@@ -28,7 +28,8 @@ fn generated_wgsl_matches_snapshots() {
     });
 }
 
-/// The pipeline's kernels: the pre-pass module, and `@crossBilateralAtrous`
+/// The pipeline's kernels: the pre-pass and spread modules (filterjit's and
+/// exported), and `@crossBilateralAtrous`
 /// as an à-trous pass (carrying the variance of an expression that reads it)
 /// in filter and fitness kernels, and as a pass of the 3x3 stencil.
 #[test]
@@ -41,7 +42,8 @@ fn pipeline_kernels_match_snapshots() {
     settings().bind(|| {
         insta::assert_snapshot!("pipeline__prepass", jit::prepass_wgsl(None));
         insta::assert_snapshot!("export__prepass", jit::prepass_wgsl(Some(jit::OutputFormat::Rgba32float)));
-        insta::assert_snapshot!("pipeline__spread", jit::spread_wgsl());
+        insta::assert_snapshot!("pipeline__spread", jit::spread_wgsl(None));
+        insta::assert_snapshot!("export__spread", jit::spread_wgsl(Some(jit::OutputFormat::Rgba32float)));
         for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying)] {
             for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
                 let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();

@@ -4,7 +4,8 @@
 //! (`tests/export.rs` runs this same file against `filterjit filter`.)
 //!
 //! Per frame, as the manifest's `order` says: the pre-pass shader once (where
-//! the pipeline has one), then the form's shader `passes` times (à-trous: pass
+//! the pipeline has one), the spread shader's `sequence` (where it keeps what
+//! the clamp removed), then the form's shader `passes` times (à-trous: pass
 //! k with step 2^k, colour and carried variance ping-ponged between textures).
 
 use std::collections::HashMap;
@@ -24,10 +25,12 @@ pub struct Frame {
     pub scales: HashMap<String, f32>,
 }
 
-/// The exported shaders: the form's, and the pre-pass's where the manifest has one.
+/// The exported shaders: the form's, and the pre-pass's and the spread's
+/// where the manifest has them.
 pub struct Shaders {
     pub form: String,
     pub prepass: Option<String>,
+    pub spread: Option<String>,
 }
 
 /// A device on the adapter wgpu prefers (`WGPU_BACKEND` narrows the choice).
@@ -280,7 +283,6 @@ pub fn filter(
     let mut encoder = device.create_command_encoder(&Default::default());
 
     // The pre-pass, once: it writes the colour the form filters and the modulation.
-    let mut colour = "color".to_string();
     if let Some(stage) = manifest.get("prepass").filter(|p| !p.is_null()) {
         let wgsl = shaders.prepass.as_deref().ok_or("the manifest has a pre-pass, and no pre-pass shader was given")?;
         // Everything it writes (`prepared`, `modulation`, what the outlier rule measured) is read later by role.
@@ -298,8 +300,29 @@ pub fn filter(
         }
         let dispatch = Dispatch { values, images: HashMap::new() };
         record(&images, &mut encoder, wgsl, stage, workgroup, frame, &dispatch)?;
-        colour = "prepared".to_string();
     }
+
+    // The spread, dispatch by dispatch: each names the image every role binds.
+    if let Some(stage) = manifest.get("spread").filter(|p| !p.is_null()) {
+        let wgsl = shaders.spread.as_deref().ok_or("the manifest has a spread, and no spread shader was given")?;
+        for step in array(stage, "sequence")? {
+            let mut dispatch = Dispatch { values: HashMap::new(), images: HashMap::new() };
+            for (name, value) in field(step, "uniform_values")?.as_object().ok_or("uniform_values")? {
+                dispatch.values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
+            }
+            for (role, image) in field(step, "images")?.as_object().ok_or("images")? {
+                dispatch.images.insert(role.as_str(), image.as_str().ok_or("an image name")?.to_string());
+            }
+            // What it writes is a fresh texture (`target` replaces by name).
+            for b in array(stage, "bindings")?.iter().filter(|b| b["kind"] == "storage_texture") {
+                let role = b["role"].as_str().ok_or("binding role")?;
+                images.target(dispatch.images.get(role).map(String::as_str).unwrap_or(role), texel_format(b)?);
+            }
+            record(&images, &mut encoder, wgsl, stage, workgroup, frame, &dispatch)?;
+        }
+    }
+    // The form's first pass filters what the manifest names.
+    let mut colour = field(manifest, "filters")?.as_str().ok_or("`filters` is not a name")?.to_string();
 
     // The form, `passes` times; pass k reads pass k-1's image and variance.
     let passes = field(manifest, "passes")?.as_u64().ok_or("passes")? as u32;

@@ -78,14 +78,13 @@ fn main() -> Result<(), String> {
     };
 
     let (device, queue) = host::open_device()?;
-    let prepass = match prepass {
-        Some(stage) => {
-            let file = std::path::Path::new(shader).with_file_name(stage["file"].as_str().ok_or("pre-pass file")?);
-            Some(std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?)
-        }
-        None => None,
+    // The pre-pass's and the spread's shaders, where the pipeline has them, are files beside the form's.
+    let stage = |name: &str| -> Result<Option<String>, String> {
+        let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { return Ok(None) };
+        let file = std::path::Path::new(shader).with_file_name(stage["file"].as_str().ok_or("a stage's file")?);
+        Ok(Some(std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?))
     };
-    let shaders = host::Shaders { form: wgsl, prepass };
+    let shaders = host::Shaders { form: wgsl, prepass: stage("prepass")?, spread: stage("spread")? };
     let filtered = host::filter(&device, &queue, &shaders, &manifest, &frame, radius)?;
     let rgb: Vec<[f32; 3]> = filtered.iter().map(|c| [c[0], c[1], c[2]]).collect();
     filterjit::preview::write_png(&PathBuf::from(out), scene.width, scene.height, &rgb).map_err(|e| e.to_string())?;

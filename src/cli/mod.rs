@@ -69,10 +69,16 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                 filterjit::export::export_filter(&resolved.expr, &pipeline, resolved.radius, target, format)?;
             let manifest_path = manifest_path(&output);
             let mut files = vec![(output.clone(), exported.code.to_bytes())];
-            if let (Some(code), Some(stage)) = (&exported.prepass, exported.manifest.prepass.as_mut()) {
-                let path = prepass_path(&output);
-                stage.file = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-                files.push((path, code.to_bytes()));
+            let stages = [
+                ("prepass", &exported.prepass, exported.manifest.prepass.as_mut()),
+                ("spread", &exported.spread, exported.manifest.spread.as_mut()),
+            ];
+            for (name, code, stage) in stages {
+                if let (Some(code), Some(stage)) = (code, stage) {
+                    let path = stage_path(&output, name);
+                    stage.file = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                    files.push((path, code.to_bytes()));
+                }
             }
             let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
             files.push((manifest_path.clone(), manifest.into_bytes()));
@@ -82,6 +88,13 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             }
             if let Some(stage) = &exported.manifest.prepass {
                 println!("wrote {} (the pre-pass)", output.with_file_name(&stage.file).display());
+            }
+            if let Some(stage) = &exported.manifest.spread {
+                println!(
+                    "wrote {} (keep's spread: {} dispatches after the pre-pass)",
+                    output.with_file_name(&stage.file).display(),
+                    stage.sequence.len()
+                );
             }
             if exported.manifest.passes > 1 {
                 println!(
@@ -509,12 +522,13 @@ pub(crate) fn ms(d: std::time::Duration) -> f64 {
     d.as_secs_f64() * 1e3
 }
 
-/// Where the pre-pass of an exported pipeline goes: `NAME.prepass.EXT` beside `NAME.EXT`.
-pub(crate) fn prepass_path(shader: &Path) -> PathBuf {
+/// Where a stage of an exported pipeline goes: `NAME.STAGE.EXT` beside
+/// `NAME.EXT` (`prepass`, `spread`).
+pub(crate) fn stage_path(shader: &Path, stage: &str) -> PathBuf {
     let stem = shader.file_stem().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "filter".into());
     let name = match shader.extension() {
-        Some(ext) => format!("{stem}.prepass.{}", ext.to_string_lossy()),
-        None => format!("{stem}.prepass"),
+        Some(ext) => format!("{stem}.{stage}.{}", ext.to_string_lossy()),
+        None => format!("{stem}.{stage}"),
     };
     shader.with_file_name(name)
 }

@@ -20,8 +20,8 @@ impl Gpu {
 
     fn spread_pipeline(&self) -> Result<&Pipeline, GpuError> {
         static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        let validate = || crate::jit::spread_module().map_err(|e| e.to_string());
-        self.built_in(&self.spread, &MODULE, "<spread>", validate, crate::jit::spread_wgsl)
+        let validate = || crate::jit::spread_module(None).map_err(|e| e.to_string());
+        self.built_in(&self.spread, &MODULE, "<spread>", validate, || crate::jit::spread_wgsl(None))
     }
 
     /// Run `pipeline`'s pre-pass on `color` (RGBA per pixel; `albedo` the raw
@@ -104,7 +104,7 @@ impl Gpu {
         if let Some(spread) = spread {
             // `keep`: the pre-pass wrote the clamped colour undivided; spread
             // raw − clamped, then (spread + clamped) / modulation is the colour.
-            let interface = BindingInterface::spread();
+            let interface = BindingInterface::spread(None);
             let mut buffers = [make("spread"), make("spread")];
             let sequence = SpreadParams::sequence(width, height);
             let last = sequence.len() - 1;

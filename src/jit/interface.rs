@@ -367,18 +367,40 @@ impl BindingInterface {
 
     /// The interface of `keep`'s spread kernel (`jit::spread`): the uniform
     /// `SpreadParams`, the image it spreads (`Color`), the clamped colour
-    /// (`Image`), the modulation, and its output.
-    pub fn spread() -> BindingInterface {
-        let read = Resource::Storage { element: Element::Vec4F32, writable: false };
+    /// (`Image`), the modulation, and its output. In storage buffers for
+    /// filterjit (`None`), or, exported, sampled textures in and an
+    /// `rgba32float` storage texture out.
+    pub fn spread(textures: Option<OutputFormat>) -> BindingInterface {
+        let (kind, params, roles) = match textures {
+            None => {
+                let read = Resource::Storage { element: Element::Vec4F32, writable: false };
+                let written = Resource::Storage { element: Element::Vec4F32, writable: true };
+                let roles = [
+                    (Role::Color, read, "buf_color"),
+                    (Role::Image, read, "buf_image"),
+                    (Role::Modulation, read, "buf_modulation"),
+                    (Role::Output, written, "buf_out"),
+                ];
+                (KernelKind::Filter, own_params(), roles)
+            }
+            // Exported: every image it writes is rgba32float whatever the
+            // output format, so that the total it keeps is not rounded to half
+            // precision between passes.
+            Some(format) => {
+                let sampled = Resource::SampledTexture;
+                let written = Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float));
+                let roles = [
+                    (Role::Color, sampled, "tex_color"),
+                    (Role::Image, sampled, "tex_image"),
+                    (Role::Modulation, sampled, "tex_modulation"),
+                    (Role::Output, written, "tex_out"),
+                ];
+                (KernelKind::Export(format), Resource::Uniform, roles)
+            }
+        };
         let bindings = dense(
-            [
-                (Role::Params, own_params(), "params"),
-                (Role::Color, read, "buf_color"),
-                (Role::Image, read, "buf_image"),
-                (Role::Modulation, read, "buf_modulation"),
-                (Role::Output, Resource::Storage { element: Element::Vec4F32, writable: true }, "buf_out"),
-            ]
-            .map(|(role, resource, ident)| (role, resource, ident.to_string())),
+            std::iter::once((Role::Params, params, "params".to_string()))
+                .chain(roles.map(|(role, resource, ident)| (role, resource, ident.to_string()))),
         );
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
@@ -386,7 +408,7 @@ impl BindingInterface {
             field("step", "u32", 8, "pixel step between taps: 2^pass"),
             field("stage", "u32", 12, "0: spread colour - image; 1: spread colour; 2: (colour + image) / modulation"),
         ];
-        BindingInterface { kind: KernelKind::Filter, bindings, uniform, uniform_bytes: 16 }
+        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
     }
 
     /// The interface of the fitness reduction (`jit::reduce`): the uniform

@@ -4,7 +4,7 @@
 //! `crate::pipeline` owns; `cpu::spread` is its reference.
 
 use super::interface::BindingInterface;
-use super::kernel::{wgsl_f32, TEMPLATE_VERSION, WORKGROUP};
+use super::kernel::{wgsl_f32, OutputFormat, TEMPLATE_VERSION, WORKGROUP};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 use crate::pipeline;
 
@@ -47,9 +47,10 @@ impl SpreadParams {
     }
 }
 
-/// The spread kernel's WGSL.
-pub fn spread_wgsl() -> String {
-    let interface = BindingInterface::spread();
+/// The spread kernel's WGSL: on storage buffers (filterjit's, `None`), or
+/// exported, on textures (its output `rgba32float` whatever `format` is).
+pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
+    let interface = BindingInterface::spread(textures);
     let mut tera = tera::Tera::default();
     tera.add_raw_template("spread", include_str!("../../templates/spread.wgsl.tera"))
         .expect("built-in spread template parses");
@@ -61,12 +62,13 @@ pub fn spread_wgsl() -> String {
     context.insert("stencil", &pipeline::KEEP_STENCIL.weights().iter().map(|h| wgsl_f32(*h)).collect::<Vec<_>>());
     context.insert("workgroup_x", &WORKGROUP[0]);
     context.insert("workgroup_y", &WORKGROUP[1]);
+    context.insert("textures", &textures.is_some());
     context.insert("params_struct", &interface.params_struct());
     context.insert("declarations", &interface.declarations());
     tera.render("spread", &context).expect("built-in spread template renders")
 }
 
 /// The spread kernel, validated by naga; its bindings are checked against its interface.
-pub fn spread_module() -> Result<ValidatedModule, ValidateError> {
-    validate_with_interface(&spread_wgsl(), "<spread>", &BindingInterface::spread())
+pub fn spread_module(textures: Option<OutputFormat>) -> Result<ValidatedModule, ValidateError> {
+    validate_with_interface(&spread_wgsl(textures), "<spread>", &BindingInterface::spread(textures))
 }
