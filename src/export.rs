@@ -84,6 +84,8 @@ pub struct Exported {
 /// The binding interface of an exported shader, written beside it as JSON.
 #[derive(Clone, Debug, Serialize)]
 pub struct Manifest {
+    /// The manifest's layout ([`MANIFEST_VERSION`]): a host checks it before reading the rest.
+    pub version: u32,
     pub generator: String,
     pub expression: String,
     pub target: Target,
@@ -153,6 +155,10 @@ pub struct StageDispatch {
     /// the storage binding that first writes it.
     pub images: BTreeMap<String, String>,
 }
+
+/// The version of the manifest's layout, raised whenever a host would have
+/// to read it differently (2: `keep`'s `spread` stage and `filters`).
+pub const MANIFEST_VERSION: u32 = 2;
 
 /// Sampled textures per shader stage every WebGPU device allows.
 pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;
@@ -585,6 +591,7 @@ fn manifest(
     let interface = &kernel.source().interface;
     let bindings = bindings(interface, target, format, Stages::Form);
     Manifest {
+        version: MANIFEST_VERSION,
         generator: format!("filterjit {}", env!("CARGO_PKG_VERSION")),
         expression: kernel.source().canonical.clone(),
         target,

@@ -257,77 +257,99 @@ fn report_refuses_bad_input_naming_it() {
 }
 
 /// The report opened as a person would: headless Chromium loads `index.html`
-/// (through a probe page beside it that reads the loaded page's DOM) and the
-/// rendered page has the OIDN rows, the HDR-FLIP column, its plots and its
-/// crops, every picture decoded. Runs where Chromium is found (`chromium`,
-/// or FILTERJIT_CHROMIUM); CI installs it and requires it (FILTERJIT_REQUIRE_CHROMIUM).
+/// over HTTP, and the rendered page has the OIDN rows, the HDR-FLIP column,
+/// its plots and its crops, every picture decoded; each scene's viewer shows
+/// whole frames at full resolution, changes what it shows when a method is
+/// chosen, the split is moved, the picture is clicked (it flips) or a crop is
+/// clicked. Runs where Chromium is found (`chromium`, or FILTERJIT_CHROMIUM);
+/// CI installs it and requires it (FILTERJIT_REQUIRE_CHROMIUM).
 #[test]
-fn the_report_renders_in_a_browser_with_its_rows_plots_and_crops() {
-    let browser = std::env::var_os("FILTERJIT_CHROMIUM").map(PathBuf::from).or_else(|| {
-        ["chromium", "chromium-browser", "google-chrome"].iter().find_map(|name| {
-            std::env::var_os("PATH")?.to_str()?.split(':').map(|d| Path::new(d).join(name)).find(|p| p.is_file())
-        })
-    });
-    let Some(browser) = browser else {
-        assert!(std::env::var_os("FILTERJIT_REQUIRE_CHROMIUM").is_none(), "Chromium is required here and not found");
-        eprintln!("SKIPPED the_report_renders_in_a_browser_with_its_rows_plots_and_crops: no chromium on PATH");
+fn the_report_renders_in_a_browser_with_its_rows_plots_crops_and_viewer() {
+    use crate::common::browser::{chromium, Browser, Served};
+    let Some(chromium) = chromium("the_report_renders_in_a_browser_with_its_rows_plots_crops_and_viewer") else {
         return;
     };
     let dir = temp_dir("report", "browser");
     let out = dir.join("report");
     report_with_oidn_in(&out, &fake_oidn(&dir));
-    let probe = out.join("probe.html");
-    std::fs::write(
-        &probe,
-        r#"<!doctype html><html><body><iframe id="page" src="index.html" width="1280" height="900"></iframe><script>
-document.getElementById("page").onload = () => {
-  const d = document.getElementById("page").contentDocument;
-  const images = [...d.images];
-  const seen = {
+    let served = Served::folder(&out);
+    let mut browser = Browser::open(&chromium, &format!("{}index.html", served.url), dir.join("profile"));
+    const LOADED: &str = "const loaded = (img) => img.complete ? (img.naturalWidth > 0 ? Promise.resolve() : \
+        Promise.reject(new Error('broken: ' + img.src))) : new Promise((ok, fail) => { img.onload = ok; \
+        img.onerror = () => fail(new Error('broken: ' + img.src)); });";
+    let seen = browser.evaluate(&format!(
+        r#"(async () => {{
+  {LOADED}
+  const images = [...document.images];
+  await Promise.allSettled(images.map(loaded));
+  return {{
     images: images.length,
     broken: images.filter(i => !(i.complete && i.naturalWidth > 0)).map(i => i.getAttribute("src")),
     svg: images.filter(i => i.getAttribute("src").endsWith(".svg")).length,
     crops: images.filter(i => i.getAttribute("src").startsWith("crops/")).length,
-    headers: [...d.querySelectorAll("th")].map(t => t.textContent),
-    rows: [...d.querySelectorAll("tr td:first-child")].map(t => t.textContent),
-    height: d.body.scrollHeight,
-  };
-  const out = document.createElement("pre");
-  out.id = "probe";
-  out.textContent = JSON.stringify(seen);
-  document.body.appendChild(out);
-};
-</script></body></html>"#,
-    )
-    .unwrap();
-    let o = Command::new(&browser)
-        .args(["--headless", "--no-sandbox", "--disable-gpu", "--allow-file-access-from-files"])
-        .args(["--virtual-time-budget=20000", "--dump-dom"])
-        .arg(format!("file://{}", probe.display()))
-        .output()
-        .expect("chromium runs");
-    let dom = String::from_utf8_lossy(&o.stdout);
-    let json = dom
-        .split_once("<pre id=\"probe\">")
-        .and_then(|(_, rest)| rest.split_once("</pre>"))
-        .map(|(json, _)| json.replace("&amp;", "&").replace("&lt;", "<").replace("&gt;", ">"))
-        .unwrap_or_else(|| panic!("the probe saw no page:\n{dom}\n{}", String::from_utf8_lossy(&o.stderr)));
-    let seen: serde_json::Value = serde_json::from_str(&json).unwrap();
-    let strings = |key: &str| -> Vec<String> {
+    headers: [...document.querySelectorAll("th")].map(t => t.textContent),
+    rows: [...document.querySelectorAll("tr td:first-child")].map(t => t.textContent),
+    height: document.body.scrollHeight,
+  }};
+}})()"#
+    ));
+    let strings = |seen: &serde_json::Value, key: &str| -> Vec<String> {
         seen[key].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect()
     };
-    assert!(strings("broken").is_empty(), "pictures that did not load: {:?}", strings("broken"));
+    assert!(strings(&seen, "broken").is_empty(), "pictures that did not load: {:?}", strings(&seen, "broken"));
     assert!(seen["svg"].as_u64().unwrap() >= 2, "the mean and per-scene scatter plots: {seen}");
     // noisy, the baseline, the OIDN peers and the reference, at least.
     assert!(seen["crops"].as_u64().unwrap() >= 5, "the crop strip: {seen}");
-    let headers = strings("headers");
+    let headers = strings(&seen, "headers");
     assert!(
         headers.iter().filter(|h| *h == "HDR-FLIP").count() >= 2,
         "HDR-FLIP in the mean and scene tables: {headers:?}"
     );
-    let rows = strings("rows");
+    let rows = strings(&seen, "rows");
     for peer in ["OIDN colour", "OIDN colour+albedo+normal"] {
         assert!(rows.iter().filter(|r| *r == peer).count() >= 2, "{peer} in the mean and scene tables: {rows:?}");
     }
     assert!(seen["height"].as_u64().unwrap() > 900, "a laid-out page, taller than one screen: {seen}");
+
+    // The viewer, as a person uses it; what it shows, read from the page and from screenshots.
+    let state = format!(
+        r#"(async () => {{
+  {LOADED}
+  const viewer = document.querySelector(".viewer");
+  const [a, b] = [viewer.querySelector("img.a"), viewer.querySelector("img.b")];
+  await loaded(a); await loaded(b);
+  viewer.scrollIntoView();
+  return {{ a: a.getAttribute("src"), b: b.getAttribute("src"), clip: b.style.clipPath, label: viewer.querySelector(".label").textContent,
+    natural: [a.naturalWidth, a.naturalHeight, b.naturalWidth], frame: [+viewer.dataset.width, +viewer.dataset.height] }};
+}})()"#
+    );
+    let start = browser.evaluate(&state);
+    assert_eq!(start["a"], "full/mitsuba-cornell-64/noisy.png", "{start}");
+    assert_eq!(start["b"], "full/mitsuba-cornell-64/reference.png", "{start}");
+    let (natural, frame) = (&start["natural"], &start["frame"]);
+    assert_eq!([&natural[0], &natural[1]], [&frame[0], &frame[1]], "whole frames at full resolution: {start}");
+    assert_eq!(start["clip"], "inset(0px 0px 0px 50%)", "split in the middle: {start}");
+    let shot_split = browser.screenshot(1000, 800);
+    // Click: the whole picture flips to one side; again: to the other.
+    browser.evaluate("document.querySelector('.viewer .stage').click()");
+    let flipped = browser.evaluate(&state);
+    let shot_flipped = browser.screenshot(1000, 800);
+    browser.evaluate("document.querySelector('.viewer .stage').click()");
+    let back = browser.evaluate(&state);
+    let shot_back = browser.screenshot(1000, 800);
+    assert_ne!(flipped["clip"], start["clip"], "a click flips: {flipped}");
+    assert_ne!(back["clip"], flipped["clip"], "a second click flips back: {back}");
+    assert!(shot_split != shot_flipped && shot_flipped != shot_back, "flipping changes what the page shows");
+    // A method chosen for the left side, then a crop clicked.
+    browser
+        .evaluate("document.querySelector('.viewer button[data-side=a][data-view=OIDN_colour_albedo_normal]').click()");
+    let chosen = browser.evaluate(&state);
+    assert_eq!(chosen["a"], "full/mitsuba-cornell-64/OIDN_colour_albedo_normal.png", "{chosen}");
+    assert!(chosen["label"].as_str().unwrap().contains("left: OIDN colour+albedo+normal"), "{chosen}");
+    browser.evaluate("document.querySelector('.crops figure[data-view=crossBilateralAtrous]').click()");
+    let cropped = browser.evaluate(&state);
+    assert_eq!(cropped["a"], "full/mitsuba-cornell-64/crossBilateralAtrous.png", "a crop clicked: {cropped}");
+    let shot = dir.join("viewer.png");
+    std::fs::write(&shot, browser.screenshot(1000, 800)).unwrap();
+    eprintln!("the viewer, as shown: {}", shot.display());
 }

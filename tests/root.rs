@@ -3,6 +3,7 @@
 mod common;
 
 mod architecture;
+mod browser;
 mod cli;
 mod distributed;
 mod evolve;

@@ -265,6 +265,10 @@ pub fn filter(
     frame: &Frame,
     radius: u32,
 ) -> Result<Vec<[f32; 4]>, String> {
+    // The layout this host reads (filterjit's export::MANIFEST_VERSION).
+    if manifest.get("version").and_then(Value::as_u64) != Some(2) {
+        return Err(format!("manifest version {:?}: this host reads version 2", manifest.get("version")));
+    }
     let (width, height) = (frame.width, frame.height);
     let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
     let output_format = match field(manifest, "output_format")?.as_str() {

@@ -217,9 +217,8 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             .with_context(|| format!("{} has no reference image to compare with", path.display()))?;
         progress(&format!("scene {} ({}x{})", scene.name, scene.width, scene.height));
         let crop = crop_window(&scene.color, &reference, scene.width, scene.height, settings.crop);
-        let crops_dir = output.join("crops").join(file_name(&scene.name));
-        std::fs::create_dir_all(&crops_dir)?;
-        let mut strip = vec![write_crop(&crops_dir.join("noisy.png"), &scene.color, &scene, crop)?];
+        let views = Views::new(output, &scene, crop)?;
+        let mut strip = vec![views.write("noisy", &scene.color)?];
 
         let noisy = metrics::errors(&scene.color, &reference, scene.spp);
         let flip = |image: &[[f32; 3]]| crate::flip::hdr_flip(&reference, image, scene.width, scene.height).mean();
@@ -268,12 +267,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             let (cell, filtered) =
                 measure(gpu, kernel, buffers, &scene, &mut timing, &reference, settings, method.radius, noisy.relmse)
                     .with_context(|| format!("filtering {} with {}", scene.name, method.name))?;
-            strip.push(write_crop(
-                &crops_dir.join(format!("{}.png", file_name(&method.name))),
-                &filtered,
-                &scene,
-                crop,
-            )?);
+            strip.push(views.write(&method.name, &filtered)?);
             results.cells.push(Cell { method: method.name.clone(), ..cell });
         }
         if let Some(oidn) = oidn {
@@ -305,12 +299,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                 times.sort_by(f64::total_cmp);
                 let mpx = timing_scene.pixels() as f64 / 1e6;
                 let e = metrics::errors(&denoised.color, &reference, scene.spp);
-                strip.push(write_crop(
-                    &crops_dir.join(format!("{}.png", file_name(&name))),
-                    &denoised.color,
-                    &scene,
-                    crop,
-                )?);
+                strip.push(views.write(&name, &denoised.color)?);
                 results.cells.push(Cell {
                     scene: scene.name.clone(),
                     method: name,
@@ -326,7 +315,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                 });
             }
         }
-        strip.push(write_crop(&crops_dir.join("reference.png"), &reference, &scene, crop)?);
+        strip.push(views.write("reference", &reference)?);
         write_strip(&output.join("crops").join(format!("{}.png", file_name(&scene.name))), &strip)?;
         results.scenes.push(SceneInfo {
             name: scene.name.clone(),
@@ -508,6 +497,33 @@ fn write_strip(path: &Path, crops: &[Crop]) -> Result<()> {
         }
     }
     preview::write_png(path, width, side, &pixels).map_err(anyhow::Error::from)
+}
+
+/// Where a scene's pictures go: each method's crop (`crops/SCENE/METHOD.png`)
+/// and its whole frame (`full/SCENE/METHOD.png`, which the page's viewer
+/// flips between), tone-mapped alike.
+struct Views<'a> {
+    crops: PathBuf,
+    full: PathBuf,
+    scene: &'a Scene,
+    crop: (usize, usize, usize),
+}
+
+impl<'a> Views<'a> {
+    fn new(output: &Path, scene: &'a Scene, crop: (usize, usize, usize)) -> Result<Views<'a>> {
+        let (crops, full) =
+            (output.join("crops").join(file_name(&scene.name)), output.join("full").join(file_name(&scene.name)));
+        std::fs::create_dir_all(&crops)?;
+        std::fs::create_dir_all(&full)?;
+        Ok(Views { crops, full, scene, crop })
+    }
+
+    /// Write `method`'s crop and whole frame; the crop, for the strip.
+    fn write(&self, method: &str, image: &[[f32; 3]]) -> Result<Crop> {
+        let file = format!("{}.png", file_name(method));
+        preview::write_png(&self.full.join(&file), self.scene.width, self.scene.height, image)?;
+        write_crop(&self.crops.join(&file), image, self.scene, self.crop)
+    }
 }
 
 /// The crop, tone-mapped like every preview and enlarged to about 192 pixels (nearest neighbour).

@@ -77,6 +77,10 @@ struct ScenePage {
     crop_x: usize,
     crop_y: usize,
     crop_side: usize,
+    /// The viewer's width in CSS pixels (small renders enlarged), and the
+    /// crop's box in it, in percent of the frame: left, top, width, height.
+    view_width: usize,
+    crop_box: [String; 4],
     cells: Vec<CellRow>,
     /// The crops shown, in the strip's order: every method that ran, then the reference.
     crops: Vec<CropItem>,
@@ -99,6 +103,9 @@ struct CellRow {
     ms_range: String,
     flagged_pixels: usize,
 }
+
+/// The viewer shows a frame narrower than this at a whole multiple of its size.
+const VIEW_WIDTH: usize = 768;
 
 #[derive(Serialize)]
 struct CropItem {
@@ -163,6 +170,14 @@ impl<'a> Page<'a> {
                         crop_x: s.crop[0],
                         crop_y: s.crop[1],
                         crop_side: s.crop[2],
+                        view_width: s.width * (VIEW_WIDTH / s.width).max(1),
+                        crop_box: [
+                            (s.crop[0], s.width),
+                            (s.crop[1], s.height),
+                            (s.crop[2], s.width),
+                            (s.crop[2], s.height),
+                        ]
+                        .map(|(v, of)| format!("{:.3}", 100.0 * v as f64 / of as f64)),
                         crops: cells
                             .iter()
                             .filter(|c| c.unavailable.is_none())

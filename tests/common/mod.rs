@@ -1,5 +1,7 @@
 //! Shared test helpers: one GPU for the whole binary, synthetic scenes, the Mitsuba sample.
 
+pub mod browser;
+
 use std::path::PathBuf;
 use std::sync::OnceLock;
 

@@ -1,0 +1,318 @@
+// filterjit's WebGPU host: runs a filter exported by `filterjit export
+// --target wgsl` on the GPUTextures a page already has. No build step, no
+// dependencies; the same steps as examples/run_exported/host.rs, read from
+// the manifest alone (examples/README.md, "The interface").
+//
+//   import { loadFilter } from "./filterjit.js";
+//   const filter = await loadFilter(device, "denoise.wgsl.json");
+//   const output = filter.run({ width, height, textures: { color, albedo, normal } });
+//
+// Per frame, as the manifest's `order` says: the pre-pass once (where the
+// pipeline has one), the spread's dispatches (where it keeps what the outlier
+// clamp removed), then the form's shader `passes` times, its colour and
+// carried variance ping-ponged between textures.
+
+/** The manifest layout this module reads (filterjit's `export::MANIFEST_VERSION`). */
+export const MANIFEST_VERSION = 2;
+
+const WRITTEN = GPUTextureUsage.STORAGE_BINDING | GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_SRC;
+
+/** A filter whose manifest or inputs do not fit what is asked of it. */
+export class FilterError extends Error {
+  constructor(message) {
+    super(`filterjit: ${message}`);
+    this.name = "FilterError";
+  }
+}
+
+/**
+ * Fetch an export's manifest from `manifestUrl` and the shaders it names
+ * beside it (the form's is the manifest's name without `.json`), and build
+ * the filter's pipelines on `device`.
+ */
+export async function loadFilter(device, manifestUrl) {
+  const text = async (url) => {
+    const response = await fetch(url);
+    if (!response.ok) throw new FilterError(`${url}: HTTP ${response.status}`);
+    return response.text();
+  };
+  const manifest = JSON.parse(await text(manifestUrl));
+  const beside = (file) => new URL(file, new URL(manifestUrl, location.href)).href;
+  const shaders = { form: await text(String(manifestUrl).replace(/\.json$/, "")) };
+  for (const stage of ["prepass", "spread"]) {
+    if (manifest[stage]) shaders[stage] = await text(beside(manifest[stage].file));
+  }
+  return createFilter(device, manifest, shaders);
+}
+
+/**
+ * Build the filter's pipelines from its manifest and shader texts
+ * (`{ form, prepass, spread }`, the last two where the manifest has them).
+ * Compilation messages are collected in `filter.messages`.
+ */
+export async function createFilter(device, manifest, shaders) {
+  const filter = new Filter(device, manifest, shaders);
+  await filter.compiled;
+  return filter;
+}
+
+export class Filter {
+  constructor(device, manifest, shaders) {
+    if (manifest?.version !== MANIFEST_VERSION) {
+      throw new FilterError(
+        `manifest version ${JSON.stringify(manifest?.version)}: this module reads version ${MANIFEST_VERSION} ` +
+          "(export the filter again with this filterjit)",
+      );
+    }
+    if (manifest.target !== "wgsl") throw new FilterError(`a ${manifest.target} export: WebGPU runs WGSL exports only`);
+    this.device = device;
+    this.manifest = manifest;
+    this.workgroup = manifest.workgroup_size;
+    this.stages = {};
+    this.messages = [];
+    const needs = [["form", manifest]];
+    for (const name of ["prepass", "spread"]) if (manifest[name]) needs.push([name, manifest[name]]);
+    const compiled = [];
+    for (const [name, stage] of needs) {
+      const code = shaders[name];
+      if (typeof code !== "string") throw new FilterError(`the manifest has a ${name} stage and no ${name} shader was given`);
+      checkLimits(device, name, stage);
+      const module = device.createShaderModule({ label: `filterjit ${name}`, code });
+      compiled.push(
+        module.getCompilationInfo().then((info) => {
+          for (const m of info.messages) this.messages.push({ stage: name, type: m.type, line: m.lineNum, text: m.message });
+        }),
+      );
+      const layout = device.createBindGroupLayout({ entries: stage.bindings.map(layoutEntry) });
+      const pipeline = device.createComputePipeline({
+        label: `filterjit ${name}`,
+        layout: device.createPipelineLayout({ bindGroupLayouts: [layout] }),
+        compute: { module, entryPoint: stage.entry_point },
+      });
+      this.stages[name] = { stage, layout, pipeline };
+    }
+    this.compiled = Promise.all(compiled);
+    this.textures = new Map();
+    this.uniforms = new Map();
+  }
+
+  /** Every image the caller provides, by role: `color`, `albedo` where the pipeline demodulates, and the features. */
+  get inputs() {
+    const roles = new Set(["color"]);
+    if (this.manifest.prepass && (this.manifest.prepass.uniform_values.stages & 2) !== 0) roles.add("albedo");
+    for (const b of this.manifest.bindings) if (b.scale_index !== undefined) roles.add(b.role);
+    return [...roles];
+  }
+
+  /**
+   * Record one frame into `encoder` (a new one, submitted, when not given).
+   * `frame`: `{ width, height, textures: { role: GPUTexture }, scales: { role: number }, radius }`;
+   * scales default to 1 (the texture holds normalised values), the radius to
+   * the manifest's. Returns the GPUTexture holding the filtered frame (in
+   * `manifest.output_format`; it is reused by the next frame of the same size).
+   */
+  run(frame, encoder) {
+    const { width, height } = frame;
+    const own = !encoder;
+    encoder ??= this.device.createCommandEncoder({ label: "filterjit" });
+    const images = new Map(Object.entries(frame.textures).map(([role, texture]) => [role, texture.createView()]));
+    for (const role of this.inputs) {
+      if (!images.has(role)) {
+        throw new FilterError(`the filter reads \`${role}\` and no texture was given for it (inputs: ${this.inputs.join(", ")})`);
+      }
+    }
+    // Not read unless the pipeline demodulates; any texture will do.
+    if (!images.has("albedo")) images.set("albedo", images.get("color"));
+    const target = (name, format) => images.set(name, this.texture(name, format, width, height).createView());
+    const workgroups = [Math.ceil(width / this.workgroup[0]), Math.ceil(height / this.workgroup[1])];
+    let dispatches = 0;
+    const dispatch = (name, values, roles) => {
+      const { stage, layout, pipeline } = this.stages[name];
+      const uniform = this.uniform(dispatches++, stage, frame, values);
+      const entries = stage.bindings.map((b) => {
+        if (b.kind === "uniform") return { binding: b.binding, resource: { buffer: uniform } };
+        const image = roles[b.role] ?? b.image ?? b.role;
+        const view = images.get(image);
+        if (!view) throw new FilterError(`${name}: binding ${b.binding} (\`${b.role}\`) needs the image \`${image}\`, which no stage wrote`);
+        return { binding: b.binding, resource: view };
+      });
+      const pass = encoder.beginComputePass({ label: `filterjit ${name}` });
+      pass.setPipeline(pipeline);
+      pass.setBindGroup(0, this.device.createBindGroup({ layout, entries }));
+      pass.dispatchWorkgroups(workgroups[0], workgroups[1], 1);
+      pass.end();
+    };
+    const storage = (stage) => stage.bindings.filter((b) => b.kind === "storage_texture");
+
+    const prepass = this.manifest.prepass;
+    if (prepass) {
+      for (const b of storage(prepass)) target(b.role, b.format);
+      dispatch("prepass", prepass.uniform_values, {});
+    }
+    const spread = this.manifest.spread;
+    if (spread) {
+      spread.sequence.forEach((step, n) => {
+        // Ping-ponged images alternate between two textures; each dispatch writes the one it does not read.
+        for (const b of storage(spread)) target(step.images[b.role] ?? b.role, b.format);
+        dispatch("spread", step.uniform_values, step.images);
+      });
+    }
+    let colour = this.manifest.filters;
+    let variance = "colorVariance";
+    const passes = this.manifest.passes;
+    const radius = frame.radius ?? this.manifest.radius ?? 0;
+    for (let k = 0; k < passes; k++) {
+      const out = `image${k % 2}`;
+      const varianceOut = `variance${k % 2}`;
+      for (const b of storage(this.manifest)) target(b.role === "output" ? out : varianceOut, b.format);
+      const values = { radius, step: 2 ** k, level: k, last: k + 1 === passes ? 1 : 0 };
+      dispatch("form", values, { color: colour, output: out, colorVariance: variance, variance_out: varianceOut });
+      colour = out;
+      variance = varianceOut;
+    }
+    if (own) this.device.queue.submit([encoder.finish()]);
+    return this.texture(colour, this.manifest.output_format, width, height);
+  }
+
+  /**
+   * The typed-array convenience: `frame.color` and `frame.inputs[role]` are
+   * Float32Arrays of width × height RGBA texels, top row first. Uploads
+   * them, runs the filter and resolves to the filtered frame as a
+   * Float32Array of RGBA texels.
+   */
+  async filterArrays(frame) {
+    const { width, height } = frame;
+    const textures = {};
+    const upload = (role, texels) => {
+      if (!(texels instanceof Float32Array) || texels.length !== 4 * width * height) {
+        throw new FilterError(`\`${role}\` must be a Float32Array of ${4 * width * height} values (RGBA, ${width}x${height})`);
+      }
+      const texture = this.device.createTexture({
+        label: role,
+        size: [width, height],
+        format: "rgba32float",
+        usage: GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_DST,
+      });
+      this.device.queue.writeTexture({ texture }, texels, { bytesPerRow: 16 * width, rowsPerImage: height }, [width, height]);
+      textures[role] = texture;
+    };
+    upload("color", frame.color);
+    for (const [role, texels] of Object.entries(frame.inputs ?? {})) upload(role, texels);
+    const encoder = this.device.createCommandEncoder({ label: "filterjit" });
+    const output = this.run({ ...frame, textures }, encoder);
+    const texel = this.manifest.output_format === "rgba16float" ? 8 : 16;
+    const bytesPerRow = Math.ceil((width * texel) / 256) * 256;
+    const staging = this.device.createBuffer({ size: bytesPerRow * height, usage: GPUBufferUsage.MAP_READ | GPUBufferUsage.COPY_DST });
+    encoder.copyTextureToBuffer({ texture: output }, { buffer: staging, bytesPerRow }, [width, height]);
+    this.device.pushErrorScope("validation");
+    this.device.queue.submit([encoder.finish()]);
+    const error = await this.device.popErrorScope();
+    if (error) throw new FilterError(error.message);
+    await staging.mapAsync(GPUMapMode.READ);
+    const bytes = staging.getMappedRange();
+    const result = new Float32Array(4 * width * height);
+    for (let y = 0; y < height; y++) {
+      if (texel === 16) {
+        result.set(new Float32Array(bytes, y * bytesPerRow, 4 * width), 4 * width * y);
+      } else {
+        const halves = new Uint16Array(bytes, y * bytesPerRow, 4 * width);
+        for (let i = 0; i < 4 * width; i++) result[4 * width * y + i] = halfToFloat(halves[i]);
+      }
+    }
+    staging.unmap();
+    staging.destroy();
+    for (const texture of Object.values(textures)) texture.destroy();
+    return result;
+  }
+
+  /** A texture this filter writes, made once per name, format and size. */
+  texture(name, format, width, height) {
+    const key = `${name}/${format}/${width}x${height}`;
+    let texture = this.textures.get(key);
+    if (!texture) {
+      texture = this.device.createTexture({ label: `filterjit ${name}`, size: [width, height], format, usage: WRITTEN });
+      this.textures.set(key, texture);
+    }
+    return texture;
+  }
+
+  /**
+   * The uniform of a frame's `n`th dispatch: width, height, the dispatch's
+   * values and the inputs' scales. One buffer per dispatch, kept for the
+   * next frame: writes land before the frame's commands run, so a frame's
+   * dispatches cannot share one.
+   */
+  uniform(n, stage, frame, values) {
+    const bytes = new ArrayBuffer(stage.uniform.size_bytes);
+    const view = new DataView(bytes);
+    for (const f of stage.uniform.fields) {
+      let value;
+      const scale = /^scale\[(\d+)\]$/.exec(f.name);
+      if (f.name === "width") value = frame.width;
+      else if (f.name === "height") value = frame.height;
+      else if (scale) {
+        const binding = stage.bindings.find((b) => b.scale_index === Number(scale[1]));
+        value = frame.scales?.[binding.role] ?? 1;
+      } else value = values[f.name] ?? 0;
+      if (f.type === "u32") view.setUint32(f.offset, value, true);
+      else if (f.type === "f32" || f.type === "vec4<f32>") view.setFloat32(f.offset, value, true);
+      else throw new FilterError(`uniform field ${f.name} has type ${f.type}`);
+    }
+    let buffer = this.uniforms.get(n);
+    if (buffer?.size !== bytes.byteLength) {
+      buffer = this.device.createBuffer({ size: bytes.byteLength, usage: GPUBufferUsage.UNIFORM | GPUBufferUsage.COPY_DST });
+      this.uniforms.set(n, buffer);
+    }
+    this.device.queue.writeBuffer(buffer, 0, bytes);
+    return buffer;
+  }
+
+  /** Free the textures and buffers this filter made. */
+  destroy() {
+    for (const texture of this.textures.values()) texture.destroy();
+    for (const buffer of this.uniforms.values()) buffer.destroy();
+    this.textures.clear();
+    this.uniforms.clear();
+  }
+}
+
+/** A manifest binding as a bind group layout entry. */
+function layoutEntry(b) {
+  const entry = { binding: b.binding, visibility: GPUShaderStage.COMPUTE };
+  switch (b.kind) {
+    case "uniform":
+      return { ...entry, buffer: { type: "uniform" } };
+    // Read with textureLoad only: any float format, no sampler.
+    case "sampled_texture":
+      return { ...entry, texture: { sampleType: "unfilterable-float", viewDimension: "2d" } };
+    case "storage_texture":
+      return { ...entry, storageTexture: { access: "write-only", format: b.format, viewDimension: "2d" } };
+    default:
+      throw new FilterError(`binding ${b.binding} has an unknown kind \`${b.kind}\``);
+  }
+}
+
+/** Refuse a stage the device cannot bind, naming the limit. */
+function checkLimits(device, name, stage) {
+  const count = (kind) => stage.bindings.filter((b) => b.kind === kind).length;
+  const limits = [
+    ["maxSampledTexturesPerShaderStage", count("sampled_texture")],
+    ["maxStorageTexturesPerShaderStage", count("storage_texture")],
+    ["maxUniformBuffersPerShaderStage", count("uniform")],
+  ];
+  for (const [limit, needed] of limits) {
+    if (needed > device.limits[limit]) {
+      throw new FilterError(`the ${name} shader needs ${limit} = ${needed}; this device allows ${device.limits[limit]}`);
+    }
+  }
+}
+
+/** An IEEE half (its 16 bits) as a number. */
+function halfToFloat(h) {
+  const sign = h & 0x8000 ? -1 : 1;
+  const exponent = (h >> 10) & 0x1f;
+  const fraction = h & 0x3ff;
+  if (exponent === 0) return sign * 2 ** -14 * (fraction / 1024);
+  if (exponent === 31) return fraction ? NaN : sign * Infinity;
+  return sign * 2 ** (exponent - 15) * (1 + fraction / 1024);
+}
