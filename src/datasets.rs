@@ -52,7 +52,7 @@ pub fn common_terminals(datasets: &[PathBuf]) -> Result<(BTreeSet<Feature>, BTre
     let mut features: Option<BTreeSet<Feature>> = None;
     let mut variances: Option<BTreeSet<ScalarVar>> = None;
     for d in datasets {
-        let (f, v) = scene::provides(d).with_context(|| format!("reading {}", d.display()))?;
+        let (f, v) = scene::provides(d, None).with_context(|| format!("reading {}", d.display()))?;
         features = Some(match features {
             Some(all) => all.intersection(&f).copied().collect(),
             None => f,

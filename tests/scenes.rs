@@ -38,7 +38,7 @@ fn mitsuba_sample_loads_with_the_noisy_error_its_readme_states() {
 #[test]
 fn mitsuba_moment_output_gives_a_colour_variance() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/mitsuba-moment-cornell-64");
-    let (features, variances) = scene::provides(&dir).unwrap();
+    let (features, variances) = scene::provides(&dir, None).unwrap();
     for f in [Feature::Normal, Feature::Texture, Feature::WorldPosition, Feature::Depth] {
         assert!(features.contains(&f), "{f} from the nested AOVs");
     }

@@ -14,6 +14,24 @@ pub(crate) struct Cli {
     pub(crate) command: Command,
 }
 
+/// How `filter` reads its scene.
+#[derive(clap::Args, Debug)]
+pub(crate) struct ReadScene {
+    /// Reference image, when not beside the noisy image.
+    #[arg(long)]
+    pub(crate) reference: Option<PathBuf>,
+    /// Samples per pixel of the noisy image, when the scene does not say.
+    #[arg(long)]
+    pub(crate) spp: Option<u32>,
+    /// What to do with features the scene lacks.
+    #[arg(long, value_enum, default_value_t = Absent::Refuse)]
+    pub(crate) absent: Absent,
+    /// The view layer of a Blender multilayer EXR that has several
+    /// [default: the only one].
+    #[arg(long)]
+    pub(crate) view_layer: Option<String>,
+}
+
 #[derive(Subcommand)]
 pub(crate) enum Command {
     /// Print the validated WGSL kernel of an expression.
@@ -82,15 +100,8 @@ pub(crate) enum Command {
         /// Output EXR; a PNG preview is written beside it.
         #[arg(short, long)]
         output: PathBuf,
-        /// Reference image, when not beside the noisy image.
-        #[arg(long)]
-        reference: Option<PathBuf>,
-        /// Samples per pixel of the noisy image, when the scene does not say.
-        #[arg(long)]
-        spp: Option<u32>,
-        /// What to do with features the scene lacks.
-        #[arg(long, value_enum, default_value_t = Absent::Refuse)]
-        absent: Absent,
+        #[command(flatten)]
+        read: ReadScene,
         /// Also run the f64 CPU reference and report its difference from the GPU result.
         #[arg(long)]
         cpu_check: bool,

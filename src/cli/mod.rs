@@ -150,8 +150,8 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             );
             Ok(())
         }
-        Command::Filter { expr, radius, scene, output, reference, spp, absent, cpu_check, pipeline } => {
-            filter(env, expr.as_deref(), radius, &scene, &output, reference, spp, absent, cpu_check, pipeline)
+        Command::Filter { expr, radius, scene, output, read, cpu_check, pipeline } => {
+            filter(env, expr.as_deref(), radius, &scene, &output, read, cpu_check, pipeline)
         }
         Command::Render { scene, spp, reference_spp, size, seed, output } => {
             render(env, &scene, spp, reference_spp, size, seed, output.as_deref())
@@ -263,17 +263,15 @@ pub(crate) fn filter(
     radius: Option<u32>,
     scene_path: &Path,
     output: &Path,
-    reference: Option<PathBuf>,
-    spp: Option<u32>,
-    absent: Absent,
+    read: ReadScene,
     cpu_check: bool,
     pipeline: Option<filterjit::pipeline::FilterPipeline>,
 ) -> Result<()> {
     let choice = match expr {
         Some(expr) => Choice::asked(expr, pipeline, radius)?,
         None => {
-            let (features, variances) =
-                scene::provides(scene_path).with_context(|| format!("reading scene {}", scene_path.display()))?;
+            let (features, variances) = scene::provides(scene_path, read.view_layer.as_deref())
+                .with_context(|| format!("reading scene {}", scene_path.display()))?;
             let choice = Choice::asked_or_best(None, pipeline, radius, &Provided { features, variances })?;
             eprintln!(
                 "filter    {} (pipeline {}): {}",
@@ -285,7 +283,8 @@ pub(crate) fn filter(
         }
     };
     let (expr, pipeline, radius) = (&choice.expr, choice.pipeline, choice.radius);
-    let request = Request { reference_path: reference, spp, absent, ..choice.request() };
+    let ReadScene { reference, spp, absent, view_layer } = read;
+    let request = Request { reference_path: reference, spp, absent, view_layer, ..choice.request() };
     let load_start = Instant::now();
     let scene = scene::load(scene_path, &request).with_context(|| format!("loading scene {}", scene_path.display()))?;
     let load_time = load_start.elapsed();

@@ -183,7 +183,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         .collect::<Result<_>>()?;
     for path in scenes {
         let (provided, provided_variances) =
-            scene::provides(path).with_context(|| format!("reading {}", path.display()))?;
+            scene::provides(path, None).with_context(|| format!("reading {}", path.display()))?;
         let runnable = |e: &Expr| {
             let missing: Vec<String> = e
                 .features()

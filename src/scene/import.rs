@@ -1,6 +1,9 @@
 //! Channel layouts of the renderers we read: which EXR channels hold which
 //! feature. Features a layout has no channels for are absent, never zero.
 
+use std::path::Path;
+
+use super::SceneError;
 use crate::lang::{Feature, ScalarVar};
 
 /// The renderer conventions a dataset follows.
@@ -15,6 +18,11 @@ pub enum Layout {
     /// channel's first moment (`nested.*`) and second moment (`m2_nested.*`);
     /// the colour variance comes from the two.
     MitsubaMoment,
+    /// Blender's Cycles, an OpenEXR MultiLayer file: `LAYER.PASS.CHANNEL`,
+    /// read through one view layer ([`Channels`]); the Combined pass (or
+    /// `Noisy Image`, where a denoiser replaced Combined) and the Denoising
+    /// Data, Normal, Position and Depth passes. No per-pixel variance.
+    Blender,
 }
 
 /// Alternative channel-name sets for one quantity, most preferred first.
@@ -26,13 +34,16 @@ impl Layout {
             Layout::Mitsuba => "Mitsuba 3 (aov + path)",
             Layout::Pbrt => "pbrt-v4 GBufferFilm / filterjit",
             Layout::MitsubaMoment => "Mitsuba 3 (moment + aov + path)",
+            Layout::Blender => "Blender Cycles (multilayer EXR)",
         }
     }
 
     /// Decide the layout from the channel names of the noisy image.
     pub fn detect(channels: &[String]) -> Layout {
         let mitsuba = ["albedo.R", "sh_normal.X", "position.X", "depth.T", "path.R"];
-        if channels.iter().any(|c| c.starts_with("m2_nested.")) {
+        if channels.iter().any(|c| c == "Combined.R" || c == "Noisy Image.R") {
+            Layout::Blender
+        } else if channels.iter().any(|c| c.starts_with("m2_nested.")) {
             Layout::MitsubaMoment
         } else if channels.iter().any(|c| mitsuba.contains(&c.as_str())) {
             Layout::Mitsuba
@@ -41,8 +52,35 @@ impl Layout {
         }
     }
 
+    /// The noisy colour's channels.
     pub fn color(self) -> Alternatives {
-        &[&["R", "G", "B"]]
+        match self {
+            // With a denoiser on, Combined is denoised and the noisy one is `Noisy Image`.
+            Layout::Blender => {
+                &[&["Noisy Image.R", "Noisy Image.G", "Noisy Image.B"], &["Combined.R", "Combined.G", "Combined.B"]]
+            }
+            _ => &[&["R", "G", "B"]],
+        }
+    }
+
+    /// The reference image's colour channels.
+    pub fn reference_color(self) -> Alternatives {
+        match self {
+            Layout::Blender => &[&["Combined.R", "Combined.G", "Combined.B"]],
+            _ => self.color(),
+        }
+    }
+
+    /// What to enable in the renderer to get `f`, where the layout names it.
+    pub fn how_to_get(self, f: Feature) -> Option<&'static str> {
+        match (self, f) {
+            (Layout::Blender, Feature::Texture | Feature::Normal) => {
+                Some("View Layer Properties > Passes > Data > Denoising Data (Cycles)")
+            }
+            (Layout::Blender, Feature::WorldPosition) => Some("View Layer Properties > Passes > Data > Position"),
+            (Layout::Blender, Feature::Depth) => Some("View Layer Properties > Passes > Data > Z"),
+            _ => None,
+        }
     }
 
     /// Channels of a stored (non-gradient) feature in the noisy image.
@@ -71,6 +109,18 @@ impl Layout {
                 &[&["SecondaryAlbedo.R", "SecondaryAlbedo.G", "SecondaryAlbedo.B"]]
             }
             (Layout::Pbrt, Feature::DirectIllumination) => &[&["DirectVisibility"]],
+            // Blender 3.x and 4.x pass names: the denoiser's passes first (world-space normals).
+            (Layout::Blender, Feature::Texture) => &[
+                &["Denoising Albedo.R", "Denoising Albedo.G", "Denoising Albedo.B"],
+                &["DiffCol.R", "DiffCol.G", "DiffCol.B"],
+            ],
+            (Layout::Blender, Feature::Normal) => &[
+                &["Denoising Normal.X", "Denoising Normal.Y", "Denoising Normal.Z"],
+                &["Normal.X", "Normal.Y", "Normal.Z"],
+            ],
+            (Layout::Blender, Feature::WorldPosition) => &[&["Position.X", "Position.Y", "Position.Z"]],
+            // Camera-space depth (the Z pass), or the denoiser's.
+            (Layout::Blender, Feature::Depth) => &[&["Depth.Z"], &["Denoising Depth.Z"]],
             _ => &[],
         }
     }
@@ -111,6 +161,17 @@ impl Layout {
 }
 
 impl Layout {
+    /// A stored feature's values as filterjit reads them: Blender writes a
+    /// depth of 1e10 where a ray hits nothing, which would swamp the depth's
+    /// normalisation; like Mitsuba, no hit is 0.
+    pub fn clean(self, f: Feature, values: &mut [[f32; 3]]) {
+        if self == Layout::Blender && f == Feature::Depth {
+            for v in values.iter_mut().filter(|v| v[0] >= BLENDER_NO_HIT) {
+                *v = [0.0; 3];
+            }
+        }
+    }
+
     /// One scalar variance per pixel from the channels [`Layout::variance`]
     /// picked: the mean over the channels, or, from first and second moments
     /// m1, m2 (Mitsuba's `moment` integrator), the mean over colour channels
@@ -129,6 +190,55 @@ impl Layout {
                 .collect();
         }
         channel_mean(channels)
+    }
+}
+
+/// Blender's depth where nothing was hit is 1e10; anything this far is no hit.
+const BLENDER_NO_HIT: f32 = 1e9;
+
+/// The channels of one EXR file as a layout reads them. A Blender multilayer
+/// file names its channels `LAYER.PASS.CHANNEL`: it is read through one view
+/// layer, whose prefix is stripped here and put back when reading; other
+/// renderers' files are read as they are.
+#[derive(Clone, Debug)]
+pub struct Channels {
+    /// The channel names, without the view layer's prefix.
+    pub names: Vec<String>,
+    /// `LAYER.`, or empty.
+    prefix: String,
+}
+
+impl Channels {
+    /// `names` (all of `file`'s channels) through the view layer asked for,
+    /// or the only one there is.
+    pub fn of(file: &Path, names: Vec<String>, view_layer: Option<&str>) -> Result<Channels, SceneError> {
+        let layers: Vec<String> = names
+            .iter()
+            .filter_map(|n| n.strip_suffix(".Combined.R").or_else(|| n.strip_suffix(".Noisy Image.R")))
+            .map(str::to_string)
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        let layer = match (view_layer, layers.as_slice()) {
+            (None, []) => return Ok(Channels { names, prefix: String::new() }),
+            (Some(asked), _) if layers.iter().any(|l| l == asked) => asked.to_string(),
+            (None, [only]) => only.clone(),
+            (asked, _) => {
+                return Err(SceneError::ViewLayer {
+                    file: file.to_path_buf(),
+                    asked: asked.map(str::to_string),
+                    layers,
+                })
+            }
+        };
+        let prefix = format!("{layer}.");
+        let names = names.iter().filter_map(|n| n.strip_prefix(&prefix)).map(str::to_string).collect();
+        Ok(Channels { names, prefix })
+    }
+
+    /// The file's own names of `chosen` (channels named as in [`Channels::names`]).
+    pub fn in_file(&self, chosen: &[&str]) -> Vec<String> {
+        chosen.iter().map(|n| format!("{}{n}", self.prefix)).collect()
     }
 }
 

@@ -9,7 +9,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::ops::Range;
 use std::path::Path;
 
-use super::import::{pick, Layout};
+use super::import::{pick, Channels, Layout};
 use super::{exr_io, locate, preprocess, Absent, Images, Origin, Request, Scene, SceneError};
 use crate::lang::{Feature, FeatureSource, ScalarVar};
 use crate::semantics::COLOR_LIMIT;
@@ -23,13 +23,15 @@ pub fn load(path: &Path, request: &Request) -> Result<Scene, SceneError> {
 /// The raw images of the dataset at `path` that `request` needs.
 fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
     let files = locate(path, request)?;
-    let (channels, width, height) = exr_io::channel_names(&files.noisy)?;
+    let (names, width, height) = exr_io::channel_names(&files.noisy)?;
     if width == 0 || height == 0 {
         return Err(SceneError::Empty { file: files.noisy.clone() });
     }
-    let layout = Layout::detect(&channels);
-    let plan = NoisyPlan::new(layout, &channels, request, &files.noisy)?;
-    let noisy = exr_io::read_channels(&files.noisy, &plan.names)?;
+    let view = Channels::of(&files.noisy, names, request.view_layer.as_deref())?;
+    let channels = &view.names;
+    let layout = Layout::detect(channels);
+    let plan = NoisyPlan::new(layout, channels, request, &files.noisy)?;
+    let noisy = read(&files.noisy, &view, &plan.names)?;
     let pixels = width * height;
     let gathered = |range: &Range<usize>| gather(&noisy.data, range, pixels);
     let mut variances: BTreeMap<ScalarVar, Vec<f32>> =
@@ -46,7 +48,7 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
         }
     }
     let reference = match (&files.reference, request.reference) {
-        (Some(file), true) => Some(read_reference(file, layout, &files.noisy, (width, height))?),
+        (Some(file), true) => Some(read_reference(file, layout, request, &files.noisy, (width, height))?),
         _ => None,
     };
     let (meta_spp, meta_name) = match &files.meta {
@@ -58,10 +60,18 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
         width,
         height,
         spp: meta_spp,
-        origin: Origin::File { layout: layout.name(), file: files.noisy.clone() },
+        origin: Origin::File { layout, file: files.noisy.clone() },
         color: gathered(&plan.color),
-        features: plan.features.iter().map(|(f, range)| (*f, gathered(range))).collect(),
-        provided: layout.stored_features(&channels),
+        features: plan
+            .features
+            .iter()
+            .map(|(f, range)| {
+                let mut values = gathered(range);
+                layout.clean(*f, &mut values);
+                (*f, values)
+            })
+            .collect(),
+        provided: layout.stored_features(channels),
         variances,
         reference,
     })
@@ -236,6 +246,10 @@ impl Preparer<'_> {
     fn absent(&mut self, what: &str) -> Result<(), SceneError> {
         match self.request.absent {
             Absent::Refuse => Err(SceneError::MissingFeature {
+                how_to_get: match self.origin {
+                    Origin::File { layout, .. } => Feature::from_name(what).and_then(|f| layout.how_to_get(f.base())),
+                    Origin::Arrays => None,
+                },
                 scene: self.name.to_string(),
                 feature: what.to_string(),
                 origin: self.origin.clone(),
@@ -309,21 +323,29 @@ impl Preparer<'_> {
     }
 }
 
+/// `chosen` channels (named as in `view`) of `file`.
+fn read(file: &Path, view: &Channels, chosen: &[&str]) -> Result<exr_io::ImageChannels, SceneError> {
+    let names = view.in_file(chosen);
+    exr_io::read_channels(file, &names.iter().map(String::as_str).collect::<Vec<_>>())
+}
+
 /// The reference image's colour.
 fn read_reference(
     file: &Path,
     layout: Layout,
+    request: &Request,
     noisy: &Path,
     expected: (usize, usize),
 ) -> Result<Vec<[f32; 3]>, SceneError> {
-    let (channels, w, h) = exr_io::channel_names(file)?;
+    let (names, w, h) = exr_io::channel_names(file)?;
     check_size(file, (w, h), noisy, expected)?;
-    let chosen = pick(layout.color(), &channels).ok_or_else(|| SceneError::MissingChannel {
+    let view = Channels::of(file, names, request.view_layer.as_deref())?;
+    let chosen = pick(layout.reference_color(), &view.names).ok_or_else(|| SceneError::MissingChannel {
         file: file.to_path_buf(),
-        channel: "R, G, B".into(),
-        available: channels.clone(),
+        channel: layout.reference_color()[0].join(", "),
+        available: view.names.clone(),
     })?;
-    let data = exr_io::read_channels(file, chosen)?.data;
+    let data = read(file, &view, chosen)?.data;
     Ok((0..w * h).map(|p| [data[0][p], data[1][p], data[2][p]]).collect())
 }
 

@@ -25,8 +25,15 @@ pub enum SceneError {
     #[error("{}: no channel `{channel}` (the file has: {})", file.display(), available.join(", "))]
     MissingChannel { file: PathBuf, channel: String, available: Vec<String> },
     #[error("scene `{scene}` has no `{feature}` ({origin} provides: {}); \
-             the expression needs it. Use an expression without it, or have absent inputs read as 0", provided.join(", "))]
-    MissingFeature { scene: String, feature: String, origin: Origin, provided: Vec<String> },
+             the expression needs it. {}Use an expression without it, or have absent inputs read as 0",
+             provided.join(", "), how_to_get.map(|h| format!("The renderer writes it when asked: {h}. ")).unwrap_or_default())]
+    MissingFeature {
+        scene: String,
+        feature: String,
+        origin: Origin,
+        provided: Vec<String>,
+        how_to_get: Option<&'static str>,
+    },
     #[error(
         "scene `{scene}` has no albedo ({origin} has no texture/albedo); \
              demodulation divides by it: use a pipeline without `demodulate`"
@@ -40,6 +47,11 @@ pub enum SceneError {
     Empty { file: PathBuf },
     #[error("{}: {message}", file.display())]
     Meta { file: PathBuf, message: String },
+    #[error("{}: {}", file.display(), match asked {
+        Some(asked) => format!("no view layer `{asked}` (the file has: {})", layers.join(", ")),
+        None => format!("several view layers ({}): choose one with --view-layer", layers.join(", ")),
+    })]
+    ViewLayer { file: PathBuf, asked: Option<String>, layers: Vec<String> },
     #[error(transparent)]
     Write(#[from] crate::io::WriteError),
 }
@@ -83,6 +95,8 @@ pub struct Request {
     /// Load the raw albedo (the `texture` feature's channels, not normalised),
     /// which demodulation divides by (`pipeline`).
     pub albedo: bool,
+    /// The view layer of a Blender multilayer file, where it has several.
+    pub view_layer: Option<String>,
 }
 
 impl Request {
@@ -96,7 +110,7 @@ impl Request {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Origin {
     /// A renderer's EXR files, read by their channel layout.
-    File { layout: &'static str, file: PathBuf },
+    File { layout: Layout, file: PathBuf },
     /// Arrays handed over in memory (the Python module's `denoise`).
     Arrays,
 }
@@ -105,7 +119,7 @@ impl Origin {
     /// The renderer's channel layout, for files.
     pub fn layout(&self) -> Option<&'static str> {
         match self {
-            Origin::File { layout, .. } => Some(layout),
+            Origin::File { layout, .. } => Some(layout.name()),
             Origin::Arrays => None,
         }
     }
@@ -114,7 +128,7 @@ impl Origin {
 impl std::fmt::Display for Origin {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Origin::File { layout, file } => write!(f, "{layout} data from {}", file.display()),
+            Origin::File { layout, file } => write!(f, "{} data from {}", layout.name(), file.display()),
             Origin::Arrays => f.write_str("the arrays given"),
         }
     }
@@ -306,10 +320,12 @@ pub fn with_derived(stored: BTreeSet<Feature>) -> BTreeSet<Feature> {
     features
 }
 
-/// The features and variances a scene on disk provides, from its channel names alone.
-pub fn provides(path: &Path) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>), SceneError> {
+/// The features and variances a scene on disk provides, from its channel
+/// names alone (through `view_layer` in a Blender multilayer file).
+pub fn provides(path: &Path, view_layer: Option<&str>) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>), SceneError> {
     let files = locate(path, &Request::default())?;
-    let (channels, _, _) = exr_io::channel_names(&files.noisy)?;
+    let (names, _, _) = exr_io::channel_names(&files.noisy)?;
+    let channels = import::Channels::of(&files.noisy, names, view_layer)?.names;
     let layout = Layout::detect(&channels);
     let features = with_derived(layout.stored_features(&channels));
     let separate = match &files.variance {
