@@ -3,6 +3,7 @@
 mod common;
 
 mod architecture;
+mod blender;
 mod browser;
 mod cli;
 mod distributed;

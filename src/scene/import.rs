@@ -193,6 +193,11 @@ impl Layout {
     }
 }
 
+/// Channels by which a Blender multilayer file is known, and its view layers
+/// found: `LAYER` + one of these.
+const BLENDER_PASSES: &[&str] =
+    &[".Combined.R", ".Noisy Image.R", ".Denoising Albedo.R", ".Denoising Normal.X", ".Normal.X", ".Depth.Z"];
+
 /// Blender's depth where nothing was hit is 1e10; anything this far is no hit.
 const BLENDER_NO_HIT: f32 = 1e9;
 
@@ -214,7 +219,7 @@ impl Channels {
     pub fn of(file: &Path, names: Vec<String>, view_layer: Option<&str>) -> Result<Channels, SceneError> {
         let layers: Vec<String> = names
             .iter()
-            .filter_map(|n| n.strip_suffix(".Combined.R").or_else(|| n.strip_suffix(".Noisy Image.R")))
+            .filter_map(|n| BLENDER_PASSES.iter().find_map(|pass| n.strip_suffix(pass)))
             .map(str::to_string)
             .collect::<std::collections::BTreeSet<_>>()
             .into_iter()
@@ -234,6 +239,14 @@ impl Channels {
         let prefix = format!("{layer}.");
         let names = names.iter().filter_map(|n| n.strip_prefix(&prefix)).map(str::to_string).collect();
         Ok(Channels { names, prefix })
+    }
+
+    /// The layout to read these channels by.
+    pub fn layout(&self) -> Layout {
+        match self.prefix.is_empty() {
+            true => Layout::detect(&self.names),
+            false => Layout::Blender,
+        }
     }
 
     /// The file's own names of `chosen` (channels named as in [`Channels::names`]).

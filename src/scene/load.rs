@@ -29,7 +29,7 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
     }
     let view = Channels::of(&files.noisy, names, request.view_layer.as_deref())?;
     let channels = &view.names;
-    let layout = Layout::detect(channels);
+    let layout = view.layout();
     let plan = NoisyPlan::new(layout, channels, request, &files.noisy)?;
     let noisy = read(&files.noisy, &view, &plan.names)?;
     let pixels = width * height;
@@ -155,7 +155,7 @@ impl NoisyPlan {
         };
         let color = plan(layout.color()).ok_or_else(|| SceneError::MissingChannel {
             file: noisy.to_path_buf(),
-            channel: "R, G, B".into(),
+            channel: layout.color().iter().map(|names| names.join(", ")).collect::<Vec<_>>().join(" or "),
             available: channels.to_vec(),
         })?;
         let mut bases = stored_bases(request);

@@ -325,8 +325,8 @@ pub fn with_derived(stored: BTreeSet<Feature>) -> BTreeSet<Feature> {
 pub fn provides(path: &Path, view_layer: Option<&str>) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>), SceneError> {
     let files = locate(path, &Request::default())?;
     let (names, _, _) = exr_io::channel_names(&files.noisy)?;
-    let channels = import::Channels::of(&files.noisy, names, view_layer)?.names;
-    let layout = Layout::detect(&channels);
+    let view = import::Channels::of(&files.noisy, names, view_layer)?;
+    let (channels, layout) = (&view.names, view.layout());
     let features = with_derived(layout.stored_features(&channels));
     let separate = match &files.variance {
         Some(file) => exr_io::channel_names(file)?.0,
