@@ -327,7 +327,7 @@ pub fn provides(path: &Path, view_layer: Option<&str>) -> Result<(BTreeSet<Featu
     let (names, _, _) = exr_io::channel_names(&files.noisy)?;
     let view = import::Channels::of(&files.noisy, names, view_layer)?;
     let (channels, layout) = (&view.names, view.layout());
-    let features = with_derived(layout.stored_features(&channels));
+    let features = with_derived(layout.stored_features(channels));
     let separate = match &files.variance {
         Some(file) => exr_io::channel_names(file)?.0,
         None => Vec::new(),
@@ -337,7 +337,7 @@ pub fn provides(path: &Path, view_layer: Option<&str>) -> Result<(BTreeSet<Featu
         .copied()
         .filter(|v| {
             let (alternatives, in_separate_file) = layout.variance(*v);
-            pick(alternatives, if in_separate_file { &separate } else { &channels }).is_some()
+            pick(alternatives, if in_separate_file { &separate } else { channels }).is_some()
         })
         .collect();
     Ok((features, variances))
