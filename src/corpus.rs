@@ -29,6 +29,29 @@ pub const PIPELINE_PREFIX: &str = "# pipeline:";
 /// A named-expression file's line stating the window radius of the entries after it.
 pub const RADIUS_PREFIX: &str = "# radius:";
 
+/// The line, in an entry's comment block, that states what the entry was
+/// measured to do on the public renders (`filterjit list` shows it).
+pub const MEASURED_PREFIX: &str = "# measured:";
+
+/// What the `# measured:` line of entry `name`'s own comment block says, if it has one.
+pub fn measured_of<'t>(text: &'t str, name: &str) -> Option<&'t str> {
+    let mut current = None;
+    for line in text.lines().map(str::trim) {
+        if let Some(said) = line.strip_prefix(MEASURED_PREFIX) {
+            current = Some(said.trim());
+        } else if !line.starts_with('#') {
+            if line.split_once('=').is_some_and(|(n, _)| n.trim() == name) {
+                return current;
+            }
+            // An entry ends the block its line belonged to.
+            if !line.is_empty() {
+                current = None;
+            }
+        }
+    }
+    None
+}
+
 /// What the last `PREFIX value` line before entry `name` says, if any: how
 /// a named-expression file states what applies to the entries after it.
 fn stated_for<'t>(text: &'t str, prefix: &str, name: &str) -> Option<&'t str> {
@@ -138,6 +161,15 @@ fn file_reference(reference: &str) -> Option<(std::path::PathBuf, Option<String>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_measured_line_belongs_to_its_own_entry_only() {
+        let text = "# measured: A did this\na = 1\nb = 2\n# note\n# measured: C did that\n# more\nc = 3\n";
+        assert_eq!(measured_of(text, "a"), Some("A did this"));
+        assert_eq!(measured_of(text, "b"), None, "not carried over from the entry before");
+        assert_eq!(measured_of(text, "c"), Some("C did that"));
+        assert_eq!(measured_of(text, "d"), None);
+    }
 
     #[test]
     fn stated_lines_apply_to_the_entries_after_them() {

@@ -26,6 +26,7 @@ use crate::scene::{Holds, Needs, Request};
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
     "evolvedAtrous3x3Keep",
     "evolvedAtrous3x3",
+    "evolvedAtrous128Keep",
     "evolvedAtrous128",
     "svgfAtrous",
     "crossBilateralAtrous",
@@ -149,6 +150,48 @@ impl Choice {
     }
 }
 
+/// A shipped filter as `filterjit list` shows it.
+pub struct Shipped {
+    pub name: &'static str,
+    pub pipeline: FilterPipeline,
+    /// What a render must hold for it: `color`, the stored features, the
+    /// per-pixel variances, and `albedo` where it demodulates.
+    pub reads: Vec<&'static str>,
+    /// Its place in the order `filter` tries shipped filters in when none is
+    /// asked for (`SHIPPED_BY_QUALITY`), from 1.
+    pub rank: Option<usize>,
+    /// What it was measured to do on the public renders (its `# measured:` line).
+    pub measured: Option<&'static str>,
+    pub text: &'static str,
+}
+
+/// Every shipped filter, in file order.
+pub fn shipped() -> Result<Vec<Shipped>> {
+    corpus::named()
+        .into_iter()
+        .map(|(name, text)| {
+            let choice = Choice::asked(&format!("@{name}"), None, None)?;
+            let needs = Needs::of(&choice.expr, choice.pipeline.demodulate);
+            let mut reads = vec!["color"];
+            let bases: BTreeSet<&'static str> =
+                needs.features.iter().filter(|f| **f != Feature::Color).map(|f| f.base().name()).collect();
+            reads.extend(bases);
+            reads.extend(needs.variances.iter().map(|v| v.name()));
+            if needs.albedo {
+                reads.push("albedo");
+            }
+            Ok(Shipped {
+                name,
+                pipeline: choice.pipeline,
+                reads,
+                rank: SHIPPED_BY_QUALITY.iter().position(|n| *n == name).map(|k| k + 1),
+                measured: corpus::measured_of(corpus::EXPRESSIONS, name),
+                text,
+            })
+        })
+        .collect()
+}
+
 /// `scene` filtered on `gpu` with `kernel` (the choice's, [`Choice::compile`]):
 /// the pre-pass, then the form, read back.
 pub fn filter(gpu: &Gpu, choice: &Choice, kernel: &jit::ValidatedKernel, scene: &Scene) -> Result<Filtered> {
@@ -186,6 +229,8 @@ mod tests {
         let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
         let chosen = Choice::best_for(&no_variance).unwrap();
         assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
+        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous128Keep"));
+        assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep), "keeps the light: {}", chosen.pipeline);
         let because = chosen.chosen_because.unwrap();
         assert!(because.contains("@evolvedAtrous3x3Keep needs colorVariance"), "{because}");
 

@@ -397,3 +397,44 @@ fn scene_stats_measure_the_light_s_tails() {
     let top: f64 = fields[4].parse().unwrap();
     assert!((0.0..=1.5).contains(&median) && top > 1.0 && top <= 100.0 && fields[5] == "%", "{row}");
 }
+
+/// `list` shows every shipped filter with its pipeline and what it reads, and
+/// the order `filter` tries them in without `--expr`.
+#[test]
+fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
+    let o = filterjit(&["list"]);
+    assert!(o.status.success());
+    let stdout = text(&o.stdout);
+    for (name, _) in filterjit::corpus::named() {
+        assert!(stdout.contains(&format!("@{name}  pipeline ")), "@{name}: {stdout}");
+    }
+    let block = |name: &str| -> String {
+        let start = stdout.find(&format!("@{name}  ")).unwrap();
+        let rest = &stdout[start + 1..];
+        rest[..rest.find("\n@").unwrap_or(rest.len())].to_string()
+    };
+    let kept = block("evolvedAtrous3x3Keep");
+    assert!(kept.contains("reads     color, normal, worldPosition, colorVariance, albedo"), "{kept}");
+    assert!(kept.contains("default   1. choice"), "{kept}");
+    let free = block("evolvedAtrous128Keep");
+    assert!(!free.contains("colorVariance") && free.contains("default   3. choice"), "{free}");
+}
+
+/// A render without a per-pixel variance (the Mitsuba sample with its
+/// `variance.exr` withheld) gets the best shipped filter that needs none, and
+/// stderr says which and why; it lowers the error.
+#[test]
+fn filter_without_expr_picks_a_variance_free_filter_where_the_render_has_no_variance() {
+    let sample = mitsuba_sample();
+    let dir = crate::common::temp_dir("cli", "no-variance").join("scene");
+    std::fs::create_dir_all(&dir).unwrap();
+    for file in ["noisy.exr", "reference.exr", "meta.json"] {
+        std::fs::copy(sample.join(file), dir.join(file)).unwrap();
+    }
+    let out = dir.with_file_name("out.exr");
+    let o = filterjit(&["filter", dir.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("filter    @evolvedAtrous128Keep") && stderr.contains("needs colorVariance"), "{stderr}");
+    assert!(relmse(&stdout, "filtered") < relmse(&stdout, "noisy"), "{stdout}");
+}

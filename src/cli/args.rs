@@ -189,7 +189,8 @@ pub(crate) enum Command {
         spp: u32,
         scenes: Vec<String>,
     },
-    /// List the shipped expressions.
+    /// List the shipped filters: each one's pipeline, what it reads, where
+    /// `filter` ranks it, its measured error on the public renders, its expression.
     List,
     /// List the GPU adapters and say which one filterjit uses.
     Adapters,

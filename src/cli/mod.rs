@@ -220,11 +220,18 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         }
         Command::Scenes { size, spp, scenes, .. } => scene_stats(env, size, spp, scenes),
         Command::List => {
-            for (name, text) in corpus::named() {
-                match corpus::pipeline_of(corpus::EXPRESSIONS, name) {
-                    Some(pipeline) => println!("@{name} (pipeline {})\n    {text}", pipeline?),
-                    None => println!("@{name}\n    {text}"),
+            for s in filterjit::denoise::shipped()? {
+                println!("@{}  pipeline {}", s.name, s.pipeline);
+                println!("    reads     {}", s.reads.join(", "));
+                if let Some(rank) = s.rank {
+                    println!(
+                        "    default   {rank}. choice of `filter` without --expr, where the render has what it reads"
+                    );
                 }
+                if let Some(measured) = s.measured {
+                    println!("    measured  {measured}");
+                }
+                println!("    {}", s.text);
             }
             Ok(())
         }
