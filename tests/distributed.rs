@@ -39,6 +39,8 @@ fn evolve_args(dir: &Path, generations: u32) -> Vec<String> {
     let (training, test) = datasets();
     let mut args: Vec<String> = [
         "evolve",
+        "--preset",
+        "quick",
         "--islands",
         "4",
         "--island-size",

@@ -277,6 +277,8 @@ fn killed_runs_resume_to_the_same_hall_of_fame() {
     let args = |dir: &Path| -> Vec<String> {
         [
             "evolve",
+            "--preset",
+            "quick",
             "--scenes",
             &training.display().to_string(),
             "--test-scenes",

@@ -50,6 +50,7 @@ pub(crate) fn evolve_on(
     use filterjit::evolve as ev;
     let root = transport.is_root();
     let (settings, config) = run_settings(&args)?;
+    let seed_name = args.seed_expr.clone().unwrap_or_else(|| PresetValues::of(args.preset).seed_expr);
     let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {
         Some(dir) => dir.clone(),
@@ -231,6 +232,22 @@ pub(crate) fn evolve_on(
     used.sort_by(|a, b| b.1.cmp(a.1));
     println!("features  {}", used.iter().map(|(f, n)| format!("{f} {n}")).collect::<Vec<_>>().join(", "));
     println!("time      {:.1} s", summary.seconds);
+    // Seeded from a shipped filter: how the search's best compares with it, last.
+    let shipped = seed_name.strip_prefix('@').filter(|n| filterjit::corpus::lookup(n).is_some());
+    let compared = shipped.map(|name| {
+        let (best, seed) = (summary.test_best.normalised, summary.test_seed.normalised);
+        let change = match best <= seed {
+            true => format!("{:.1} % lower", 100.0 * (1.0 - best / seed)),
+            false => format!("{:.1} % higher", 100.0 * (best / seed - 1.0)),
+        };
+        let light = |l: &[Option<f64>]| ev::mean_light(l).map_or_else(|| "-".to_string(), |l| format!("{l:.3}"));
+        format!(
+            "against   @{name}, the seed: on the test scenes the best's mean relMSE / noisy is {best:.5} against {seed:.5} \
+             ({change}), its light {} against {} (mean luminance / the reference's)",
+            light(&summary.test_best.light),
+            light(&summary.test_seed.light)
+        )
+    });
     println!(
         "wrote     {}/{{{},{},{},{},{}}}",
         output.display(),
@@ -240,6 +257,9 @@ pub(crate) fn evolve_on(
         ev::FEATURES_FILE,
         ev::SUMMARY_FILE
     );
+    if let Some(line) = compared {
+        println!("{line}");
+    }
     Ok(())
 }
 
@@ -251,28 +271,42 @@ struct PresetValues {
     reference_spp: u32,
     radius: u32,
     pipeline: filterjit::pipeline::FilterPipeline,
-    seed_expr: &'static str,
+    seed_expr: String,
     objectives: filterjit::gp::Objectives,
     elites: usize,
     features: &'static [&'static str],
-    relative_to: Option<&'static str>,
+    relative_to: Option<String>,
     pool: filterjit::fitness::Pool,
     cost_model: fn() -> filterjit::cost::CostModel,
 }
 
+/// What a Mitsuba or engine G-buffer holds (colour, position, normal,
+/// albedo, depth, colour variance) plus the outlier rule's measures.
+const G_BUFFER: &[&str] = &[
+    "color",
+    "pixel",
+    "normal",
+    "texture",
+    "worldPosition",
+    "depth",
+    "colorVariance",
+    "localMean",
+    "localStd",
+    "clampedShare",
+];
+
 impl PresetValues {
     fn of(preset: Preset) -> PresetValues {
         use filterjit::fitness::Pool;
-        use filterjit::gp::Objectives;
-        let base = filterjit::gp::Settings::default();
-        let thesis = PresetValues {
-            gp: base.clone(),
+        use filterjit::gp::{Objectives, Settings};
+        let thesis = || PresetValues {
+            gp: Settings::default(),
             size: (64, 64),
             spp: 4,
             reference_spp: 1024,
             radius: 10,
             pipeline: filterjit::pipeline::FilterPipeline::WINDOW,
-            seed_expr: "@bilateral",
+            seed_expr: "@bilateral".into(),
             objectives: Objectives::Error,
             elites: 0,
             features: &[],
@@ -280,39 +314,45 @@ impl PresetValues {
             pool: Pool::Mean,
             cost_model: filterjit::cost::CostModel::table,
         };
+        let quick = || PresetValues {
+            gp: Settings { island_size: 25, generations: 15, ..Settings::default() },
+            size: (32, 32),
+            reference_spp: 512,
+            radius: 3,
+            ..thesis()
+        };
         match preset {
-            Preset::Thesis => thesis,
-            Preset::Quick => PresetValues {
-                gp: filterjit::gp::Settings { island_size: 25, generations: 15, ..base },
-                size: (32, 32),
-                reference_spp: 512,
-                radius: 3,
-                ..thesis
-            },
+            Preset::Thesis => thesis(),
+            Preset::Quick => quick(),
+            Preset::Shipped => {
+                let best = format!("@{}", filterjit::denoise::SHIPPED_BY_QUALITY[0]);
+                let pipeline = filterjit::corpus::resolve_with_pipeline(&best)
+                    .ok()
+                    .and_then(|r| r.pipeline)
+                    .expect("the best shipped filter is stored with its pipeline");
+                PresetValues {
+                    pipeline,
+                    features: G_BUFFER,
+                    relative_to: Some(best.clone()),
+                    seed_expr: best,
+                    pool: Pool::Guarded,
+                    elites: 2,
+                    ..quick()
+                }
+            }
             Preset::Realtime => PresetValues {
-                gp: filterjit::gp::Settings { island_size: 40, generations: 30, ..base },
+                gp: Settings { island_size: 40, generations: 30, ..Settings::default() },
                 size: (128, 128),
                 radius: 3,
                 pipeline: "outliers=2,demodulate,atrous3x3=4".parse().expect("a valid pipeline"),
-                seed_expr: "@svgfAtrous",
+                seed_expr: "@svgfAtrous".into(),
                 objectives: Objectives::ErrorCost,
                 elites: 2,
-                features: &[
-                    "color",
-                    "pixel",
-                    "normal",
-                    "texture",
-                    "worldPosition",
-                    "depth",
-                    "colorVariance",
-                    "localMean",
-                    "localStd",
-                    "clampedShare",
-                ],
-                relative_to: Some("@svgfAtrous"),
+                features: G_BUFFER,
+                relative_to: Some("@svgfAtrous".into()),
                 pool: Pool::Guarded,
                 cost_model: filterjit::cost::CostModel::lavapipe,
-                ..thesis
+                ..thesis()
             },
         }
     }
@@ -350,12 +390,12 @@ fn run_settings(args: &EvolveArgs) -> Result<(filterjit::gp::Settings, filterjit
     };
     let size = args.render.size.unwrap_or(preset.size);
     let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
-    let seed_text = resolve_expr(args.seed_expr.as_deref().unwrap_or(preset.seed_expr))?.to_string();
+    let seed_text = resolve_expr(args.seed_expr.as_deref().unwrap_or(&preset.seed_expr))?.to_string();
     let features: Vec<String> = match args.features.is_empty() {
         true => preset.features.iter().map(|f| f.to_string()).collect(),
         false => args.features.clone(),
     };
-    let relative_to = args.fitness_relative_to.as_deref().or(preset.relative_to);
+    let relative_to = args.fitness_relative_to.as_deref().or(preset.relative_to.as_deref());
     let config = ev::RunConfig {
         training: if args.scenes.is_empty() { builtin(render::Split::Train) } else { args.scenes.clone() },
         test: if args.test_scenes.is_empty() { builtin(render::Split::Test) } else { args.test_scenes.clone() },
@@ -414,11 +454,26 @@ mod tests {
     }
 
     #[test]
+    fn the_default_search_starts_from_the_best_shipped_filter_in_its_pipeline() {
+        let (settings, config) = settings_of(&[]);
+        assert_eq!((settings.island_size, settings.generations, settings.elites), (25, 15, 2));
+        assert_eq!((config.render.width, config.render.height), (32, 32));
+        let best = filterjit::corpus::resolve_with_pipeline(&format!("@{}", filterjit::denoise::SHIPPED_BY_QUALITY[0]))
+            .unwrap();
+        assert_eq!(config.seed_expr, best.expr.to_string());
+        assert_eq!(config.fitness.relative_to, Some(best.expr.to_string()));
+        assert_eq!(Some(config.pipeline), best.pipeline);
+        assert_eq!(config.fitness.pool, filterjit::fitness::Pool::Guarded);
+        let features = config.features.expect("a G-buffer's terminals");
+        assert!(features.contains("colorVariance") && !features.contains("directIllumination"), "{features:?}");
+    }
+
+    #[test]
     fn flags_override_the_preset_and_the_quick_preset_keeps_the_thesis_rules() {
         let (settings, config) = settings_of(&["--preset", "realtime", "--elites", "0", "--fitness-pool", "mean"]);
         assert_eq!(settings.elites, 0);
         assert_eq!(config.fitness.pool, filterjit::fitness::Pool::Mean);
-        let (settings, config) = settings_of(&[]);
+        let (settings, config) = settings_of(&["--preset", "quick"]);
         assert_eq!((settings.island_size, settings.generations, settings.elites), (25, 15, 0));
         assert_eq!(settings.objectives, filterjit::gp::Objectives::Error);
         assert!(config.fitness.is_thesis() && config.features.is_none());
