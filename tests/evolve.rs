@@ -687,3 +687,37 @@ fn test_results_state_each_outputs_light() {
     assert_eq!(results[0].light, kept);
     assert_eq!(evolve::mean_light(&results[0].light), Some((kept[0].unwrap() + kept[1].unwrap()) / 2.0));
 }
+
+/// `filterjit evolve` with no preset improves on the best shipped filter: it
+/// is the seed, scored against, and kept (2 elites), so the best's training
+/// fitness is at most the seed's (1), and the last line compares the two.
+#[test]
+fn the_default_search_starts_from_the_shipped_filter_and_says_how_it_compares() {
+    let (training, test) = datasets();
+    let dir = temp_dir("default-search");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_filterjit"))
+        .args(["evolve", "--islands", "2", "--island-size", "6", "--generations", "2", "--seed", "3"])
+        .arg("--scenes")
+        .arg(training)
+        .arg("--test-scenes")
+        .arg(test)
+        .arg("-o")
+        .arg(&dir)
+        .output()
+        .unwrap();
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stderr}");
+    let shipped = filterjit::denoise::SHIPPED_BY_QUALITY[0];
+    let said = format!("{stdout}{stderr}");
+    assert!(
+        said.contains("pipeline outliers=2,keep,demodulate,atrous3x3=4"),
+        "in the shipped filter's pipeline: {said}"
+    );
+    let last = stdout.lines().last().unwrap();
+    assert!(last.starts_with(&format!("against   @{shipped}, the seed: on the test scenes")), "{last}");
+    let fitness: f64 = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("fitness   ")?.split_whitespace().next()?.parse().ok())
+        .unwrap_or_else(|| panic!("a fitness line: {stdout}"));
+    assert!(fitness <= 1.0 + 1e-9, "never worse than the seed it is scored against: {fitness}");
+}

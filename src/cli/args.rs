@@ -201,7 +201,7 @@ pub(crate) enum Preset {
     /// Improve on the best shipped filter (`filter`'s default): seeded with it
     /// in its pipeline and scored against it (`--fitness-pool guarded`, 2
     /// elites, so the best is never worse than it on the training scenes), 4
-    /// islands of 25, 15 generations, 32x32 scenes, only what a Mitsuba or
+    /// islands of 16, 8 generations, 32x32 scenes, only what a Mitsuba or
     /// engine G-buffer holds plus the outlier rule's measures. About a minute
     /// on a 2-core CPU.
     Shipped,
@@ -240,7 +240,7 @@ pub(crate) struct RenderArgs {
     pub(crate) radius: Option<u32>,
     /// The filter pipeline around the expression: stages separated by commas,
     /// `outliers=K` (firefly pre-pass), `keep` (put back what it clamped, spread),
-    /// `demodulate` (filter colour/albedo), then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3) [window].
+    /// `demodulate` (filter colour/albedo), then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3) [evolve: the preset's (shipped: the best shipped filter's, quick, thesis: window); report, tune: the run's, else window].
     #[arg(long)]
     pub(crate) pipeline: Option<filterjit::pipeline::FilterPipeline>,
 }
@@ -325,16 +325,16 @@ pub(crate) struct EvolveArgs {
     pub(crate) test_scenes: Vec<String>,
     #[command(flatten)]
     pub(crate) render: RenderArgs,
-    /// The expression the population is seeded from [quick, thesis: @bilateral; realtime: @svgfAtrous].
+    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous3x3Keep; quick, thesis: @bilateral; realtime: @svgfAtrous].
     #[arg(long)]
     pub(crate) seed_expr: Option<String>,
-    /// Number of islands [quick, thesis, realtime: 4].
+    /// Number of islands [every preset: 4].
     #[arg(long)]
     pub(crate) islands: Option<usize>,
-    /// Individuals per island [quick: 25, thesis: 100, realtime: 40].
+    /// Individuals per island [shipped: 16, quick: 25, thesis: 100, realtime: 40].
     #[arg(long)]
     pub(crate) island_size: Option<usize>,
-    /// Generations to run: the stopping rule [quick: 15, thesis: 200, realtime: 30].
+    /// Generations to run: the stopping rule [shipped: 8, quick: 15, thesis: 200, realtime: 30].
     #[arg(long)]
     pub(crate) generations: Option<u32>,
     /// Longest expression, in nodes [75].
@@ -374,7 +374,7 @@ pub(crate) struct EvolveArgs {
     /// What the search minimises: `error` (the thesis) or `error,cost`:
     /// NSGA-II over error and the modelled cost per pixel (src/cost.rs); the
     /// run's result is a front of filters, fast to accurate (pareto.json)
-    /// [quick, thesis: error; realtime: error,cost].
+    /// [shipped, quick, thesis: error; realtime: error,cost].
     #[arg(long)]
     pub(crate) objectives: Option<filterjit::gp::Objectives>,
     /// With `--objectives error,cost`: how many islands (the first) keep
@@ -385,7 +385,7 @@ pub(crate) struct EvolveArgs {
     pub(crate) error_islands: Option<usize>,
     /// The best N of each island pass to the next generation unchanged, so
     /// that the best filter found is never lost to tournament chance
-    /// [quick, thesis: 0, the thesis's search, which can lose it; realtime: 2].
+    /// [quick, thesis: 0, the thesis's search, which can lose it; shipped, realtime: 2].
     #[arg(long)]
     pub(crate) elites: Option<usize>,
     /// Run directory: checkpoint, log, hall of fame, summary [default: runs/evolve, or
@@ -406,7 +406,7 @@ pub(crate) struct EvolveArgs {
     pub(crate) tiles: filterjit::fitness::Tiles,
     /// The weights of the modelled cost that `--objectives error,cost` trades
     /// against error, as `filterjit bench` measured them on this device
-    /// (its `bench.json`, or a file holding just its `cost_model`) [quick,
+    /// (its `bench.json`, or a file holding just its `cost_model`) [shipped, quick,
     /// thesis: the operator table's; realtime: data/cost-model-lavapipe.json]. Kept in the run's checkpoint.
     #[arg(long, value_name = "FILE")]
     pub(crate) cost_model: Option<PathBuf>,
@@ -420,21 +420,21 @@ pub(crate) struct EvolveArgs {
     /// The only features and variances the search may read, e.g.
     /// `color,pixel,normal,texture,worldPosition,depth` for filters meant for
     /// Mitsuba renders (no direct illumination, secondary albedo or per-feature
-    /// variances) [quick, thesis: every one the training scenes provide; realtime:
+    /// variances) [quick, thesis: every one the training scenes provide; shipped, realtime:
     /// color,pixel,normal,texture,worldPosition,depth,colorVariance and the outlier measures]. Kept in the checkpoint.
     #[arg(long, value_delimiter = ',', value_parser = parse_terminal)]
     pub(crate) features: Vec<String>,
     /// Divide each training scene's relMSE by this filter's relMSE on it
     /// (an expression, `@NAME` or `@FILE:NAME`; scored once, through the run's
     /// pipeline, on the same pixels) instead of by the noisy input's: fitness 1
-    /// is the baseline's [quick, thesis: the noisy input, the thesis's rule; realtime: @svgfAtrous]. Kept in the checkpoint.
+    /// is the baseline's [quick, thesis: the noisy input, the thesis's rule; shipped: the seed; realtime: @svgfAtrous]. Kept in the checkpoint.
     #[arg(long, value_name = "EXPR")]
     pub(crate) fitness_relative_to: Option<String>,
     /// Pool the per-scene ratios by their mean, by the worst scene (with
     /// `--fitness-relative-to`, a fitness below 1 is then better than the
     /// baseline on every training scene), or `guarded`: the mean plus every
     /// scene's loss against the baseline in full [quick, thesis: mean;
-    /// realtime: guarded]. Kept in the checkpoint.
+    /// shipped, realtime: guarded]. Kept in the checkpoint.
     #[arg(long, value_name = "mean|worst|guarded")]
     pub(crate) fitness_pool: Option<filterjit::fitness::Pool>,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).

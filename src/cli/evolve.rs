@@ -331,6 +331,8 @@ impl PresetValues {
                     .and_then(|r| r.pipeline)
                     .expect("the best shipped filter is stored with its pipeline");
                 PresetValues {
+                    // Smaller than quick's: a pass kernel takes longer to compile than a window's.
+                    gp: Settings { island_size: 16, generations: 8, ..Settings::default() },
                     pipeline,
                     features: G_BUFFER,
                     relative_to: Some(best.clone()),
@@ -456,7 +458,7 @@ mod tests {
     #[test]
     fn the_default_search_starts_from_the_best_shipped_filter_in_its_pipeline() {
         let (settings, config) = settings_of(&[]);
-        assert_eq!((settings.island_size, settings.generations, settings.elites), (25, 15, 2));
+        assert_eq!((settings.island_size, settings.generations, settings.elites), (16, 8, 2));
         assert_eq!((config.render.width, config.render.height), (32, 32));
         let best = filterjit::corpus::resolve_with_pipeline(&format!("@{}", filterjit::denoise::SHIPPED_BY_QUALITY[0]))
             .unwrap();
