@@ -416,6 +416,7 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
     let kept = block("evolvedAtrous3x3Keep");
     assert!(kept.contains("reads     color, normal, worldPosition, colorVariance, albedo"), "{kept}");
     assert!(kept.contains("default   1. choice"), "{kept}");
+    assert!(kept.contains("measured  relMSE") && kept.contains("x OIDN"), "its error on the public renders: {kept}");
     let free = block("evolvedAtrous128Keep");
     assert!(!free.contains("colorVariance") && free.contains("default   3. choice"), "{free}");
 }
