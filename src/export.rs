@@ -351,18 +351,9 @@ pub fn export_pipeline(
             let (code, entry_point) = translate(&module, &jit::prepass_wgsl(Some(format)), &interface, target)?;
             let params = jit::PrepassParams::of(pipeline, 0, 0);
             manifest.prepass = Some(Stage {
-                file: String::new(),
-                entry_point,
-                dispatch: manifest.dispatch.clone(),
-                uniform: Uniform {
-                    binding: interface.slot(Role::Params),
-                    size_bytes: interface.uniform_bytes,
-                    fields: interface.uniform.clone(),
-                },
                 uniform_values: [("k".to_string(), params.k as f64), ("stages".to_string(), params.stages as f64)]
                     .into(),
-                bindings: bindings(&interface, target, format, Stages::Prepass),
-                sequence: Vec::new(),
+                ..Stage::of(&interface, entry_point, &manifest.dispatch, target, format, Stages::Prepass)
             });
             manifest.filters = "prepared".into();
             Some(code)
@@ -375,17 +366,8 @@ pub fn export_pipeline(
             let module = jit::spread_module(Some(format)).map_err(jit::CompileError::from)?;
             let (code, entry_point) = translate(&module, &jit::spread_wgsl(Some(format)), &interface, target)?;
             manifest.spread = Some(Stage {
-                file: String::new(),
-                entry_point,
-                dispatch: manifest.dispatch.clone(),
-                uniform: Uniform {
-                    binding: interface.slot(Role::Params),
-                    size_bytes: interface.uniform_bytes,
-                    fields: interface.uniform.clone(),
-                },
-                uniform_values: BTreeMap::new(),
-                bindings: bindings(&interface, target, format, Stages::Spread),
                 sequence: spread_sequence(),
+                ..Stage::of(&interface, entry_point, &manifest.dispatch, target, format, Stages::Spread)
             });
             manifest.filters = "kept".into();
             Some(code)
@@ -402,6 +384,33 @@ pub fn export_pipeline(
         spread: spread.map(with_header),
         manifest,
     })
+}
+
+impl Stage {
+    /// A stage's shader with `interface`, dispatched once with no uniform
+    /// values of its own until the caller sets them.
+    fn of(
+        interface: &BindingInterface,
+        entry_point: String,
+        dispatch: &str,
+        target: Target,
+        format: OutputFormat,
+        stage: Stages,
+    ) -> Stage {
+        Stage {
+            file: String::new(),
+            entry_point,
+            dispatch: dispatch.to_string(),
+            uniform: Uniform {
+                binding: interface.slot(Role::Params),
+                size_bytes: interface.uniform_bytes,
+                fields: interface.uniform.clone(),
+            },
+            uniform_values: BTreeMap::new(),
+            bindings: bindings(interface, target, format, stage),
+            sequence: Vec::new(),
+        }
+    }
 }
 
 /// The spread's dispatches (`jit::SpreadParams::sequence`) with the images

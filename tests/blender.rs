@@ -4,27 +4,15 @@
 //! passes than filterjit expects.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 use filterjit::scene::exr_io;
 
+use crate::cli::{filterjit, relmse};
 use crate::common::temp_dir;
-
-fn filterjit(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_filterjit")).args(args).output().expect("the binary runs")
-}
 
 fn committed() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/cycles-64")
-}
-
-/// relMSE of the `noisy` and `filtered` rows of `filter`'s table.
-fn relmse(stdout: &str, row: &str) -> f64 {
-    let line = stdout
-        .lines()
-        .find(|l| l.split_whitespace().next() == Some(row))
-        .unwrap_or_else(|| panic!("no `{row}` row:\n{stdout}"));
-    line.split_whitespace().nth(1).unwrap().parse().unwrap()
 }
 
 /// `filterjit filter DATASET -o OUT` with no other flag: it picks a shipped

@@ -27,12 +27,15 @@ use crate::common::{mitsuba_sample, temp_dir};
 /// percent (a scale ignored: 0.19).
 const TOLERANCE: f64 = 1e-5;
 
-/// A page beside the module: the module, and everything the test fetches.
-fn page(dir: &Path) -> (Served, std::path::PathBuf) {
+/// A page served from `dir` with the module beside it (and whatever else
+/// the test wrote there to fetch), open in Chromium.
+fn page(dir: &Path) -> (Served, Browser) {
     std::fs::copy(Path::new(env!("CARGO_MANIFEST_DIR")).join("web/filterjit.js"), dir.join("filterjit.js")).unwrap();
     std::fs::write(dir.join("index.html"), "<!doctype html><title>filterjit test</title>\n").unwrap();
     let chromium = chromium("the browser tests").expect("checked by the caller");
-    (Served::folder(dir), chromium)
+    let served = Served::folder(dir);
+    let browser = Browser::open(&chromium, &format!("{}index.html", served.url), dir.join("profile"));
+    (served, browser)
 }
 
 /// A WebGPU device in the page, with WebGPU's default limits (none requested).
@@ -88,8 +91,7 @@ fn the_web_module_runs_an_exported_filter_as_filter_does() {
         json!({ "width": scene.width, "height": scene.height, "color": color, "inputs": inputs, "scales": scales });
     std::fs::write(dir.join("frame.json"), frame.to_string()).unwrap();
 
-    let (served, chromium) = page(&dir);
-    let mut browser = Browser::open(&chromium, &format!("{}index.html", served.url), dir.join("profile"));
+    let (_served, mut browser) = page(&dir);
     let seen = browser.evaluate(&format!(
         r#"(async () => {{
   const {{ loadFilter }} = await import("./filterjit.js");
@@ -162,8 +164,7 @@ fn every_shipped_export_compiles_through_tint_within_default_limits() {
         }
     }
     std::fs::write(dir.join("exports.json"), Value::Array(exports.clone()).to_string()).unwrap();
-    let (served, chromium) = page(&dir);
-    let mut browser = Browser::open(&chromium, &format!("{}index.html", served.url), dir.join("profile"));
+    let (_served, mut browser) = page(&dir);
     let seen = browser.evaluate(&format!(
         r#"(async () => {{
   const {{ createFilter }} = await import("./filterjit.js");

@@ -4,7 +4,7 @@ use std::process::{Command, Output};
 
 use crate::common::mitsuba_sample;
 
-fn filterjit(args: &[&str]) -> Output {
+pub(crate) fn filterjit(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_filterjit")).args(args).output().expect("the binary runs")
 }
 
@@ -13,7 +13,7 @@ fn text(bytes: &[u8]) -> String {
 }
 
 /// Value of a row of the error table, e.g. `filtered`.
-fn relmse(stdout: &str, row: &str) -> f64 {
+pub(crate) fn relmse(stdout: &str, row: &str) -> f64 {
     let line = stdout
         .lines()
         .find(|l| l.split_whitespace().next() == Some(row))
