@@ -134,6 +134,7 @@ fn report_with_oidn_in(out: &Path, program: &Path) -> serde_json::Value {
     assert!(md.contains("OIDN colour+albedo+normal"), "{md}");
     let crops = out.join("crops/mitsuba-cornell-64");
     assert!(crops.join("OIDN_colour.png").is_file() && crops.join("OIDN_colour_albedo_normal.png").is_file());
+    assert!(!out.join("oidn").exists(), "OIDN's working files are not left in the report");
     serde_json::from_str(&std::fs::read_to_string(out.join("results.json")).unwrap()).unwrap()
 }
 

@@ -326,6 +326,8 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             crop: [crop.0, crop.1, crop.2],
         });
     }
+    // OIDN's working files went scene by scene; their folder goes too (only if empty).
+    let _ = std::fs::remove_dir(output.join("oidn"));
     let peers = oidn.map_or(&[][..], |_| &[oidn::Auxiliary::ColorOnly, oidn::Auxiliary::AlbedoNormal][..]);
     // Every error against the peer a user would pick instead, scene by scene.
     let peer = oidn::Auxiliary::AlbedoNormal.method_name();
