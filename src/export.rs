@@ -414,21 +414,21 @@ impl Stage {
 }
 
 /// The spread's dispatches (`jit::SpreadParams::sequence`) with the images
-/// each binds: the first spreads the noisy colour minus the clamped
-/// `prepared`, later ones the previous output (ping-ponged between `spread0`
-/// and `spread1`), and the last writes `kept`, the colour the form filters.
+/// each binds: the noisy colour or a scratch image (`spread0`, `spread1`)
+/// in, a scratch image out, except the last, which writes `kept`, the colour
+/// the form filters.
 fn spread_sequence() -> Vec<StageDispatch> {
     let sequence = jit::SpreadParams::sequence(0, 0);
     let last = sequence.len() - 1;
     sequence
         .iter()
         .enumerate()
-        .map(|(n, params)| {
-            let source = match n {
-                0 => "color".to_string(),
-                n => format!("spread{}", (n - 1) % 2),
+        .map(|(n, jit::SpreadDispatch { params, source, target })| {
+            let source = match source {
+                jit::SpreadSource::Noisy => "color".to_string(),
+                jit::SpreadSource::Scratch(k) => format!("spread{k}"),
             };
-            let target = if n == last { "kept".to_string() } else { format!("spread{}", n % 2) };
+            let target = if n == last { "kept".to_string() } else { format!("spread{target}") };
             StageDispatch {
                 uniform_values: [("step".to_string(), params.step as f64), ("stage".to_string(), params.stage as f64)]
                     .into(),

@@ -7,7 +7,9 @@ use std::sync::OnceLock;
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
-use crate::jit::{BindingInterface, Input, PrepassParams, Role, SpreadParams, ValidatedModule, WORKGROUP};
+use crate::jit::{
+    BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, ValidatedModule, WORKGROUP,
+};
 use crate::lang::ScalarVar;
 use crate::pipeline::FilterPipeline;
 
@@ -107,10 +109,14 @@ impl Gpu {
             let interface = BindingInterface::spread(None);
             let mut buffers = [make("spread"), make("spread")];
             let sequence = SpreadParams::sequence(width, height);
-            let last = sequence.len() - 1;
-            for (n, params) in sequence.iter().enumerate() {
-                let uniform = self.params_buffer(interface.params(), "spread params", bytemuck::bytes_of(params));
-                let (source, target) = (&buffers[(n + 1) % 2], &buffers[n % 2]);
+            for dispatch in &sequence {
+                let uniform =
+                    self.params_buffer(interface.params(), "spread params", bytemuck::bytes_of(&dispatch.params));
+                let source = match dispatch.source {
+                    SpreadSource::Noisy => color,
+                    SpreadSource::Scratch(k) => &buffers[k],
+                };
+                let target = &buffers[dispatch.target];
                 let bind_group = self.bind_in_slot_order(
                     spread,
                     interface
@@ -118,7 +124,6 @@ impl Gpu {
                         .iter()
                         .map(|b| match b.role {
                             Role::Params => uniform.as_entire_binding(),
-                            Role::Color if n == 0 => color.as_entire_binding(),
                             Role::Color => source.as_entire_binding(),
                             Role::Image => prepared.as_entire_binding(),
                             Role::Modulation => modulation.as_entire_binding(),
@@ -133,7 +138,8 @@ impl Gpu {
                 pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
             }
             // The finishing dispatch wrote the colour the form filters.
-            std::mem::swap(&mut prepared, &mut buffers[last % 2]);
+            let last = sequence.last().expect("a spread has dispatches").target;
+            std::mem::swap(&mut prepared, &mut buffers[last]);
         }
         self.queue().submit([encoder.finish()]);
         self.wait("running the pre-pass")?;

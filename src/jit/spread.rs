@@ -32,9 +32,28 @@ pub struct SpreadParams {
     pub stage: u32,
 }
 
+/// What a spread dispatch reads as its `Color`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpreadSource {
+    /// The noisy colour (the first dispatch spreads it minus the clamped colour).
+    Noisy,
+    /// Scratch image k (0 or 1), which the dispatch before wrote.
+    Scratch(usize),
+}
+
+/// One dispatch of a spread: its uniform, the image it reads and the
+/// scratch image it writes. Two scratch images are ping-ponged; the last
+/// dispatch's is the colour the form filters.
+#[derive(Clone, Copy, Debug)]
+pub struct SpreadDispatch {
+    pub params: SpreadParams,
+    pub source: SpreadSource,
+    pub target: usize,
+}
+
 impl SpreadParams {
     /// The dispatches of one spread, in order.
-    pub fn sequence(width: u32, height: u32) -> Vec<SpreadParams> {
+    pub fn sequence(width: u32, height: u32) -> Vec<SpreadDispatch> {
         (0..pipeline::KEEP_PASSES)
             .map(|level| SpreadParams {
                 width,
@@ -43,6 +62,12 @@ impl SpreadParams {
                 stage: if level == 0 { SpreadStage::First } else { SpreadStage::Again } as u32,
             })
             .chain([SpreadParams { width, height, step: 0, stage: SpreadStage::Finish as u32 }])
+            .enumerate()
+            .map(|(n, params)| SpreadDispatch {
+                params,
+                source: if n == 0 { SpreadSource::Noisy } else { SpreadSource::Scratch((n - 1) % 2) },
+                target: n % 2,
+            })
             .collect()
     }
 }
