@@ -8,7 +8,7 @@
 
 use serde::Serialize;
 
-use super::kernel::{Input, KernelKind, KernelLayout, OutputFormat, Shape};
+use super::kernel::{Input, KernelKind, KernelLayout, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP};
 use crate::lang::ScalarVar;
 
 /// What a binding is for.
@@ -482,6 +482,20 @@ impl BindingInterface {
         self.bindings.iter().filter(|b| b.resource == Resource::SampledTexture).count()
     }
 
+    /// What every built-in kernel's template (pre-pass, spread, reduction)
+    /// is rendered with: the versions, the workgroup, and this interface's
+    /// `struct Params` and declarations. Each kernel adds its own constants.
+    pub fn template_context(&self) -> tera::Context {
+        let mut context = tera::Context::new();
+        context.insert("crate_version", env!("CARGO_PKG_VERSION"));
+        context.insert("template_version", &TEMPLATE_VERSION);
+        context.insert("workgroup_x", &WORKGROUP[0]);
+        context.insert("workgroup_y", &WORKGROUP[1]);
+        context.insert("params_struct", &self.params_struct());
+        context.insert("declarations", &self.declarations());
+        context
+    }
+
     /// The WGSL declarations of every binding, one line each.
     pub fn declarations(&self) -> String {
         self.bindings.iter().map(|b| b.declaration() + "\n").collect()
@@ -537,6 +551,14 @@ fn dense(roles: impl IntoIterator<Item = (Role, Resource, String)>) -> Vec<Bindi
 
 fn field(name: &str, ty: &'static str, offset: u32, meaning: &str) -> UniformField {
     UniformField { name: name.into(), ty, offset, meaning: meaning.into() }
+}
+
+/// A built-in kernel's template rendered: it ships in the binary, so a
+/// template that does not parse or render is filterjit's bug.
+pub fn render_builtin(name: &str, template: &str, context: &tera::Context) -> String {
+    let mut tera = tera::Tera::default();
+    tera.add_raw_template(name, template).unwrap_or_else(|e| panic!("built-in {name} template parses: {e}"));
+    tera.render(name, context).unwrap_or_else(|e| panic!("built-in {name} template renders: {e}"))
 }
 
 #[cfg(test)]

@@ -2,8 +2,8 @@
 //! for every pipeline, its stages chosen by the uniform, rendered from
 //! `templates/prepass.wgsl.tera` with the constants `crate::pipeline` owns.
 
-use super::interface::BindingInterface;
-use super::kernel::{wgsl_f32, OutputFormat, TEMPLATE_VERSION, WORKGROUP};
+use super::interface::{render_builtin, BindingInterface};
+use super::kernel::{wgsl_f32, OutputFormat};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 use crate::pipeline::{self, FilterPipeline};
 
@@ -33,22 +33,12 @@ impl PrepassParams {
 /// The pre-pass's WGSL: on storage buffers (filterjit's, `None`), or
 /// exported, on textures with outputs in `format`.
 pub fn prepass_wgsl(textures: Option<OutputFormat>) -> String {
-    let interface = BindingInterface::prepass(textures);
-    let mut tera = tera::Tera::default();
-    tera.add_raw_template("prepass", include_str!("../../templates/prepass.wgsl.tera"))
-        .expect("built-in pre-pass template parses");
-    let mut context = tera::Context::new();
-    context.insert("crate_version", env!("CARGO_PKG_VERSION"));
-    context.insert("template_version", &TEMPLATE_VERSION);
+    let mut context = BindingInterface::prepass(textures).template_context();
     context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
     context.insert("outlier_radius", &pipeline::OUTLIER_RADIUS);
     context.insert("albedo_floor", &wgsl_f32(pipeline::ALBEDO_FLOOR));
-    context.insert("workgroup_x", &WORKGROUP[0]);
-    context.insert("workgroup_y", &WORKGROUP[1]);
     context.insert("textures", &textures.is_some());
-    context.insert("params_struct", &interface.params_struct());
-    context.insert("declarations", &interface.declarations());
-    tera.render("prepass", &context).expect("built-in pre-pass template renders")
+    render_builtin("pre-pass", include_str!("../../templates/prepass.wgsl.tera"), &context)
 }
 
 /// The pre-pass, validated by naga; its bindings are checked against its interface.

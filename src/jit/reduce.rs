@@ -4,8 +4,7 @@
 //! out of the generated kernels is what makes them cheap to compile on
 //! software drivers, and the tree is the same for every member, fused or not.
 
-use super::interface::BindingInterface;
-use super::kernel::{TEMPLATE_VERSION, WORKGROUP};
+use super::interface::{render_builtin, BindingInterface};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 
 /// The reduction's uniform (`struct Params` of its module; fields in [`BindingInterface::reduce`]).
@@ -21,18 +20,11 @@ pub struct ReduceParams {
 
 /// The reduction's WGSL.
 pub fn reduce_wgsl() -> String {
-    let mut tera = tera::Tera::default();
-    tera.add_raw_template("reduce", include_str!("../../templates/reduce.wgsl.tera"))
-        .expect("built-in reduction template parses");
-    let mut context = tera::Context::new();
-    context.insert("crate_version", env!("CARGO_PKG_VERSION"));
-    context.insert("template_version", &TEMPLATE_VERSION);
-    context.insert("workgroup_x", &WORKGROUP[0]);
-    context.insert("workgroup_y", &WORKGROUP[1]);
-    let interface = BindingInterface::reduce();
-    context.insert("params_struct", &interface.params_struct());
-    context.insert("declarations", &interface.declarations());
-    tera.render("reduce", &context).expect("built-in reduction template renders")
+    render_builtin(
+        "reduction",
+        include_str!("../../templates/reduce.wgsl.tera"),
+        &BindingInterface::reduce().template_context(),
+    )
 }
 
 /// The reduction, validated by naga; its bindings are checked against its interface.

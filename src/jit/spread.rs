@@ -3,8 +3,8 @@
 //! pipeline, rendered from `templates/spread.wgsl.tera` with the stencil
 //! `crate::pipeline` owns; `cpu::spread` is its reference.
 
-use super::interface::BindingInterface;
-use super::kernel::{wgsl_f32, OutputFormat, TEMPLATE_VERSION, WORKGROUP};
+use super::interface::{render_builtin, BindingInterface};
+use super::kernel::{wgsl_f32, OutputFormat};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 use crate::pipeline;
 
@@ -75,22 +75,12 @@ impl SpreadParams {
 /// The spread kernel's WGSL: on storage buffers (filterjit's, `None`), or
 /// exported, on textures (its output `rgba32float` whatever `format` is).
 pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
-    let interface = BindingInterface::spread(textures);
-    let mut tera = tera::Tera::default();
-    tera.add_raw_template("spread", include_str!("../../templates/spread.wgsl.tera"))
-        .expect("built-in spread template parses");
-    let mut context = tera::Context::new();
-    context.insert("crate_version", env!("CARGO_PKG_VERSION"));
-    context.insert("template_version", &TEMPLATE_VERSION);
+    let mut context = BindingInterface::spread(textures).template_context();
     context.insert("passes", &pipeline::KEEP_PASSES);
     context.insert("half", &pipeline::KEEP_STENCIL.half_width());
     context.insert("stencil", &pipeline::KEEP_STENCIL.weights().iter().map(|h| wgsl_f32(*h)).collect::<Vec<_>>());
-    context.insert("workgroup_x", &WORKGROUP[0]);
-    context.insert("workgroup_y", &WORKGROUP[1]);
     context.insert("textures", &textures.is_some());
-    context.insert("params_struct", &interface.params_struct());
-    context.insert("declarations", &interface.declarations());
-    tera.render("spread", &context).expect("built-in spread template renders")
+    render_builtin("spread", include_str!("../../templates/spread.wgsl.tera"), &context)
 }
 
 /// The spread kernel, validated by naga; its bindings are checked against its interface.
