@@ -559,7 +559,7 @@ fn fitness_relative_to_a_baseline_pools_the_worst_scene() {
     let (training, test) = datasets();
     let dir = temp_dir("fitness-rule");
     let base = config(training, test);
-    let rule = FitnessRule { relative_to: Some(base.seed_expr.clone()), pool: Pool::Worst };
+    let rule = FitnessRule { relative_to: Some(base.seed_expr.clone()), pool: Pool::Worst, light_tolerance: None };
     let config = RunConfig {
         training: vec![training.display().to_string(), test.display().to_string()],
         fitness: rule.clone(),

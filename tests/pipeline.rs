@@ -198,6 +198,12 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
             let got = row[0].relmse;
             assert!((got - expected).abs() <= 1e-3 * expected, "{text} `{e}`: device {got}, CPU {expected}");
             assert_eq!(row[0].flags, 0);
+            // The light the fitness rule may charge: the output's mean luminance.
+            let (got, expected) = (row[0].luminance, metrics::mean_luminance(&rgb));
+            assert!(
+                expected > 0.0 && (got - expected).abs() <= 1e-4 * expected,
+                "{text} `{e}`: luminance {got}, CPU {expected}"
+            );
         }
     }
 }
@@ -327,6 +333,7 @@ fn fused_fitness_kernels_score_each_member_as_its_own_kernel() {
                 for (s, (x, y)) in a.iter().zip(b).enumerate() {
                     let what = format!("{text} r{radius} tiles {tiles:?} scene {s} `{e}`");
                     assert_eq!(x.relmse.to_bits(), y.relmse.to_bits(), "{what}: {} against {}", x.relmse, y.relmse);
+                    assert_eq!(x.luminance.to_bits(), y.luminance.to_bits(), "{what}: luminance");
                     assert_eq!(x.flags, y.flags, "{what}: domain flags");
                 }
             }
@@ -372,6 +379,8 @@ fn fitness_tiles_covering_a_scene_give_its_whole_image_error() {
             assert_eq!(w.len(), scenes.len(), "one error per scene, not per tile");
             for (s, (w, t)) in w.iter().zip(t).enumerate() {
                 assert!(close(w.relmse, t.relmse), "{text} scene {s} `{e}`: {} whole, {} on tiles", w.relmse, t.relmse);
+                let close_f32 = (w.luminance - t.luminance).abs() <= 1e-5 * w.luminance;
+                assert!(close_f32, "{text} scene {s} `{e}`: luminance {} whole, {} on tiles", w.luminance, t.luminance);
                 assert_eq!(w.flags, t.flags, "{text} scene {s} `{e}`: flags");
             }
         }
@@ -454,4 +463,49 @@ fn a_missing_input_is_a_data_error_naming_scene_and_input() {
     let err = gpu.filter(&jit::compile(&measured).unwrap(), &mut buffers, &scene, 2).unwrap_err();
     assert!(matches!(&err, GpuError::MissingInput(m) if m.missing == Missing::Measured(ScalarVar::LocalStd)), "{err}");
     assert!(err.to_string().contains("outliers=k"), "{err}");
+}
+
+/// With `light_tolerance`, each scene's error is charged for the light the
+/// candidate moved against the noisy input's, candidates' and the baseline's
+/// alike; without it fitness is relMSE alone.
+#[test]
+fn the_fitness_rule_charges_the_light_a_filter_moves() {
+    use filterjit::fitness::{charged, FitnessRule, Pool, Scorer, Settings};
+    let gpu = gpu();
+    let scenes = vec![scene_with_albedo(40, 32, 11), scene_with_albedo(32, 24, 12)];
+    // The clamp removes light and nothing puts it back.
+    let p = pipeline("outliers=2,window");
+    let expr = parse_expr("exp(-(distance2(color) / 0.05 + distance2(pixel) / 4))").unwrap();
+    let rule = |light_tolerance| FitnessRule { relative_to: None, pool: Pool::Mean, light_tolerance };
+    let settings = |light| Settings { devices: Some(1), rule: rule(light), ..Settings::for_pipeline(2, p.clone(), 1) };
+    let mut plain = Scorer::new(&gpu, scenes.clone(), &settings(None)).unwrap();
+    let mut charging = Scorer::new(&gpu, scenes.clone(), &settings(Some(0.05))).unwrap();
+    let errors = plain.errors(std::slice::from_ref(&expr)).unwrap().pop().unwrap();
+    let per_scene = errors.as_ref().unwrap();
+    let light = plain.light_moved(per_scene);
+    assert!(light.iter().all(|l| l.is_some_and(|l| l < 0.999)), "the clamp darkens: {light:?}");
+    // The device's luminance is the CPU's on the filtered image, over the noisy input's.
+    for (scene, l) in scenes.iter().zip(&light) {
+        let filtered = cpu::filter_pipeline(&expr, scene, &p, 2).unwrap();
+        let on_cpu = metrics::mean_luminance(&filtered.color) / metrics::mean_luminance(&scene.color);
+        assert!((l.unwrap() - on_cpu).abs() < 1e-4, "device {l:?}, CPU {on_cpu}");
+    }
+    let f_plain = plain.fitness(&errors).unwrap();
+    let charged_errors = charging.errors(std::slice::from_ref(&expr)).unwrap().pop().unwrap();
+    let f_charged = charging.fitness(&charged_errors).unwrap();
+    let expected: f64 = per_scene
+        .iter()
+        .zip(plain.noisy_relmse())
+        .zip(&light)
+        .map(|((e, noisy), l)| charged(e.relmse, l.unwrap(), 1.0, Some(0.05)) / noisy)
+        .sum::<f64>()
+        / scenes.len() as f64;
+    assert!(f_charged > f_plain, "{f_charged} against {f_plain}");
+    assert!((f_charged - expected).abs() <= 1e-9 * expected, "{f_charged} against {expected}");
+    // Relative to a baseline, the baseline is charged too: it scores exactly 1 against itself.
+    let against_itself =
+        Settings { rule: FitnessRule { relative_to: Some(expr.to_string()), ..rule(Some(0.05)) }, ..settings(None) };
+    let mut baseline = Scorer::new(&gpu, scenes, &against_itself).unwrap();
+    let own = baseline.errors(std::slice::from_ref(&expr)).unwrap().pop().unwrap();
+    assert_eq!(baseline.fitness(&own).unwrap(), 1.0);
 }

@@ -437,6 +437,14 @@ pub(crate) struct EvolveArgs {
     /// shipped, realtime: guarded]. Kept in the checkpoint.
     #[arg(long, value_name = "mean|worst|guarded")]
     pub(crate) fitness_pool: Option<filterjit::fitness::Pool>,
+    /// Charge each training scene's error for the light the filter moves:
+    /// relMSE × (1 + (ln(light) / TOL)²), light being the output's mean
+    /// luminance over the noisy input's on the scored pixels (0.05: a 5 %
+    /// loss doubles a scene's error), or `off` for relMSE alone [every
+    /// preset: off; docs/BENCHMARKS.md, "Fitness that charges the light"].
+    /// Kept in the checkpoint.
+    #[arg(long, value_name = "TOL|off")]
+    pub(crate) fitness_light: Option<LightTolerance>,
     /// Individuals per fitness kernel: auto = 12 on software adapters (their compile cost is per module), 1 on hardware GPUs; a number forces it (same results either way).
     #[arg(long, default_value = "auto")]
     pub(crate) fuse: filterjit::fitness::Fusion,
@@ -466,4 +474,21 @@ pub(crate) fn parse_size(text: &str) -> Result<(u32, u32), String> {
         return Err(format!("`{text}`: the size must be at least 1x1"));
     }
     Ok((w, h))
+}
+
+/// `--fitness-light`: a positive tolerance, or `off`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct LightTolerance(pub(crate) Option<f64>);
+
+impl std::str::FromStr for LightTolerance {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "off" {
+            return Ok(LightTolerance(None));
+        }
+        match s.parse::<f64>() {
+            Ok(t) if t.is_finite() && t > 0.0 => Ok(LightTolerance(Some(t))),
+            _ => Err(format!("`{s}` is neither a positive tolerance (e.g. 0.05) nor `off`")),
+        }
+    }
 }

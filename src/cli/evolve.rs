@@ -277,6 +277,7 @@ struct PresetValues {
     features: &'static [&'static str],
     relative_to: Option<String>,
     pool: filterjit::fitness::Pool,
+    light_tolerance: Option<f64>,
     cost_model: fn() -> filterjit::cost::CostModel,
 }
 
@@ -312,6 +313,7 @@ impl PresetValues {
             features: &[],
             relative_to: None,
             pool: Pool::Mean,
+            light_tolerance: None,
             cost_model: filterjit::cost::CostModel::table,
         };
         let quick = || PresetValues {
@@ -420,6 +422,7 @@ fn run_settings(args: &EvolveArgs) -> Result<(filterjit::gp::Settings, filterjit
         fitness: filterjit::fitness::FitnessRule {
             relative_to: relative_to.map(resolve_expr).transpose()?.map(|e| e.to_string()),
             pool: args.fitness_pool.unwrap_or(preset.pool),
+            light_tolerance: args.fitness_light.map_or(preset.light_tolerance, |t| t.0),
         },
     };
     Ok((settings, config))
@@ -482,5 +485,19 @@ mod tests {
         assert_eq!(config.pipeline, filterjit::pipeline::FilterPipeline::WINDOW);
         assert_eq!(config.seed_expr, resolve_expr("@bilateral").unwrap().to_string());
         assert_eq!(config.cost_model, filterjit::cost::CostModel::table());
+    }
+
+    #[test]
+    fn the_light_charge_is_off_unless_asked_and_takes_a_tolerance_or_off() {
+        assert_eq!(settings_of(&[]).1.fitness.light_tolerance, None);
+        let (_, config) = settings_of(&["--fitness-light", "0.05"]);
+        assert_eq!(config.fitness.light_tolerance, Some(0.05));
+        assert!(config.fitness.describe().contains("tolerance 0.05"), "{}", config.fitness.describe());
+        assert_eq!(settings_of(&["--fitness-light", "off"]).1.fitness.light_tolerance, None);
+        for bad in ["0", "-0.1", "inf", "some"] {
+            let flag = format!("--fitness-light={bad}");
+            let error = Cli::try_parse_from(["filterjit", "evolve", &flag]).err().expect("refused");
+            assert!(error.to_string().contains("neither a positive tolerance"), "{bad}: {error}");
+        }
     }
 }

@@ -4,7 +4,7 @@
 //! [`Settings`] value; it compiles each batch of expressions into fitness
 //! kernels ([`batch`]: fused where the device benefits, member by member
 //! where a group fails), spreads them over devices, and reduces each
-//! kernel's per-pixel terms to one relMSE per scene. Fitness tiles
+//! kernel's per-pixel terms to one relMSE (and output luminance) per scene. Fitness tiles
 //! ([`tiles`]) and their pooling ([`pool`]) and the rule that turns per-scene
 //! errors into one number ([`rule`]) are pure functions, tested without a
 //! device. Why a candidate has no fitness is data ([`Invalid`]); `gp` sees it
@@ -19,7 +19,7 @@ mod settings;
 pub mod tiles;
 
 pub use invalid::Invalid;
-pub use rule::{FitnessRule, Pool};
+pub use rule::{charged, FitnessRule, Pool};
 pub use scorer::{domain_flags, normalised_error, ScoredErrors, Scorer};
 pub use settings::{FitnessTiles, Fusion, Settings, Tiles, FUSED_ON_SOFTWARE};
 pub use tiles::TileSampling;

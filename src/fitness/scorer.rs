@@ -40,6 +40,9 @@ pub struct Scorer<'g> {
     /// relMSE of each scene's noisy input (over its tiles' interiors, with
     /// tiles): fitness divides by it (thesis 3.2.3).
     noisy: Vec<f64>,
+    /// Each scene's noisy input's mean luminance over the same pixels: the
+    /// light a candidate's is measured against where the rule charges it.
+    noisy_luminance: Vec<f64>,
     /// What each scene's relMSE is divided by before the scenes are pooled:
     /// `noisy`, or a baseline's relMSE on the same pixels (`settings.rule`).
     divisors: Vec<f64>,
@@ -88,7 +91,8 @@ impl<'g> Scorer<'g> {
             }
             device_scenes.push(on_device);
         }
-        let noisy = pool::noisy_per_scene(scored, &counted, pooling.as_ref(), scenes.len());
+        let noisy_errors = pool::noisy_per_scene(scored, &counted, pooling.as_ref(), scenes.len());
+        let noisy: Vec<f64> = noisy_errors.iter().map(|e| e.relmse).collect();
         let options = jit::LowerOptions {
             tile_radius: settings.workgroup_tiles.enabled(gpu).then_some(radius),
             ..jit::LowerOptions::ALL
@@ -102,6 +106,7 @@ impl<'g> Scorer<'g> {
             device_scenes,
             divisors: noisy.clone(),
             noisy,
+            noisy_luminance: noisy_errors.iter().map(|e| e.luminance).collect(),
             settings: settings.clone(),
             options,
             fuse: settings.fusion.members(gpu),
@@ -113,7 +118,7 @@ impl<'g> Scorer<'g> {
         Ok(scorer)
     }
 
-    /// The fitness baseline's relMSE per scene, which candidates' are divided by.
+    /// The fitness baseline's error per scene (charged as the rule says), which candidates' are divided by.
     fn baseline_errors(&mut self, text: &str) -> Result<Vec<f64>> {
         let baseline = crate::lang::parse_expr(text).map_err(|e| anyhow::anyhow!("fitness baseline:\n{e}"))?;
         let scored = self.errors(std::slice::from_ref(&baseline))?.pop().expect("one result");
@@ -128,7 +133,24 @@ impl<'g> Scorer<'g> {
         if let Some((scene, _)) = self.scenes.iter().zip(&per_scene).find(|(_, e)| !e.finite || !e.relmse.is_finite()) {
             bail!("the fitness baseline `{text}` has no finite error on scene `{}`", scene.name);
         }
-        Ok(per_scene.iter().map(|e| e.relmse).collect())
+        Ok(self.charged(&per_scene))
+    }
+
+    /// Each scene's error as the rule counts it: relMSE, charged for the
+    /// light moved where the rule says so.
+    fn charged(&self, per_scene: &[FitnessError]) -> Vec<f64> {
+        let tolerance = self.settings.rule.light_tolerance;
+        per_scene
+            .iter()
+            .zip(&self.noisy_luminance)
+            .map(|(e, noisy)| super::rule::charged(e.relmse, e.luminance, *noisy, tolerance))
+            .collect()
+    }
+
+    /// Each scene's light moved by a candidate: its mean luminance over the
+    /// noisy input's on the scored pixels (`None` where the input is black).
+    pub fn light_moved(&self, per_scene: &[FitnessError]) -> Vec<Option<f64>> {
+        per_scene.iter().zip(&self.noisy_luminance).map(|(e, n)| (*n > 0.0).then(|| e.luminance / n)).collect()
     }
 
     /// The settings the scorer was made with.
@@ -285,7 +307,7 @@ impl<'g> Scorer<'g> {
         if per_scene.iter().any(|e| !e.finite || !e.relmse.is_finite()) {
             return Err(Invalid::NonFinite);
         }
-        Ok(self.settings.rule.pool.combine(per_scene.iter().map(|e| e.relmse), &self.divisors))
+        Ok(self.settings.rule.pool.combine(self.charged(per_scene), &self.divisors))
     }
 }
 

@@ -1,7 +1,7 @@
 //! Fitness on the device: many kernels on many scenes in few submissions.
-//! A fitness kernel writes every pixel's relMSE terms for each of its
-//! members; the reduction kernel (`jit::reduce`) sums them per workgroup;
-//! only the partial sums come back.
+//! A fitness kernel writes every pixel's relMSE terms and output luminance
+//! for each of its members; the reduction kernel (`jit::reduce`) sums them
+//! per workgroup; only the partial sums come back.
 
 use std::sync::OnceLock;
 
@@ -62,6 +62,9 @@ impl Region {
 pub struct SceneError {
     /// relMSE (equation 3.5 without the m/2 factor) of the filtered image.
     pub relmse: f64,
+    /// The filtered image's mean luminance (`pipeline::luminance`) over the
+    /// same pixels: what the fitness rule's light is measured from.
+    pub luminance: f64,
     /// Union of the domain-error bits of every pixel.
     pub flags: u32,
     /// Whether the reduced error was finite.
@@ -111,16 +114,17 @@ impl FitnessScene {
         if self.terms.as_ref().is_some_and(|(_, _, room)| *room >= members) {
             return;
         }
-        let size = (self.width as u64 * self.height as u64 * members as u64 * 4).max(4);
-        let make = |label| {
+        let pixels = (self.width as u64 * self.height as u64 * members as u64).max(1);
+        let make = |label, bytes| {
             gpu.device().create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size,
+                size: pixels * bytes,
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             })
         };
-        self.terms = Some((make("fitness terms"), make("fitness pixel flags"), members));
+        // Each pixel's pair (relMSE terms, luminance), and its flags.
+        self.terms = Some((make("fitness terms", 8), make("fitness pixel flags", 4), members));
     }
 }
 
@@ -225,16 +229,17 @@ impl Gpu {
             }
         }
         let total = total.max(1);
-        let make = |label, usage| {
+        let make = |label, bytes| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
-                size: total * 4,
-                usage,
+                size: total * bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 mapped_at_creation: false,
             })
         };
-        let partials = make("partials", wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
-        let partial_flags = make("partial flags", wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC);
+        // A partial is a pair (relMSE terms, luminance); its flags one word.
+        let partials = make("partials", 8);
+        let partial_flags = make("partial flags", 4);
 
         // Parameters per scene, pass and band, shared by every kernel: (uniform, level, rows).
         let bands: Vec<Vec<(wgpu::Buffer, u32, u32)>> = scenes
@@ -299,9 +304,11 @@ impl Gpu {
                 }
                 // The member's terms are complete once every band (and pass) has run.
                 for member in 0..members[k] as usize {
-                    let offset = offsets[(first_member + member) * scenes.len() + s] * 4;
-                    let size = std::num::NonZeroU64::new(fs.groups() * 4);
-                    let partial = |buffer| wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size });
+                    let at = offsets[(first_member + member) * scenes.len() + s];
+                    let partial = |buffer, bytes| {
+                        let (offset, size) = (at * bytes, std::num::NonZeroU64::new(fs.groups() * bytes));
+                        wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size })
+                    };
                     let bind_group = self.bind_in_slot_order(
                         reduce,
                         reduce_interface
@@ -311,8 +318,8 @@ impl Gpu {
                                 Role::Params => reduce_params[s][member].as_entire_binding(),
                                 Role::Terms => terms.as_entire_binding(),
                                 Role::PixelFlags => pixel_flags.as_entire_binding(),
-                                Role::Output => partial(&partials),
-                                Role::Flags => partial(&partial_flags),
+                                Role::Output => partial(&partials, 8),
+                                Role::Flags => partial(&partial_flags, 4),
                                 other => unreachable!("the reduction has no {other:?} binding"),
                             })
                             .collect(),
@@ -342,34 +349,35 @@ impl Gpu {
         }
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("fitness readback"),
-            size: total * 8,
+            size: total * 12,
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        encoder.copy_buffer_to_buffer(&partials, 0, &staging, 0, total * 4);
-        encoder.copy_buffer_to_buffer(&partial_flags, 0, &staging, total * 4, total * 4);
+        encoder.copy_buffer_to_buffer(&partials, 0, &staging, 0, total * 8);
+        encoder.copy_buffer_to_buffer(&partial_flags, 0, &staging, total * 8, total * 4);
         let bytes = self.finish_and_read(encoder, scope, "evaluating fitness", &staging)?;
-        let sums: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes[..(total * 4) as usize]);
-        let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(total * 4) as usize..]);
+        let sums: Vec<[f32; 2]> = bytemuck::pod_collect_to_vec(&bytes[..(total * 8) as usize]);
+        let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(total * 8) as usize..]);
         let total_members = members.iter().sum::<u32>() as usize;
         let mut out = Vec::with_capacity(total_members);
         for k in 0..total_members {
             let mut row = Vec::with_capacity(scenes.len());
             for (s, fs) in scenes.iter().enumerate() {
                 let start = offsets[k * scenes.len() + s] as usize;
-                let (sum, bits, pixels) = match fs.counted {
-                    None => {
-                        let range = start..start + fs.groups() as usize;
-                        let sum: f64 = sums[range.clone()].iter().map(|v| *v as f64).sum();
-                        (sum, flags[range].iter().fold(0, |a, b| a | b), fs.width * fs.height)
-                    }
-                    Some(region) => {
-                        region.partials(fs.width).fold((0.0, 0, region.width * region.height), |(sum, bits, n), w| {
-                            (sum + sums[start + w] as f64, bits | flags[start + w], n)
-                        })
-                    }
+                let counted: Vec<usize> = match fs.counted {
+                    None => (start..start + fs.groups() as usize).collect(),
+                    Some(region) => region.partials(fs.width).map(|w| start + w).collect(),
                 };
-                row.push(SceneError { relmse: sum / pixels as f64, flags: bits, finite: sum.is_finite() });
+                let pixels = fs.counted.map_or(fs.width * fs.height, |r| r.width * r.height) as f64;
+                let (sum, luminance, bits) = counted.iter().fold((0.0f64, 0.0f64, 0u32), |(e, l, bits), &w| {
+                    (e + sums[w][0] as f64, l + sums[w][1] as f64, bits | flags[w])
+                });
+                row.push(SceneError {
+                    relmse: sum / pixels,
+                    luminance: luminance / pixels,
+                    flags: bits,
+                    finite: sum.is_finite() && luminance.is_finite(),
+                });
             }
             out.push(row);
         }

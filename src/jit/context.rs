@@ -79,6 +79,8 @@ pub(super) struct KernelContext {
     pub declarations: String,
     pub params_struct: String,
     pub relmse_epsilon: String,
+    /// The luminance weights (`pipeline::LUMINANCE`): a fitness kernel also writes its output's luminance.
+    pub luminance: [String; 3],
     pub workgroup_x: u32,
     pub workgroup_y: u32,
     /// An exported shader's texel format.

@@ -67,6 +67,8 @@ impl TexelFormat {
 pub enum Element {
     F32,
     U32,
+    /// A fitness kernel's per-pixel pair: relMSE terms and the output's luminance.
+    Vec2F32,
     Vec4F32,
 }
 
@@ -75,6 +77,7 @@ impl Element {
         match self {
             Element::F32 => "f32",
             Element::U32 => "u32",
+            Element::Vec2F32 => "vec2<f32>",
             Element::Vec4F32 => "vec4<f32>",
         }
     }
@@ -82,6 +85,7 @@ impl Element {
     pub fn bytes(self) -> u32 {
         match self {
             Element::F32 | Element::U32 => 4,
+            Element::Vec2F32 => 8,
             Element::Vec4F32 => 16,
         }
     }
@@ -246,7 +250,7 @@ impl BindingInterface {
             }
             KernelKind::Fitness => {
                 // Per pixel and member; `jit::reduce` sums them per workgroup.
-                roles.push((Role::Output, written(Element::F32), "buf_terms".into()));
+                roles.push((Role::Output, written(Element::Vec2F32), "buf_terms".into()));
                 roles.push((Role::Flags, written(Element::U32), "buf_pixel_flags".into()));
             }
             KernelKind::Export(format) => {
@@ -420,9 +424,9 @@ impl BindingInterface {
         let bindings = dense(
             [
                 (Role::Params, own_params(), "params"),
-                (Role::Terms, read(Element::F32), "buf_terms"),
+                (Role::Terms, read(Element::Vec2F32), "buf_terms"),
                 (Role::PixelFlags, read(Element::U32), "buf_pixel_flags"),
-                (Role::Output, written(Element::F32), "buf_partials"),
+                (Role::Output, written(Element::Vec2F32), "buf_partials"),
                 (Role::Flags, written(Element::U32), "buf_partial_flags"),
             ]
             .map(|(role, resource, ident)| (role, resource, ident.to_string())),

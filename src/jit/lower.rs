@@ -172,6 +172,7 @@ fn lower_members(
         bindings,
         declarations: interface.declarations(),
         relmse_epsilon: wgsl_f32(crate::metrics::RELMSE_EPSILON),
+        luminance: crate::pipeline::LUMINANCE.map(wgsl_f32),
         params_struct: interface.params_struct(),
         workgroup_x: WORKGROUP[0],
         workgroup_y: WORKGROUP[1],

@@ -8,16 +8,15 @@ use super::kernel::{wgsl_f32, OutputFormat};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 use crate::pipeline;
 
-/// What one dispatch of the spread kernel does (`params.stage`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u32)]
-pub enum SpreadStage {
-    /// Spread raw colour − clamped colour.
-    First = 0,
-    /// Spread the previous pass's output.
-    Again = 1,
-    /// (spread + clamped) / modulation: the colour the form filters.
-    Finish = 2,
+/// What one pass of the spread kernel does: bits of `params.stage`.
+pub struct SpreadStage;
+
+impl SpreadStage {
+    /// The first pass spreads raw colour − clamped colour; later ones the previous pass's output.
+    pub const FIRST: u32 = 1;
+    /// The last pass writes (spread + clamped) / modulation, the colour the
+    /// form filters, instead of the spread alone: no dispatch of its own.
+    pub const FINISH: u32 = 2;
 }
 
 /// The spread kernel's uniform (`struct Params` of its module; fields in [`BindingInterface::spread`]).
@@ -28,7 +27,7 @@ pub struct SpreadParams {
     pub height: u32,
     /// Pixel step between taps: 2^pass.
     pub step: u32,
-    /// A [`SpreadStage`].
+    /// [`SpreadStage`] bits.
     pub stage: u32,
 }
 
@@ -54,14 +53,15 @@ pub struct SpreadDispatch {
 impl SpreadParams {
     /// The dispatches of one spread, in order.
     pub fn sequence(width: u32, height: u32) -> Vec<SpreadDispatch> {
+        let last = pipeline::KEEP_PASSES - 1;
         (0..pipeline::KEEP_PASSES)
             .map(|level| SpreadParams {
                 width,
                 height,
                 step: pipeline::FilterPipeline::step(level),
-                stage: if level == 0 { SpreadStage::First } else { SpreadStage::Again } as u32,
+                stage: if level == 0 { SpreadStage::FIRST } else { 0 }
+                    | if level == last { SpreadStage::FINISH } else { 0 },
             })
-            .chain([SpreadParams { width, height, step: 0, stage: SpreadStage::Finish as u32 }])
             .enumerate()
             .map(|(n, params)| SpreadDispatch {
                 params,
@@ -80,6 +80,10 @@ pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
     context.insert("half", &pipeline::KEEP_STENCIL.half_width());
     context.insert("stencil", &pipeline::KEEP_STENCIL.weights().iter().map(|h| wgsl_f32(*h)).collect::<Vec<_>>());
     context.insert("textures", &textures.is_some());
+    let half = pipeline::KEEP_STENCIL.half_width() as i32;
+    context.insert("offsets", &(-half..=half).collect::<Vec<i32>>());
+    context.insert("first", &SpreadStage::FIRST);
+    context.insert("finish", &SpreadStage::FINISH);
     render_builtin("spread", include_str!("../../templates/spread.wgsl.tera"), &context)
 }
 
