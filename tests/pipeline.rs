@@ -477,7 +477,7 @@ fn the_fitness_rule_charges_the_light_a_filter_moves() {
     let p = pipeline("outliers=2,window");
     let expr = parse_expr("exp(-(distance2(color) / 0.05 + distance2(pixel) / 4))").unwrap();
     let rule = |light_tolerance| FitnessRule { relative_to: None, pool: Pool::Mean, light_tolerance };
-    let settings = |light| Settings { devices: Some(1), rule: rule(light), ..Settings::for_pipeline(2, p.clone(), 1) };
+    let settings = |light| Settings { devices: Some(1), rule: rule(light), ..Settings::for_pipeline(2, p, 1) };
     let mut plain = Scorer::new(&gpu, scenes.clone(), &settings(None)).unwrap();
     let mut charging = Scorer::new(&gpu, scenes.clone(), &settings(Some(0.05))).unwrap();
     let errors = plain.errors(std::slice::from_ref(&expr)).unwrap().pop().unwrap();

@@ -80,7 +80,7 @@ pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
     context.insert("half", &pipeline::KEEP_STENCIL.half_width());
     context.insert("stencil", &pipeline::KEEP_STENCIL.weights().iter().map(|h| wgsl_f32(*h)).collect::<Vec<_>>());
     context.insert("textures", &textures.is_some());
-    let half = pipeline::KEEP_STENCIL.half_width() as i32;
+    let half = pipeline::KEEP_STENCIL.half_width();
     context.insert("offsets", &(-half..=half).collect::<Vec<i32>>());
     context.insert("first", &SpreadStage::FIRST);
     context.insert("finish", &SpreadStage::FINISH);
