@@ -88,8 +88,13 @@ def test_a_mitsuba_render_is_denoised_below_its_noisy_error(render):
     assert np.isfinite(out).all()
     noisy = filterjit.relmse(render["color"], render["reference"])
     ours = filterjit.relmse(out, render["reference"])
-    print(f"relMSE noisy {noisy:.4f}, filterjit {ours:.4f} ({filterjit.choose(list(inputs(render)))[0]})")
-    assert ours < 0.5 * noisy, (ours, noisy)
+    # The light the filter moved: its mean luminance over the noisy input's.
+    moved = filterjit.light(out, render["color"])
+    print(f"relMSE noisy {noisy:.4f}, filterjit {ours:.4f} ({filterjit.choose(list(inputs(render)))[0]}), light {moved:.3f}")
+    # The default is chosen for keeping the light as well as for its error
+    # (docs/BENCHMARKS.md, "Fitness that charges the light"): both count.
+    assert ours < 0.9 * noisy, (ours, noisy)
+    assert abs(moved - 1) < 0.03, moved
     assert filterjit.flip(out, render["reference"]) < filterjit.flip(render["color"], render["reference"])
     light = filterjit.light(out, render["reference"])
     print(f"light (mean luminance / reference's): noisy {filterjit.light(render['color'], render['reference']):.3f}, filterjit {light:.3f}")

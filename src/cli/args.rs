@@ -203,7 +203,8 @@ pub(crate) enum Preset {
     /// elites, so the best is never worse than it on the training scenes), 4
     /// islands of 16, 8 generations, 32x32 scenes, only what a Mitsuba or
     /// engine G-buffer holds plus the outlier rule's measures. About a minute
-    /// on a 2-core CPU.
+    /// on a 2-core CPU once the scenes are rendered (a minute and a half with
+    /// the first renders).
     Shipped,
     /// 4 islands of 25, 15 generations, 32x32 scenes, radius 3, the thesis's
     /// window and rules, seeded with `@bilateral`: minutes on a 2-core CPU.
