@@ -310,6 +310,10 @@ pub(crate) struct TuneArgs {
     /// shipped one, e.g. `@svgfAtrous`) instead of the cross-bilateral's sigmas.
     #[arg(long, value_name = "EXPR")]
     pub(crate) expr: Option<String>,
+    /// Charge each training scene's error for the light the filter moves, as
+    /// `evolve --fitness-light` does [off].
+    #[arg(long, value_name = "TOL|off")]
+    pub(crate) fitness_light: Option<LightTolerance>,
 }
 
 /// Raw `evolve` flags; unset ones take the preset's values.
@@ -326,7 +330,7 @@ pub(crate) struct EvolveArgs {
     pub(crate) test_scenes: Vec<String>,
     #[command(flatten)]
     pub(crate) render: RenderArgs,
-    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous3x3Keep; quick, thesis: @bilateral; realtime: @svgfAtrous].
+    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous128Keep; quick, thesis: @bilateral; realtime: @svgfAtrous].
     #[arg(long)]
     pub(crate) seed_expr: Option<String>,
     /// Number of islands [every preset: 4].

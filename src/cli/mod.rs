@@ -162,7 +162,14 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             let gpu = gpu::Gpu::open(&env.adapter)?;
             let context = scene_context(&args.scene)?;
             let start = args.expr.as_deref().map(corpus::resolve).transpose()?;
-            let tuned = report::tune_on_training(&gpu, env, &args.scene, &context, start.as_ref().map(|(_, e)| e))?;
+            let tuned = report::tune_on_training(
+                &gpu,
+                env,
+                &args.scene,
+                &context,
+                start.as_ref().map(|(_, e)| e),
+                args.fitness_light.and_then(|t| t.0),
+            )?;
             let name = match &start {
                 None => "crossBilateralTuned".to_string(),
                 Some((Some(name), _)) => format!("{name}Tuned"),

@@ -65,7 +65,7 @@ pub(crate) fn tune_baseline(
     args: &SceneArgs,
     context: &SceneContext,
 ) -> Result<filterjit::tune::Tuned> {
-    tune_on_training(gpu, env, args, context, None)
+    tune_on_training(gpu, env, args, context, None, None)
 }
 
 /// Tune the cross-bilateral's sigmas, or every literal of `start`, on the training scenes.
@@ -75,15 +75,17 @@ pub(crate) fn tune_on_training(
     args: &SceneArgs,
     context: &SceneContext,
     start: Option<&lang::Expr>,
+    light_tolerance: Option<f64>,
 ) -> Result<filterjit::tune::Tuned> {
     let datasets = datasets::resolve(gpu, &context.training, &context.render, &env.cache, &mut render_progress())?;
     let (features, variances) = datasets::common_terminals(&datasets)?;
     let scenes = datasets::load_all(&datasets, &features, &variances, &context.pipeline)?;
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let scoring = filterjit::fitness::Settings::for_pipeline(context.radius, context.pipeline, threads);
+    let mut scoring = filterjit::fitness::Settings::for_pipeline(context.radius, context.pipeline, threads);
+    scoring.rule.light_tolerance = light_tolerance;
     let mut evaluator = filterjit::fitness::Scorer::new(gpu, scenes, &scoring)?;
     eprintln!(
-        "tune      {} on {} ({}x{}, radius {}, pipeline {})",
+        "tune      {} on {} ({}x{}, radius {}, pipeline {}; fitness: {})",
         match start {
             None => "cross-bilateral sigmas".to_string(),
             Some(e) => format!("the literals of `{e}`"),
@@ -92,7 +94,8 @@ pub(crate) fn tune_on_training(
         context.render.width,
         context.render.height,
         context.radius,
-        context.pipeline
+        context.pipeline,
+        scoring.rule.describe()
     );
     let mut on_step = |sigmas: &filterjit::tune::Sigmas, fitness: f64| {
         eprintln!(
@@ -105,7 +108,7 @@ pub(crate) fn tune_on_training(
         Some(e) => filterjit::tune::tune_literals(&mut evaluator, e, args.sweeps, &mut on_step)?,
     };
     eprintln!(
-        "tuned     training relMSE/noisy {:.5} (hand-set {:.5}), {} candidates",
+        "tuned     training fitness {:.5} (the starting values' {:.5}), {} candidates",
         tuned.fitness, tuned.hand_set_fitness, tuned.evaluated
     );
     Ok(tuned)
