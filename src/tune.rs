@@ -65,8 +65,11 @@ fn round3(value: f64) -> f64 {
 pub struct Tuned {
     pub sigmas: Sigmas,
     pub expr: String,
-    /// Mean over the training scenes of relMSE / noisy relMSE.
+    /// The training fitness by `rule` (the thesis's: mean over the training
+    /// scenes of relMSE / noisy relMSE).
     pub fitness: f64,
+    /// The fitness rule, in words.
+    pub rule: String,
     /// The hand-set sigmas' fitness on the same scenes.
     pub hand_set_fitness: f64,
     pub evaluated: usize,
@@ -199,6 +202,7 @@ fn descend(
         expr: build(&best).to_string(),
         sigmas: named(&best),
         fitness: best_fitness,
+        rule: evaluator.settings().rule.describe(),
         hand_set_fitness,
         evaluated: memo.len(),
         scenes: evaluator.scenes().iter().map(|s| s.name.clone()).collect(),

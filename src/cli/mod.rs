@@ -178,13 +178,14 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             println!("{name} = {}", tuned.expr);
             if let Some(path) = &args.output {
                 let text = format!(
-                    "# tuned on {} at {}x{}, radius {}: training relMSE/noisy {:.5} (hand-set {:.5})\n{} {}\n{name} = {}\n",
+                    "# tuned on {} at {}x{}, radius {}: training fitness {:.5} (the starting values' {:.5}; {})\n{} {}\n{name} = {}\n",
                     tuned.scenes.join(", "),
                     context.render.width,
                     context.render.height,
                     context.radius,
                     tuned.fitness,
                     tuned.hand_set_fitness,
+                    tuned.rule,
                     corpus::PIPELINE_PREFIX,
                     context.pipeline,
                     tuned.expr
