@@ -102,13 +102,18 @@ pub struct FitnessRule {
 /// adds 4 %. A black noisy input charges nothing; a black output is charged
 /// as one a million times darker.
 pub fn charged(relmse: f64, luminance: f64, noisy_luminance: f64, tolerance: Option<f64>) -> f64 {
-    match tolerance {
-        Some(tolerance) if noisy_luminance > 0.0 && tolerance > 0.0 => {
-            let light = (luminance / noisy_luminance).clamp(1e-6, 1e6);
-            relmse * (1.0 + (light.ln() / tolerance).powi(2))
+    match (tolerance, light_moved(luminance, noisy_luminance)) {
+        (Some(tolerance), Some(light)) if tolerance > 0.0 => {
+            relmse * (1.0 + (light.clamp(1e-6, 1e6).ln() / tolerance).powi(2))
         }
         _ => relmse,
     }
+}
+
+/// The light a filter moved: its output's mean luminance over the noisy
+/// input's (`None` where the input is black).
+pub fn light_moved(luminance: f64, noisy_luminance: f64) -> Option<f64> {
+    (noisy_luminance > 0.0).then(|| luminance / noisy_luminance)
 }
 
 impl FitnessRule {

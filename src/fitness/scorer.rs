@@ -150,7 +150,7 @@ impl<'g> Scorer<'g> {
     /// Each scene's light moved by a candidate: its mean luminance over the
     /// noisy input's on the scored pixels (`None` where the input is black).
     pub fn light_moved(&self, per_scene: &[FitnessError]) -> Vec<Option<f64>> {
-        per_scene.iter().zip(&self.noisy_luminance).map(|(e, n)| (*n > 0.0).then(|| e.luminance / n)).collect()
+        per_scene.iter().zip(&self.noisy_luminance).map(|(e, n)| super::rule::light_moved(e.luminance, *n)).collect()
     }
 
     /// The settings the scorer was made with.

@@ -364,14 +364,14 @@ impl Gpu {
             let mut row = Vec::with_capacity(scenes.len());
             for (s, fs) in scenes.iter().enumerate() {
                 let start = offsets[k * scenes.len() + s] as usize;
-                let counted: Vec<usize> = match fs.counted {
-                    None => (start..start + fs.groups() as usize).collect(),
-                    Some(region) => region.partials(fs.width).map(|w| start + w).collect(),
+                let add = |(e, l, bits): (f64, f64, u32), w: usize| {
+                    (e + sums[w][0] as f64, l + sums[w][1] as f64, bits | flags[w])
+                };
+                let (sum, luminance, bits) = match fs.counted {
+                    None => (start..start + fs.groups() as usize).fold((0.0, 0.0, 0), add),
+                    Some(region) => region.partials(fs.width).map(|w| start + w).fold((0.0, 0.0, 0), add),
                 };
                 let pixels = fs.counted.map_or(fs.width * fs.height, |r| r.width * r.height) as f64;
-                let (sum, luminance, bits) = counted.iter().fold((0.0f64, 0.0f64, 0u32), |(e, l, bits), &w| {
-                    (e + sums[w][0] as f64, l + sums[w][1] as f64, bits | flags[w])
-                });
                 row.push(SceneError {
                     relmse: sum / pixels,
                     luminance: luminance / pixels,

@@ -76,11 +76,11 @@ impl SpreadParams {
 /// exported, on textures (its output `rgba32float` whatever `format` is).
 pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
     let mut context = BindingInterface::spread(textures).template_context();
+    let half = pipeline::KEEP_STENCIL.half_width();
     context.insert("passes", &pipeline::KEEP_PASSES);
-    context.insert("half", &pipeline::KEEP_STENCIL.half_width());
+    context.insert("half", &half);
     context.insert("stencil", &pipeline::KEEP_STENCIL.weights().iter().map(|h| wgsl_f32(*h)).collect::<Vec<_>>());
     context.insert("textures", &textures.is_some());
-    let half = pipeline::KEEP_STENCIL.half_width();
     context.insert("offsets", &(-half..=half).collect::<Vec<i32>>());
     context.insert("first", &SpreadStage::FIRST);
     context.insert("finish", &SpreadStage::FINISH);
