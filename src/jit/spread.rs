@@ -78,10 +78,11 @@ pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
     let mut context = BindingInterface::spread(textures).template_context();
     let half = pipeline::KEEP_STENCIL.half_width();
     context.insert("passes", &pipeline::KEEP_PASSES);
-    context.insert("half", &half);
-    context.insert("stencil", &pipeline::KEEP_STENCIL.weights().iter().map(|h| wgsl_f32(*h)).collect::<Vec<_>>());
     context.insert("textures", &textures.is_some());
-    context.insert("offsets", &(-half..=half).collect::<Vec<i32>>());
+    // Each tap's offset and weight h(offset), across the stencil in order.
+    let weights = pipeline::KEEP_STENCIL.weights();
+    let taps: Vec<(i32, String)> = (-half..=half).map(|d| (d, wgsl_f32(weights[d.unsigned_abs() as usize]))).collect();
+    context.insert("taps", &taps);
     context.insert("first", &SpreadStage::FIRST);
     context.insert("finish", &SpreadStage::FINISH);
     render_builtin("spread", include_str!("../../templates/spread.wgsl.tera"), &context)
