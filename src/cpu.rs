@@ -153,7 +153,6 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
         (true, Some(albedo)) => Some(albedo.iter().map(|a| pipeline::modulation(f64s(*a))).collect::<Vec<_>>()),
         (true, None) => return Err(MissingInput { scene: scene.name.clone(), missing: crate::scene::Missing::Albedo }),
     };
-    let r = pipeline::OUTLIER_RADIUS as i64;
     let mut clamped: Vec<[f64; 3]> = Vec::with_capacity(scene.pixels());
     let mut local: [Vec<f32>; 3] = Default::default();
     for y in 0..h {
@@ -162,9 +161,9 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
             let mut c = f64s(scene.color[i]);
             let mut measured = [0.0f64; 3];
             if let Some(pipeline::Outliers { k, .. }) = pipeline.outliers {
-                let neighbours: Vec<f64> = (y - r..=y + r)
-                    .flat_map(|yj| (x - r..=x + r).map(move |xj| (xj, yj)))
-                    .filter(|&(xj, yj)| (xj, yj) != (x, y) && xj >= 0 && yj >= 0 && xj < w && yj < h)
+                let neighbours: Vec<f64> = pipeline::outlier_neighbours()
+                    .map(|[dx, dy]| (x + dx as i64, y + dy as i64))
+                    .filter(|&(xj, yj)| xj >= 0 && yj >= 0 && xj < w && yj < h)
                     .map(|(xj, yj)| pipeline::luminance(f64s(scene.color[(yj * w + xj) as usize])))
                     .collect();
                 if !neighbours.is_empty() {

@@ -21,6 +21,14 @@ pub const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
 /// The outlier rule compares a pixel with its (2R+1)² neighbourhood, itself excluded.
 pub const OUTLIER_RADIUS: u32 = 2;
 
+/// The outlier rule's neighbourhood: the offsets (dx, dy) of the (2R+1)²
+/// square without its centre, row by row, the order both the CPU reference
+/// and the pre-pass kernel sum in.
+pub fn outlier_neighbours() -> impl Iterator<Item = [i32; 2]> {
+    let r = OUTLIER_RADIUS as i32;
+    (-r..=r).flat_map(move |dy| (-r..=r).map(move |dx| [dx, dy])).filter(|&d| d != [0, 0])
+}
+
 /// Demodulation divides by the albedo clipped to [0, 1] and raised to at
 /// least this, per channel: continuous, so that emitters and escaped rays
 /// (albedo 0) neither blow up nor lose their colour, and albedo above 1

@@ -36,11 +36,8 @@ pub fn prepass_wgsl(textures: Option<OutputFormat>) -> String {
     let mut context = BindingInterface::prepass(textures).template_context();
     context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
     context.insert("outlier_radius", &pipeline::OUTLIER_RADIUS);
-    // The neighbourhood without its centre, row by row (the template unrolls it).
-    let r = pipeline::OUTLIER_RADIUS as i32;
-    let neighbours: Vec<[i32; 2]> =
-        (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| [dx, dy])).filter(|&d| d != [0, 0]).collect();
-    context.insert("neighbours", &neighbours);
+    // The template unrolls the neighbourhood, in its order.
+    context.insert("neighbours", &pipeline::outlier_neighbours().collect::<Vec<_>>());
     context.insert("albedo_floor", &wgsl_f32(pipeline::ALBEDO_FLOOR));
     context.insert("textures", &textures.is_some());
     render_builtin("pre-pass", include_str!("../../templates/prepass.wgsl.tera"), &context)

@@ -80,8 +80,7 @@ pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
     context.insert("passes", &pipeline::KEEP_PASSES);
     context.insert("textures", &textures.is_some());
     // Each tap's offset and weight h(offset), across the stencil in order.
-    let weights = pipeline::KEEP_STENCIL.weights();
-    let taps: Vec<(i32, String)> = (-half..=half).map(|d| (d, wgsl_f32(weights[d.unsigned_abs() as usize]))).collect();
+    let taps: Vec<(i32, String)> = (-half..=half).map(|d| (d, wgsl_f32(pipeline::KEEP_STENCIL.weight(d)))).collect();
     context.insert("taps", &taps);
     context.insert("first", &SpreadStage::FIRST);
     context.insert("finish", &SpreadStage::FINISH);
