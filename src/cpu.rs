@@ -74,9 +74,40 @@ pub fn check_inputs(expr: &Expr, scene: &Scene) -> Result<(), MissingInput> {
 /// Filter `scene` with weight expression `expr` over a (2r+1)² window.
 pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, MissingInput> {
     check_inputs(expr, scene)?;
+    let guided;
+    let scene = if reads_guide(expr) {
+        guided = with_guide(scene);
+        &guided
+    } else {
+        scene
+    };
     let r = radius as i64;
     let offsets: Vec<(i64, i64, f64)> = (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (dx, dy, 1.0))).collect();
     Ok(pass(expr, scene, &offsets, 0, false).0)
+}
+
+fn reads_guide(expr: &Expr) -> bool {
+    expr.features().contains(&Feature::Guide)
+}
+
+/// The `guide` terminal of the first pass (docs/SEMANTICS.md, "The guide"):
+/// `scene`'s colour blurred by one pass of the 3×3 linear B-spline, each
+/// pixel the mean of its taps inside the image. It is the filter itself with
+/// the constant weight 1, so the device runs the same kernel for it.
+pub fn guide(scene: &Scene) -> Vec<[f32; 3]> {
+    let stencil = pipeline::GUIDE_STENCIL;
+    let half = stencil.half_width() as i64;
+    let offsets: Vec<(i64, i64, f64)> = (-half..=half)
+        .flat_map(|dy| (-half..=half).map(move |dx| (dx, dy, stencil.weight(dx as i32) * stencil.weight(dy as i32))))
+        .collect();
+    pass(&Expr::Const(1.0), scene, &offsets, 0, false).0.color.iter().map(|c| c.map(|v| v as f32)).collect()
+}
+
+/// `scene` with its first pass's guide among its features.
+fn with_guide(scene: &Scene) -> Scene {
+    let mut guided = scene.clone();
+    guided.features.insert(Feature::Guide, guide(scene));
+    guided
 }
 
 /// One pass over `offsets` (dx, dy, stencil weight): every pixel's weighted
@@ -268,6 +299,9 @@ pub fn filter_pipeline(
     let mut out = match pipeline.form {
         Form::Window => filter(expr, &working, radius)?,
         Form::Atrous { passes, stencil } => {
+            if reads_guide(expr) {
+                working = with_guide(&working);
+            }
             let carry = expr.variables().contains(&ScalarVar::ColorVariance);
             let mut flags = vec![0u32; scene.pixels()];
             let mut last = None;
@@ -286,6 +320,10 @@ pub fn filter_pipeline(
                     *a |= b;
                 }
                 working.color = filtered.color.iter().map(|c| c.map(|v| v as f32)).collect();
+                if reads_guide(expr) {
+                    // From the second pass on the guide is the pass's input, already filtered.
+                    working.features.insert(Feature::Guide, working.color.clone());
+                }
                 if carry {
                     working.variances.insert(ScalarVar::ColorVariance, variance.iter().map(|v| *v as f32).collect());
                 }

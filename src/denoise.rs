@@ -25,6 +25,7 @@ use crate::scene::{Holds, Needs, Request};
 /// taken; `bilateral` reads colour alone, so there always is one
 /// (docs/BENCHMARKS.md, "Fitness that charges the light").
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
+    "evolvedAtrous128Guide",
     "evolvedAtrous128Keep",
     "evolvedAtrous3x3Keep",
     "evolvedAtrous128",

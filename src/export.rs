@@ -78,6 +78,8 @@ pub struct Exported {
     pub prepass: Option<Code>,
     /// `keep`'s spread (`outliers=k,keep,…`).
     pub spread: Option<Code>,
+    /// The first pass's guide (weights that read `guide`).
+    pub guide: Option<Code>,
     pub manifest: Manifest,
 }
 
@@ -120,6 +122,12 @@ pub struct Manifest {
     /// `sequence` says, where the pipeline keeps what its clamp removed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub spread: Option<Stage>,
+    /// The guide's shader (docs/SEMANTICS.md, "The guide"), dispatched once
+    /// after the pre-pass and the spread, where the weight reads `guide`: it
+    /// reads the image the form filters and writes `guide`, which the form's
+    /// first pass binds as its `guide`; later passes bind their own input.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub guide: Option<Stage>,
     /// The image the form's first pass filters: `color` (the noisy colour),
     /// `prepared` (the pre-pass's) or `kept` (the spread's).
     pub filters: String,
@@ -157,8 +165,9 @@ pub struct StageDispatch {
 }
 
 /// The version of the manifest's layout, raised whenever a host would have
-/// to read it differently (2: `keep`'s `spread` stage and `filters`).
-pub const MANIFEST_VERSION: u32 = 2;
+/// to read it differently (2: `keep`'s `spread` stage and `filters`; 3: the
+/// `guide` stage, and the form's `guide` binding, which changes by pass).
+pub const MANIFEST_VERSION: u32 = 3;
 
 /// Sampled textures per shader stage every WebGPU device allows.
 pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;
@@ -373,6 +382,28 @@ pub fn export_pipeline(
             Some(code)
         }
     };
+    let guide = match kernel.source().layout.inputs.contains(&Input::Feature(Feature::Guide)) {
+        false => None,
+        true => {
+            let shape = jit::Shape { atrous: true, remodulate: false, stencil: crate::pipeline::GUIDE_STENCIL };
+            let one = Expr::Const(1.0);
+            let guide = jit::compile_shaped(&one, KernelKind::Export(format), jit::LowerOptions::default(), shape)?;
+            let interface = &guide.source().interface;
+            let (code, entry_point) = translate(guide.validated(), guide.wgsl(), interface, target)?;
+            let values = [("radius", 0.0), ("step", 1.0), ("level", 0.0), ("last", 1.0)];
+            manifest.guide = Some(Stage {
+                uniform_values: values.map(|(field, value)| (field.to_string(), value)).into(),
+                sequence: vec![StageDispatch {
+                    uniform_values: BTreeMap::new(),
+                    images: [("color", manifest.filters.clone()), ("guide", "guide".to_string())]
+                        .map(|(role, image)| (role.to_string(), image))
+                        .into(),
+                }],
+                ..Stage::of(interface, entry_point, &manifest.dispatch, target, format, Stages::Guide)
+            });
+            Some(code)
+        }
+    };
     manifest.order = order(&manifest, pipeline);
     let with_header = |code: Code| match code {
         Code::Text(text) if target != Target::Wgsl => Code::Text(header(&manifest, &text)),
@@ -382,6 +413,7 @@ pub fn export_pipeline(
         code: with_header(code),
         prepass: prepass.map(with_header),
         spread: spread.map(with_header),
+        guide: guide.map(with_header),
         manifest,
     })
 }
@@ -451,6 +483,7 @@ enum Stages {
     Form,
     Prepass,
     Spread,
+    Guide,
 }
 
 /// The steps a host takes per frame, in words.
@@ -475,6 +508,12 @@ fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
         ));
         colour = "`kept`";
     }
+    if manifest.guide.is_some() {
+        steps.push(format!(
+            "guide (`guide`, one dispatch, step = 1, level = 0, last = 1): colour = {colour}; writes `guide`, the \
+             colour the form's first pass compares (blurred by the 3x3 B-spline)"
+        ));
+    }
     if manifest.passes == 1 {
         steps.push(format!(
             "form (window): colour = {colour}{}; writes `output`: the filtered frame",
@@ -484,9 +523,10 @@ fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
         steps.push(format!(
             "form (à-trous), pass k = 0 … {}: params.step = 2^k, params.level = k, params.last = 1 when k = {} \
              else 0; colour = {colour} in pass 0, else pass k-1's `output`; colorVariance (where bound) = the \
-             frame's in pass 0, else pass k-1's `variance_out`{}; pass {}'s `output` is the filtered frame",
+             frame's in pass 0, else pass k-1's `variance_out`{}{}; pass {}'s `output` is the filtered frame",
             manifest.passes - 1,
             manifest.passes - 1,
+            if manifest.guide.is_some() { "; guide = `guide` in pass 0, else pass k-1's `output`" } else { "" },
             if pipeline.demodulate { "; modulation = `modulation`" } else { "" },
             manifest.passes - 1
         ));
@@ -523,6 +563,8 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                         .into(),
                     None,
                 ),
+                (Role::Color, Stages::Guide) => ("color".into(), "xyzw", "the colour the form filters".into(), None),
+                (Role::Output, Stages::Guide) => ("guide".into(), "xyzw", written("the guide"), None),
                 (Role::Color, Stages::Form) => {
                     ("color".into(), "xyzw", "noisy colour, linear RGB; alpha is copied to the output".into(), None)
                 }
@@ -539,7 +581,7 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                 (Role::Modulation, Stages::Prepass) => {
                     ("modulation".into(), "xyzw", written("the albedo divided out, 1 without demodulation"), None)
                 }
-                (Role::Modulation, Stages::Form | Stages::Spread) => {
+                (Role::Modulation, Stages::Form | Stages::Spread | Stages::Guide) => {
                     ("modulation".into(), "xyz", "the pre-pass's `modulation`, multiplied back".into(), None)
                 }
                 (Role::VarianceOut, _) => (
@@ -553,6 +595,13 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     "xyz",
                     "what the outlier rule measured: x localMean, y localStd, z clampedShare (0 without outliers), \
                      written with textureStore; format rgba32float"
+                        .into(),
+                    None,
+                ),
+                (Role::Input(Input::Feature(Feature::Guide)), Stages::Form) => (
+                    "guide".into(),
+                    "xyz",
+                    "in pass 0 the guide stage's `guide`, from pass 1 on the pass's colour (the image bound as `color`)"
                         .into(),
                     None,
                 ),
@@ -626,6 +675,7 @@ fn manifest(
         },
         prepass: None,
         spread: None,
+        guide: None,
         filters: "color".into(),
         order: Vec::new(),
     }

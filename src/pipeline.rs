@@ -78,6 +78,12 @@ impl Stencil {
     }
 }
 
+/// The stencil the first pass's `guide` is blurred with (docs/SEMANTICS.md,
+/// "The guide"): one pass of the 3×3 linear B-spline, so that a rare bright
+/// sample counts for a quarter of itself where the weight compares colours,
+/// while an edge moves by at most one pixel.
+pub const GUIDE_STENCIL: Stencil = Stencil::Linear3;
+
 /// The largest number of à-trous passes (step 2^(passes-1) ≤ 2^15 pixels).
 pub const MAX_ATROUS_PASSES: u32 = 16;
 

@@ -60,7 +60,7 @@ fn compare(expr: &Expr, scene: &Scene, radius: u32, format: OutputFormat) -> f64
     let manifest = serde_json::to_value(&exported.manifest).unwrap();
     let gpu = gpu(); // first: it quiets Mesa's device-select layer for the whole process
     let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
-    let shaders = host::Shaders { form: wgsl.clone(), prepass: None, spread: None };
+    let shaders = host::Shaders { form: wgsl.clone(), prepass: None, spread: None, guide: None };
     let ours = host::filter(&device, &queue, &shaders, &manifest, &frame_of(scene, &manifest), radius)
         .unwrap_or_else(|e| panic!("the exported shader of `{expr}` fails in plain wgpu: {e}"));
 
@@ -138,6 +138,11 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         // What the clamp removed, kept: the spread's dispatches between the pre-pass and the form.
         (named("evolvedAtrous3x3"), "outliers=2,keep,demodulate,atrous3x3=4"),
         (named("crossBilateral"), "outliers=1.5,keep,atrous=2"),
+        // The guide: its own dispatch before the form, bound in pass 0 only;
+        // after the whole pre-pass, and without one.
+        (named("evolvedAtrous128Guide"), "outliers=2,keep,demodulate,atrous=4"),
+        (parse_expr("exp(-(distance2(guide) * 2 + distance2(normal) * 4))").unwrap(), "atrous3x3=3"),
+        (parse_expr("exp(-(distance2(guide, color) + distance2(pixel) / 8))").unwrap(), "window"),
         // What the outlier rule measured, from the exported pre-pass's packed `local` texture.
         (
             parse_expr("exp(-(distance2(normal) * 4 + clampedShare * 8 + localStd / (localMean + 0.1)))").unwrap(),
@@ -156,7 +161,7 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         };
         assert_eq!(
             exported.prepass.is_some(),
-            text != "atrous=2",
+            !["atrous=2", "atrous3x3=3", "window"].contains(&text),
             "{text}: a pre-pass exactly where the pipeline has one"
         );
         let measures = ["localMean", "localStd", "clampedShare"];
@@ -164,6 +169,8 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
             assert_eq!((b.image, b.scale_index), (Some("local"), None), "{b:?}: read raw from the pre-pass's `local`");
         }
         assert_eq!(exported.spread.is_some(), text.contains("keep"), "{text}: a spread exactly where it keeps");
+        let guided = expr.features().contains(&filterjit::lang::Feature::Guide);
+        assert_eq!(exported.guide.is_some(), guided, "{expr}: a guide stage exactly where the weight reads it");
         let filters = match (text.contains("keep"), exported.prepass.is_some()) {
             (true, _) => "kept",
             (false, true) => "prepared",
@@ -174,6 +181,7 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
             form: text_of(&exported.code),
             prepass: exported.prepass.as_ref().map(text_of),
             spread: exported.spread.as_ref().map(text_of),
+            guide: exported.guide.as_ref().map(text_of),
         };
         let mut frame = frame_of(&scene, &manifest);
         frame

@@ -147,6 +147,8 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "exp(-(distance2(normal) / 0.3 + distance2(pixel) / (1 + 3 * level)))",
         // What the outlier rule measured (the synthetic scene's own values where the pipeline has no outliers).
         "exp(-(distance2(normal) / 0.3 + clampedShare * 4 + localStd / (localMean + 0.1)))",
+        // The guide: blurred in the first pass, the pass's input after; against the colour.
+        "exp(-(distance2(guide) / 0.5 + distance2(normal) / 0.3 + distance1(guide, color) / 4))",
     ];
     for text in [
         "atrous=1",
@@ -179,6 +181,7 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
     let exprs = [
         parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3))").unwrap(),
         parse_expr("exp(-distance2(texture) / 0.1)").unwrap(),
+        parse_expr("exp(-(distance2(guide) / 0.5 + distance2(normal) / 0.3))").unwrap(),
     ];
     for text in [
         "outliers=2,demodulate,atrous=4",
@@ -208,6 +211,41 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
                 expected > 0.0 && (got - expected).abs() <= 1e-4 * expected,
                 "{text} `{e}`: luminance {got}, CPU {expected}"
             );
+        }
+    }
+}
+
+/// The guide (docs/SEMANTICS.md, "The guide"): in the first pass the
+/// colour blurred by the 3×3 B-spline, each pixel the mean of its taps inside
+/// the image; from the second pass on the pass's input. A weight that reads
+/// only the guide sees a lone bright sample at a quarter of its value.
+#[test]
+fn the_guide_is_the_colour_blurred_in_the_first_pass_and_the_input_after() {
+    let mut scene = synthetic_scene(9, 7, 3);
+    scene.color = vec![[0.0; 3]; scene.pixels()];
+    let (w, firefly) = (scene.width, 3 * scene.width + 4);
+    scene.color[firefly] = [8.0, 4.0, 2.0];
+    let guide = cpu::guide(&scene);
+    assert_eq!(guide[firefly], [2.0, 1.0, 0.5], "a quarter of the sample at its own pixel");
+    assert_eq!(guide[firefly + 1], [1.0, 0.5, 0.25], "an eighth beside it");
+    assert_eq!(guide[firefly + w + 1], [0.5, 0.25, 0.125], "a sixteenth across the corner");
+    assert_eq!(guide[firefly + 2], [0.0; 3], "nothing two pixels away");
+    // A corner's taps inside the image are (1/2, 1/4) each way, renormalised.
+    scene.color[0] = [9.0, 0.0, 0.0];
+    assert_eq!(cpu::guide(&scene)[0][0], 9.0 * 4.0 / 9.0);
+    // The weight `distance2(guide)` is 0 between a pixel and itself whatever
+    // the pass, and the same on the device: a probe of the first pass.
+    let gpu = gpu();
+    for text in ["atrous3x3=1", "window"] {
+        let expr = parse_expr("distance2(guide, color)").unwrap();
+        let p = pipeline(text);
+        let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &p).unwrap();
+        let kernel = jit::compile_kind(&expr, KernelKind::Probe).unwrap();
+        let (weights, _) = gpu.probe(&kernel, &mut buffers, &scene).unwrap();
+        for i in 0..scene.pixels() {
+            let (c, g) = (scene.color[i], cpu::guide(&scene)[i]);
+            let expected = ((0..3).map(|k| (c[k] - g[k]) as f64 * (c[k] - g[k]) as f64).sum::<f64>()).sqrt();
+            assert!((weights[i] as f64 - expected).abs() <= 1e-5 * expected.max(1.0), "{text} pixel {i}");
         }
     }
 }

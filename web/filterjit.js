@@ -9,11 +9,15 @@
 //
 // Per frame, as the manifest's `order` says: the pre-pass once (where the
 // pipeline has one), the spread's dispatches (where it keeps what the outlier
-// clamp removed), then the form's shader `passes` times, its colour and
-// carried variance ping-ponged between textures.
+// clamp removed), the guide's (where the weight reads `guide`), then the
+// form's shader `passes` times, its colour and carried variance ping-ponged
+// between textures.
 
 /** The manifest layout this module reads (filterjit's `export::MANIFEST_VERSION`). */
-export const MANIFEST_VERSION = 2;
+export const MANIFEST_VERSION = 3;
+
+/** The shaders a manifest may have besides the form's, in the order they run. */
+const STAGES = ["prepass", "spread", "guide"];
 
 const WRITTEN = GPUTextureUsage.STORAGE_BINDING | GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_SRC;
 
@@ -39,7 +43,7 @@ export async function loadFilter(device, manifestUrl) {
   const manifest = JSON.parse(await text(manifestUrl));
   const beside = (file) => new URL(file, new URL(manifestUrl, location.href)).href;
   const shaders = { form: await text(String(manifestUrl).replace(/\.json$/, "")) };
-  for (const stage of ["prepass", "spread"]) {
+  for (const stage of STAGES) {
     if (manifest[stage]) shaders[stage] = await text(beside(manifest[stage].file));
   }
   return createFilter(device, manifest, shaders);
@@ -47,7 +51,7 @@ export async function loadFilter(device, manifestUrl) {
 
 /**
  * Build the filter's pipelines from its manifest and shader texts
- * (`{ form, prepass, spread }`, the last two where the manifest has them).
+ * (`{ form, prepass, spread, guide }`, the last three where the manifest has them).
  * Compilation messages are collected in `filter.messages`.
  */
 export async function createFilter(device, manifest, shaders) {
@@ -71,7 +75,7 @@ export class Filter {
     this.stages = {};
     this.messages = [];
     const needs = [["form", manifest]];
-    for (const name of ["prepass", "spread"]) if (manifest[name]) needs.push([name, manifest[name]]);
+    for (const name of STAGES) if (manifest[name]) needs.push([name, manifest[name]]);
     const compiled = [];
     for (const [name, stage] of needs) {
       const code = shaders[name];
@@ -157,6 +161,14 @@ export class Filter {
         dispatch("spread", step.uniform_values, step.images);
       });
     }
+    const guide = this.manifest.guide;
+    if (guide) {
+      // The colour the first pass compares: the image the form filters, blurred.
+      for (const step of guide.sequence) {
+        for (const b of storage(guide)) target(step.images[b.role] ?? b.role, b.format);
+        dispatch("guide", { ...guide.uniform_values, ...step.uniform_values }, step.images);
+      }
+    }
     let colour = this.manifest.filters;
     let variance = "colorVariance";
     const passes = this.manifest.passes;
@@ -166,7 +178,9 @@ export class Filter {
       const varianceOut = `variance${k % 2}`;
       for (const b of storage(this.manifest)) target(b.role === "output" ? out : varianceOut, b.format);
       const values = { radius, step: 2 ** k, level: k, last: k + 1 === passes ? 1 : 0 };
-      dispatch("form", values, { color: colour, output: out, colorVariance: variance, variance_out: varianceOut });
+      // The guide is the guide stage's in pass 0, the pass's own colour after.
+      const guided = k === 0 ? "guide" : colour;
+      dispatch("form", values, { color: colour, output: out, colorVariance: variance, variance_out: varianceOut, guide: guided });
       colour = out;
       variance = varianceOut;
     }

@@ -5,7 +5,8 @@
 //!
 //! Per frame, as the manifest's `order` says: the pre-pass shader once (where
 //! the pipeline has one), the spread shader's `sequence` (where it keeps what
-//! the clamp removed), then the form's shader `passes` times (à-trous: pass
+//! the clamp removed), the guide shader (where the weight reads `guide`),
+//! then the form's shader `passes` times (à-trous: pass
 //! k with step 2^k, colour and carried variance ping-ponged between textures).
 
 use std::collections::HashMap;
@@ -31,6 +32,7 @@ pub struct Shaders {
     pub form: String,
     pub prepass: Option<String>,
     pub spread: Option<String>,
+    pub guide: Option<String>,
 }
 
 /// A device on the adapter wgpu prefers (`WGPU_BACKEND` narrows the choice).
@@ -266,8 +268,8 @@ pub fn filter(
     radius: u32,
 ) -> Result<Vec<[f32; 4]>, String> {
     // The layout this host reads (filterjit's export::MANIFEST_VERSION).
-    if manifest.get("version").and_then(Value::as_u64) != Some(2) {
-        return Err(format!("manifest version {:?}: this host reads version 2", manifest.get("version")));
+    if manifest.get("version").and_then(Value::as_u64) != Some(3) {
+        return Err(format!("manifest version {:?}: this host reads version 3", manifest.get("version")));
     }
     let (width, height) = (frame.width, frame.height);
     let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
@@ -306,13 +308,18 @@ pub fn filter(
         record(&images, &mut encoder, wgsl, stage, workgroup, frame, &dispatch)?;
     }
 
-    // The spread, dispatch by dispatch: each names the image every role binds.
-    if let Some(stage) = manifest.get("spread").filter(|p| !p.is_null()) {
-        let wgsl = shaders.spread.as_deref().ok_or("the manifest has a spread, and no spread shader was given")?;
+    // The spread, then the guide, dispatch by dispatch: each names the image
+    // every role binds; its uniform takes the stage's values, then its own.
+    for (name, shader) in [("spread", &shaders.spread), ("guide", &shaders.guide)] {
+        let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { continue };
+        let wgsl =
+            shader.as_deref().ok_or(format!("the manifest has a {name} stage, and no {name} shader was given"))?;
         for step in array(stage, "sequence")? {
             let mut dispatch = Dispatch { values: HashMap::new(), images: HashMap::new() };
-            for (name, value) in field(step, "uniform_values")?.as_object().ok_or("uniform_values")? {
-                dispatch.values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
+            for values in [field(stage, "uniform_values")?, field(step, "uniform_values")?] {
+                for (name, value) in values.as_object().ok_or("uniform_values")? {
+                    dispatch.values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
+                }
             }
             for (role, image) in field(step, "images")?.as_object().ok_or("images")? {
                 dispatch.images.insert(role.as_str(), image.as_str().ok_or("an image name")?.to_string());
@@ -350,6 +357,8 @@ pub fn filter(
             ("output", out.clone()),
             ("colorVariance", variance.clone()),
             ("variance_out", variance_out.clone()),
+            // The guide stage's in pass 0, the pass's own colour after.
+            ("guide", if k == 0 { "guide".to_string() } else { colour.clone() }),
         ];
         let dispatch = Dispatch { values, images: roles.into() };
         record(&images, &mut encoder, &shaders.form, manifest, workgroup, frame, &dispatch)?;

@@ -72,6 +72,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             let stages = [
                 ("prepass", &exported.prepass, exported.manifest.prepass.as_mut()),
                 ("spread", &exported.spread, exported.manifest.spread.as_mut()),
+                ("guide", &exported.guide, exported.manifest.guide.as_mut()),
             ];
             for (name, code, stage) in stages {
                 if let (Some(code), Some(stage)) = (code, stage) {
@@ -94,6 +95,12 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                     "wrote {} (keep's spread: {} dispatches after the pre-pass)",
                     output.with_file_name(&stage.file).display(),
                     stage.sequence.len()
+                );
+            }
+            if let Some(stage) = &exported.manifest.guide {
+                println!(
+                    "wrote {} (the guide: one dispatch before the form)",
+                    output.with_file_name(&stage.file).display()
                 );
             }
             if exported.manifest.passes > 1 {

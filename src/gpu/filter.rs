@@ -7,7 +7,7 @@ use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, PipelineTiming};
 use crate::jit::{AtrousParams, Input, Params, Role, Shape, ValidatedKernel, WORKGROUP};
-use crate::lang::ScalarVar;
+use crate::lang::{Feature, ScalarVar};
 use crate::pipeline::FilterPipeline;
 use crate::scene::{Missing, MissingInput, Scene};
 
@@ -52,6 +52,8 @@ impl SceneBuffers {
             Role::Input(Input::Variance(ScalarVar::ColorVariance)) if level > 0 => {
                 scratch?.variances[read].as_entire_binding()
             }
+            // From the second pass on, the guide is the pass's input.
+            Role::Input(Input::Feature(Feature::Guide)) if level > 0 => scratch?.images[read].as_entire_binding(),
             Role::Input(input) => self.inputs.get(&input)?.as_entire_binding(),
             Role::Modulation => self.modulation.as_ref()?.as_entire_binding(),
             Role::VarianceOut => scratch?.variances[write].as_entire_binding(),
@@ -181,6 +183,13 @@ impl SceneBuffers {
     /// error there, never here.
     pub(super) fn ensure(&mut self, gpu: &Gpu, scene: &Scene, input: Input) -> Result<(), GpuError> {
         if self.inputs.contains_key(&input) {
+            return Ok(());
+        }
+        if input == Input::Feature(Feature::Guide) {
+            // Made from the colour on the device; its time is the pre-pass's.
+            let (guide, dispatch) = gpu.guide(&self.color, self.width, self.height)?;
+            self.prepass_dispatch = Some(self.prepass_dispatch.unwrap_or_default() + dispatch);
+            self.inputs.insert(input, guide);
             return Ok(());
         }
         const CHECKED: &str = "check_inputs found every input the kernel binds";

@@ -4,6 +4,7 @@
 pub mod adapter;
 mod filter;
 mod fitness;
+mod guide;
 mod prepass;
 mod raw;
 mod trace;

@@ -21,7 +21,7 @@ pub const WORKGROUP: [u32; 2] = [8, 8];
 /// Per-pixel data a kernel reads, besides the colour every kernel reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Input {
-    /// A stored feature or a gradient (never `color` or `pixel`).
+    /// A stored feature, a gradient, or the guide (never `color` or `pixel`).
     Feature(Feature),
     /// A per-pixel scalar variance.
     Variance(ScalarVar),
@@ -48,7 +48,7 @@ impl Input {
     /// their 99.9th percentile); what the outlier pre-pass measures is in the
     /// colour's own units, like the colour.
     pub fn is_normalised(self) -> bool {
-        !matches!(self, Input::Variance(v) if v.from_prepass())
+        !matches!(self, Input::Variance(v) if v.from_prepass()) && self != Input::Feature(Feature::Guide)
     }
 }
 
@@ -70,7 +70,9 @@ impl KernelLayout {
         let mut inputs = BTreeSet::new();
         for expr in exprs {
             for f in expr.features() {
-                if matches!(f.source(), FeatureSource::Stored(_) | FeatureSource::Gradient(_)) && f != Feature::Color {
+                let bound =
+                    matches!(f.source(), FeatureSource::Stored(_) | FeatureSource::Gradient(_) | FeatureSource::Guide);
+                if bound && f != Feature::Color {
                     inputs.insert(Input::Feature(f));
                 }
             }

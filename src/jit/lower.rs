@@ -314,6 +314,8 @@ impl<'a> Loads<'a> {
             (Loads::Tiled, _) if f.dimension() == 1 => format!("vec3<f32>({}[t], 0.0, 0.0)", tile_ident(f)),
             (Loads::Tiled, _) => format!("{}[t].xyz", tile_ident(f)),
             (Loads::Textures(i), Feature::Color) => format!("{}.xyz", texel(i.ident(Role::Color), coords)),
+            // In the colour's own units, like the colour.
+            (Loads::Textures(i), Feature::Guide) => format!("{}.xyz", texel(i.ident(input), coords)),
             (Loads::Textures(i), _) => {
                 let texel = texel(i.ident(input), coords);
                 let raw =

@@ -92,7 +92,8 @@ name_table! {
 
 name_table! {
     /// Vector terminals: per-pixel features (thesis Figure 3.2), the noisy
-    /// colour and the pixel position.
+    /// colour, the pixel position, and the guide (the colour a pass's weights
+    /// compare, pre-filtered in the first pass: docs/SEMANTICS.md, "The guide").
     pub enum Feature {
         WorldPosition => "worldPosition",
         Normal => "normal",
@@ -108,6 +109,7 @@ name_table! {
         DiGradient => "diGradient",
         Color => "color",
         Pixel => "pixel",
+        Guide => "guide",
     }
 }
 
@@ -266,6 +268,10 @@ pub enum FeatureSource {
     Gradient(Feature),
     /// The pixel's integer coordinates, computed in the kernel.
     Coordinates,
+    /// The colour the form filters, blurred by the 3×3 linear B-spline in
+    /// the first pass (`cpu::guide`, the `guide` terminal); from the second
+    /// pass on, the pass's input itself.
+    Guide,
 }
 
 impl Feature {
@@ -295,14 +301,16 @@ impl Feature {
     pub fn source(self) -> FeatureSource {
         match self {
             Feature::Pixel => FeatureSource::Coordinates,
+            Feature::Guide => FeatureSource::Guide,
             f if f.base() != f => FeatureSource::Gradient(f.base()),
             f => FeatureSource::Stored(f),
         }
     }
 
-    /// Whether a scene must provide data for this terminal (the pixel position never needs any).
+    /// Whether a scene must provide data for this terminal (the pixel
+    /// position and the guide, made from the colour, never need any).
     pub fn needs_data(self) -> bool {
-        self != Feature::Pixel
+        !matches!(self, Feature::Pixel | Feature::Guide)
     }
 }
 

@@ -291,7 +291,7 @@ impl Preparer<'_> {
         let mut features = BTreeMap::new();
         for &f in &self.request.features {
             match f.source() {
-                FeatureSource::Stored(Feature::Color) | FeatureSource::Coordinates => {}
+                FeatureSource::Stored(Feature::Color) | FeatureSource::Coordinates | FeatureSource::Guide => {}
                 FeatureSource::Stored(base) => {
                     let values = match &stored[&base] {
                         Some(values) => values.clone(),

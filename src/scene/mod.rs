@@ -306,10 +306,10 @@ pub fn datasets_in(dir: &Path) -> Result<Vec<PathBuf>, SceneError> {
 }
 
 /// `stored` features with what every scene derives from them: colour, pixel
-/// position, and the gradient of each stored feature.
+/// position, the guide (from the colour), and the gradient of each stored feature.
 pub fn with_derived(stored: BTreeSet<Feature>) -> BTreeSet<Feature> {
     let mut features = stored;
-    features.extend([Feature::Color, Feature::Pixel]);
+    features.extend([Feature::Color, Feature::Pixel, Feature::Guide]);
     for f in Feature::ALL {
         if let FeatureSource::Gradient(base) = f.source() {
             if features.contains(&base) {

@@ -1,0 +1,83 @@
+//! The first pass's `guide` on the device (docs/SEMANTICS.md, "The guide"):
+//! the colour the form filters, blurred by one pass of
+//! `pipeline::GUIDE_STENCIL`. It is the form's own kernel with the constant
+//! weight 1, compiled like any candidate and cached with them; `cpu::guide`
+//! is its reference.
+
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+use super::filter::{rows_per_dispatch, uniform_bytes};
+use super::{Gpu, GpuError};
+use crate::jit::{self, KernelKind, LowerOptions, Params, Role, Shape, ValidatedKernel, WORKGROUP};
+use crate::lang::Expr;
+use crate::pipeline::GUIDE_STENCIL;
+
+/// The guide's kernel: one à-trous pass of the constant weight, nothing multiplied back.
+fn kernel() -> Result<&'static ValidatedKernel, GpuError> {
+    static KERNEL: OnceLock<Result<ValidatedKernel, String>> = OnceLock::new();
+    KERNEL
+        .get_or_init(|| {
+            let shape = Shape { atrous: true, remodulate: false, stencil: GUIDE_STENCIL };
+            jit::compile_shaped(&Expr::Const(1.0), KernelKind::Filter, LowerOptions::default(), shape)
+                .map_err(|e| e.to_string())
+        })
+        .as_ref()
+        .map_err(|message| GpuError::Pipeline {
+            expression: "<guide>".into(),
+            message: message.clone(),
+            wgsl: String::new(),
+        })
+}
+
+impl Gpu {
+    /// The guide of `color` (RGBA per pixel, `width` × `height`), left on
+    /// the device, and how long its dispatch took. Callers hold the GL turn.
+    pub(super) fn guide(
+        &self,
+        color: &wgpu::Buffer,
+        width: u32,
+        height: u32,
+    ) -> Result<(wgpu::Buffer, Duration), GpuError> {
+        let kernel = kernel()?;
+        let (pipeline, _) = self.pipeline(kernel)?;
+        let device = self.device();
+        let make = |label, bytes: u64| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: (width * height) as u64 * bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            })
+        };
+        let (guide, flags) = (make("guide", 16), make("guide flags", 4));
+        let interface = &kernel.source().interface;
+        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let start = Instant::now();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        // In bands of rows, as the form's passes are dispatched.
+        let band = rows_per_dispatch(width, GUIDE_STENCIL.half_width() as u32);
+        for row in (0..height).step_by(band as usize) {
+            let params = uniform_bytes(true, Params { width, height, radius: 0, row_offset: row }, 0, 1);
+            let params = self.params_buffer(interface.params(), "guide params", &params);
+            let bind_group = self.bind_group(&pipeline, interface, |role| match role {
+                Role::Params => params.as_entire_binding(),
+                Role::Color => color.as_entire_binding(),
+                Role::Output => guide.as_entire_binding(),
+                Role::Flags => flags.as_entire_binding(),
+                other => unreachable!("the guide's kernel binds no {other:?}"),
+            });
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&pipeline.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), band.min(height - row).div_ceil(WORKGROUP[1]), 1);
+        }
+        self.queue().submit([encoder.finish()]);
+        self.wait("blurring the guide")?;
+        let dispatch = start.elapsed();
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "blurring the guide", message: error.to_string() });
+        }
+        Ok((guide, dispatch))
+    }
+}
