@@ -30,6 +30,8 @@ impl Pixels<'_> {
     fn feature(&self, f: Feature, index: usize) -> [f64; 3] {
         match f {
             Feature::Pixel => [(index % self.width) as f64, (index / self.width) as f64, 0.0],
+            // The first pass's guide, where the pipeline has not stored one (a lone weight's evaluation).
+            Feature::Guide if self.scene.feature(f).is_none() => guide_at(self.scene, index).map(f64::from),
             _ => {
                 let v = self.scene.feature(f).expect("checked before filtering")[index];
                 // 1-D features are (v, 0, 0) whatever the buffer holds beyond v, as on the GPU.
@@ -93,14 +95,32 @@ fn reads_guide(expr: &Expr) -> bool {
 /// The `guide` terminal of the first pass (docs/SEMANTICS.md, "The guide"):
 /// `scene`'s colour blurred by one pass of the 3×3 linear B-spline, each
 /// pixel the mean of its taps inside the image. It is the filter itself with
-/// the constant weight 1, so the device runs the same kernel for it.
+/// the constant weight 1, so the device runs that kernel for it.
 pub fn guide(scene: &Scene) -> Vec<[f32; 3]> {
+    (0..scene.pixels()).map(|i| guide_at(scene, i)).collect()
+}
+
+/// The guide at pixel `index`, stored as f32 like every image between stages.
+fn guide_at(scene: &Scene, index: usize) -> [f32; 3] {
     let stencil = pipeline::GUIDE_STENCIL;
     let half = stencil.half_width() as i64;
-    let offsets: Vec<(i64, i64, f64)> = (-half..=half)
-        .flat_map(|dy| (-half..=half).map(move |dx| (dx, dy, stencil.weight(dx as i32) * stencil.weight(dy as i32))))
-        .collect();
-    pass(&Expr::Const(1.0), scene, &offsets, 0, false).0.color.iter().map(|c| c.map(|v| v as f32)).collect()
+    let (w, h) = (scene.width as i64, scene.height as i64);
+    let (x, y) = ((index % scene.width) as i64, (index / scene.width) as i64);
+    let (mut sum_w, mut sum_c) = (Neumaier::default(), [Neumaier::default(); 3]);
+    for dy in -half..=half {
+        for dx in -half..=half {
+            let (xj, yj) = (x + dx, y + dy);
+            if xj < 0 || yj < 0 || xj >= w || yj >= h {
+                continue;
+            }
+            let weight = stencil.weight(dx as i32) * stencil.weight(dy as i32);
+            sum_w.add(weight);
+            for (sum, c) in sum_c.iter_mut().zip(scene.color[(yj * w + xj) as usize]) {
+                sum.add(weight * c as f64);
+            }
+        }
+    }
+    sum_c.map(|s| (s.total() / sum_w.total()) as f32)
 }
 
 /// `scene` with its first pass's guide among its features.

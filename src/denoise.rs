@@ -230,7 +230,7 @@ mod tests {
         let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
         let chosen = Choice::best_for(&no_variance).unwrap();
         assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
-        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous128Keep"));
+        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous128Guide"));
         assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep), "keeps the light: {}", chosen.pipeline);
 
         // Without depth, the next that needs none; the message says what was passed over.
@@ -238,6 +238,7 @@ mod tests {
         let chosen = Choice::best_for(&no_depth).unwrap();
         assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous3x3Keep"));
         let because = chosen.chosen_because.unwrap();
+        assert!(because.contains("@evolvedAtrous128Guide needs depth"), "{because}");
         assert!(because.contains("@evolvedAtrous128Keep needs depth"), "{because}");
 
         // Demodulation needs the albedo even where the weight does not read it.

@@ -67,8 +67,8 @@ fn every_builtin_scene_renders_into_a_loadable_dataset() {
         assert!(scene.color.iter().flatten().any(|v| *v > 0.0), "{name} is black");
         assert_eq!(
             scene.features.len(),
-            all_features.len() - 2,
-            "{name}: every feature but colour and pixel is stored"
+            all_features.len() - 3,
+            "{name}: every feature but colour, pixel and guide is stored"
         );
         assert!(scene.notes.iter().all(|n| !n.contains("non-finite")), "{name}: {:?}", scene.notes);
     }

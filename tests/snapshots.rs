@@ -106,6 +106,18 @@ fn exported_shaders_match_snapshots() {
             "export__carrying.atrous.wgsl.json",
             serde_json::to_string_pretty(&exported.manifest).unwrap()
         );
+        // A weight that reads the guide: the guide stage's shader and where the manifest puts it.
+        let guided = parse_expr("exp(-(distance2(guide) + distance2(normal)))").unwrap();
+        let pipeline = "outliers=2,keep,demodulate,atrous3x3=3".parse().unwrap();
+        let exported =
+            filterjit::export::export_pipeline(&guided, &pipeline, Target::Wgsl, jit::OutputFormat::Rgba16float)
+                .unwrap();
+        let Some(Code::Text(text)) = exported.guide else { panic!("a WGSL guide stage") };
+        insta::assert_snapshot!("export__guide.wgsl", text);
+        insta::assert_snapshot!(
+            "export__guided.atrous.wgsl.json",
+            serde_json::to_string_pretty(&exported.manifest).unwrap()
+        );
     });
 }
 
