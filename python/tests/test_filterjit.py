@@ -93,7 +93,9 @@ def test_a_mitsuba_render_is_denoised_below_its_noisy_error(render):
     print(f"relMSE noisy {noisy:.4f}, filterjit {ours:.4f} ({filterjit.choose(list(inputs(render)))[0]}), light {moved:.3f}")
     # The default is chosen for keeping the light as well as for its error
     # (docs/BENCHMARKS.md, "Fitness that charges the light"): both count.
-    assert ours < 0.9 * noisy, (ours, noisy)
+    # Measured 0.29x the noisy error (0.79x before the guide: the light's
+    # edge bled into the ceiling; docs/BENCHMARKS.md, "A guide for the first pass").
+    assert ours < 0.5 * noisy, (ours, noisy)
     assert abs(moved - 1) < 0.03, moved
     assert filterjit.flip(out, render["reference"]) < filterjit.flip(render["color"], render["reference"])
     light = filterjit.light(out, render["reference"])
