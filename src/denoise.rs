@@ -26,6 +26,7 @@ use crate::scene::{Holds, Needs, Request};
 /// (docs/BENCHMARKS.md, "Fitness that charges the light").
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
     "evolvedAtrous128Guide",
+    "evolvedAtrous128Guide3x3",
     "evolvedAtrous128Keep",
     "evolvedAtrous3x3Keep",
     "evolvedAtrous128",

@@ -415,12 +415,12 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
     };
     let kept = block("evolvedAtrous3x3Keep");
     assert!(kept.contains("reads     color, normal, worldPosition, colorVariance, albedo"), "{kept}");
-    assert!(kept.contains("default   3. choice"), "{kept}");
+    assert!(kept.contains("default   4. choice"), "{kept}");
     assert!(kept.contains("measured  relMSE") && kept.contains("x OIDN"), "its error on the public renders: {kept}");
     let guided = block("evolvedAtrous128Guide");
     assert!(!guided.contains("colorVariance") && guided.contains("default   1. choice"), "{guided}");
     let free = block("evolvedAtrous128Keep");
-    assert!(!free.contains("colorVariance") && free.contains("default   2. choice"), "{free}");
+    assert!(!free.contains("colorVariance") && free.contains("default   3. choice"), "{free}");
 }
 
 /// A render without a per-pixel variance (the Mitsuba sample with its

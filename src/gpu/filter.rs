@@ -252,6 +252,7 @@ impl Gpu {
         buffers.check_shape(kernel)?;
         buffers.check_inputs(kernel, scene)?;
         let (pipeline, timing) = self.pipeline(kernel)?;
+        self.prepare_guide_for(kernel)?;
         let _turn = self.gl_turn();
         for (_, input) in kernel.source().interface.inputs() {
             buffers.ensure(self, scene, input)?;

@@ -200,6 +200,7 @@ impl Gpu {
         let mut pipelines = Vec::with_capacity(kernels.len());
         for k in kernels {
             pipelines.push(self.pipeline(k)?.0);
+            self.prepare_guide_for(k)?;
         }
         let reduce = self.reduce_pipeline()?;
         let reduce_interface = crate::jit::BindingInterface::reduce();

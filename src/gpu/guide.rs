@@ -9,12 +9,12 @@ use std::time::{Duration, Instant};
 
 use super::filter::{rows_per_dispatch, uniform_bytes};
 use super::{Gpu, GpuError};
-use crate::jit::{self, KernelKind, LowerOptions, Params, Role, Shape, ValidatedKernel, WORKGROUP};
-use crate::lang::Expr;
+use crate::jit::{self, Input, KernelKind, LowerOptions, Params, Role, Shape, ValidatedKernel, WORKGROUP};
+use crate::lang::{Expr, Feature};
 use crate::pipeline::GUIDE_STENCIL;
 
 /// The guide's kernel: one à-trous pass of the constant weight, nothing multiplied back.
-fn kernel() -> Result<&'static ValidatedKernel, GpuError> {
+fn guide_kernel() -> Result<&'static ValidatedKernel, GpuError> {
     static KERNEL: OnceLock<Result<ValidatedKernel, String>> = OnceLock::new();
     KERNEL
         .get_or_init(|| {
@@ -31,6 +31,16 @@ fn kernel() -> Result<&'static ValidatedKernel, GpuError> {
 }
 
 impl Gpu {
+    /// Make the guide's pipeline now if `kernel` reads the guide: callers
+    /// do this before their GL turn, since creating a pipeline takes the
+    /// turn itself and turns never nest (the guide is dispatched inside one).
+    pub(super) fn prepare_guide_for(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
+        if kernel.source().layout.inputs.contains(&Input::Feature(Feature::Guide)) {
+            self.pipeline(guide_kernel()?)?;
+        }
+        Ok(())
+    }
+
     /// The guide of `color` (RGBA per pixel, `width` × `height`), left on
     /// the device, and how long its dispatch took. Callers hold the GL turn.
     pub(super) fn guide(
@@ -39,7 +49,8 @@ impl Gpu {
         width: u32,
         height: u32,
     ) -> Result<(wgpu::Buffer, Duration), GpuError> {
-        let kernel = kernel()?;
+        let kernel = guide_kernel()?;
+        // A cache hit: `prepare_guide_for` made it before the caller's GL turn.
         let (pipeline, _) = self.pipeline(kernel)?;
         let device = self.device();
         let make = |label, bytes: u64| {
