@@ -385,9 +385,7 @@ pub fn export_pipeline(
     let guide = match kernel.source().layout.inputs.contains(&Input::Feature(Feature::Guide)) {
         false => None,
         true => {
-            let shape = jit::Shape { atrous: true, remodulate: false, stencil: crate::pipeline::GUIDE_STENCIL };
-            let one = Expr::Const(1.0);
-            let guide = jit::compile_shaped(&one, KernelKind::Export(format), jit::LowerOptions::default(), shape)?;
+            let guide = jit::compile_guide(KernelKind::Export(format))?;
             let interface = &guide.source().interface;
             let (code, entry_point) = translate(guide.validated(), guide.wgsl(), interface, target)?;
             let values = [("radius", 0.0), ("step", 1.0), ("level", 0.0), ("last", 1.0)];
@@ -581,7 +579,7 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                 (Role::Modulation, Stages::Prepass) => {
                     ("modulation".into(), "xyzw", written("the albedo divided out, 1 without demodulation"), None)
                 }
-                (Role::Modulation, Stages::Form | Stages::Spread | Stages::Guide) => {
+                (Role::Modulation, Stages::Form | Stages::Spread) => {
                     ("modulation".into(), "xyz", "the pre-pass's `modulation`, multiplied back".into(), None)
                 }
                 (Role::VarianceOut, _) => (
@@ -615,7 +613,11 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     let components = if input.components() == 1 { "x" } else { "xyz" };
                     (input.describe(), components, content(input), Some(scale_index - 1))
                 }
-                (Role::Flags | Role::Reference | Role::Image | Role::Terms | Role::PixelFlags | Role::Input(_), _) => {
+                (
+                    Role::Flags | Role::Reference | Role::Image | Role::Terms | Role::PixelFlags | Role::Input(_),
+                    _,
+                )
+                | (Role::Modulation, Stages::Guide) => {
                     unreachable!("exported shaders bind no {:?}", b.role)
                 }
             };

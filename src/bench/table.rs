@@ -109,7 +109,7 @@ pub fn table(r: &Report) -> String {
     }
     if !r.frames.is_empty() {
         t += &format!(
-            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: device time of pre-pass + passes; OIDN: CPU wall time; warm median [min, max], ms; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
+            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: device time of pre-pass, guide + passes; OIDN: CPU wall time; warm median [min, max], ms; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
             r.noisy_light.map_or("-".into(), |l| format!("{l:.3}"))
         );
         t += &format!(

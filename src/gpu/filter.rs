@@ -31,6 +31,8 @@ pub struct SceneBuffers {
     pub(super) scratch: Option<Scratch>,
     /// How long the pre-pass's dispatch took (pipelines with a pre-pass).
     pub(super) prepass_dispatch: Option<Duration>,
+    /// How long the guide's dispatch took, once a kernel that reads it has run.
+    pub(super) guide_dispatch: Option<Duration>,
 }
 
 /// Intermediate images of the à-trous passes; they never leave the device.
@@ -145,7 +147,17 @@ impl SceneBuffers {
                 variances: [make("a-trous variance", 4), make("a-trous variance", 4)],
             }
         });
-        Ok(SceneBuffers { width, height, color, inputs, pipeline: *pipeline, modulation, scratch, prepass_dispatch })
+        Ok(SceneBuffers {
+            width,
+            height,
+            color,
+            inputs,
+            pipeline: *pipeline,
+            modulation,
+            scratch,
+            prepass_dispatch,
+            guide_dispatch: None,
+        })
     }
 
     /// The pipeline these buffers were prepared for.
@@ -158,6 +170,13 @@ impl SceneBuffers {
     /// pre-pass: with [`Filtered::dispatch`], a frame's device time.
     pub fn prepass_time(&self) -> Option<Duration> {
         self.prepass_dispatch
+    }
+
+    /// Wall time of the guide's dispatch (docs/SEMANTICS.md, "The guide"),
+    /// made when a kernel that reads `guide` first ran on these buffers, or
+    /// `None` before: a frame of such a kernel also costs this.
+    pub fn guide_time(&self) -> Option<Duration> {
+        self.guide_dispatch
     }
 
     /// Every input of `kernel` that `scene` lacks, checked before any is bound
@@ -186,9 +205,9 @@ impl SceneBuffers {
             return Ok(());
         }
         if input == Input::Feature(Feature::Guide) {
-            // Made from the colour on the device; its time is the pre-pass's.
+            // Made from the colour on the device, once.
             let (guide, dispatch) = gpu.guide(&self.color, self.width, self.height)?;
-            self.prepass_dispatch = Some(self.prepass_dispatch.unwrap_or_default() + dispatch);
+            self.guide_dispatch = Some(dispatch);
             self.inputs.insert(input, guide);
             return Ok(());
         }

@@ -9,25 +9,16 @@ use std::time::{Duration, Instant};
 
 use super::filter::{rows_per_dispatch, uniform_bytes};
 use super::{Gpu, GpuError};
-use crate::jit::{self, Input, KernelKind, LowerOptions, Params, Role, Shape, ValidatedKernel, WORKGROUP};
-use crate::lang::{Expr, Feature};
+use crate::jit::{self, Input, KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
+use crate::lang::Feature;
 use crate::pipeline::GUIDE_STENCIL;
 
 /// The guide's kernel: one à-trous pass of the constant weight, nothing multiplied back.
 fn guide_kernel() -> Result<&'static ValidatedKernel, GpuError> {
     static KERNEL: OnceLock<Result<ValidatedKernel, String>> = OnceLock::new();
-    KERNEL
-        .get_or_init(|| {
-            let shape = Shape { atrous: true, remodulate: false, stencil: GUIDE_STENCIL };
-            jit::compile_shaped(&Expr::Const(1.0), KernelKind::Filter, LowerOptions::default(), shape)
-                .map_err(|e| e.to_string())
-        })
-        .as_ref()
-        .map_err(|message| GpuError::Pipeline {
-            expression: "<guide>".into(),
-            message: message.clone(),
-            wgsl: String::new(),
-        })
+    KERNEL.get_or_init(|| jit::compile_guide(KernelKind::Filter).map_err(|e| e.to_string())).as_ref().map_err(
+        |message| GpuError::Pipeline { expression: "<guide>".into(), message: message.clone(), wgsl: String::new() },
+    )
 }
 
 impl Gpu {

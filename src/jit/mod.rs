@@ -72,6 +72,15 @@ pub fn compile_shaped(
     Ok(validate(lower_shaped(expr, kind, options, shape)?)?)
 }
 
+/// The kernel that makes the first pass's `guide` (docs/SEMANTICS.md, "The
+/// guide"): the form's own kernel of `kind` (the filter's, or an export's)
+/// with the constant weight 1, one pass of `pipeline::GUIDE_STENCIL`,
+/// nothing multiplied back.
+pub fn compile_guide(kind: KernelKind) -> Result<ValidatedKernel, CompileError> {
+    let shape = Shape { atrous: true, remodulate: false, stencil: crate::pipeline::GUIDE_STENCIL };
+    compile_shaped(&crate::lang::Expr::Const(1.0), kind, LowerOptions::default(), shape)
+}
+
 /// Lower and validate one fitness kernel scoring every expression of `exprs`
 /// ([`lower_fused`]).
 pub fn compile_fused(
