@@ -398,12 +398,15 @@ fn fitness_tiles_covering_a_scene_give_its_whole_image_error() {
         "exp(-(distance2(color) / (0.02 + colorVariance) + distance2(normal) / 0.3 + distance2(pixel) / 4))",
         "exp(-distance2(texture) / 0.1) * tricube(distance1(pixel) / 3)",
         "sqrt(dot(normal, color) - 0.5)",
+        // The guide reads one pixel beyond the first pass's taps.
+        "exp(-(distance2(guide) / 0.3 + distance2(normal) / 0.3))",
     ]
     .iter()
     .map(|t| parse_expr(t).unwrap())
     .collect();
     let scenes = vec![scene_with_albedo(48, 40, 9), scene_with_albedo(32, 24, 10)];
-    for (text, radius) in [("window", 2), ("outliers=2,demodulate,atrous=3", 2)] {
+    // A window of radius 8 reaches exactly one workgroup: a halo without slack.
+    for (text, radius) in [("window", 2), ("outliers=2,demodulate,atrous=3", 2), ("window", 8)] {
         let p = pipeline(text);
         let whole_images = Settings { devices: Some(1), ..Settings::for_pipeline(radius, p, 1) };
         let on_tiles = |sampling| Settings { tiles: Some(FitnessTiles { sampling, seed: 3 }), ..whole_images.clone() };

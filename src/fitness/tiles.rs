@@ -61,8 +61,10 @@ impl std::str::FromStr for TileSampling {
 }
 
 /// How far from a pixel the whole pipeline reads, in pixels: the outlier
-/// pre-pass's neighbourhood (and `keep`'s spread of what it clamps), then the window's radius or the sum of the
-/// à-trous passes' reaches (each pass filters the previous one's output).
+/// pre-pass's neighbourhood (and `keep`'s spread of what it clamps), the
+/// first pass's `guide` (blurred once more; counted whether or not the weight
+/// reads it), then the window's radius or the sum of the à-trous passes'
+/// reaches (each pass filters the previous one's output).
 pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
     let prepass = match pipeline.outliers {
         Some(outliers) if outliers.keep => OUTLIER_RADIUS + crate::pipeline::keep_reach(),
@@ -75,7 +77,7 @@ pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
             (0..passes).map(|level| pipeline.pass_radius(radius) * FilterPipeline::step(level)).sum()
         }
     };
-    prepass + form
+    prepass + crate::pipeline::GUIDE_STENCIL.half_width() as u32 + form
 }
 
 /// The halo cut around a tile: the pipeline's reach, rounded up to whole
@@ -151,7 +153,8 @@ mod tests {
 
     #[test]
     fn the_halo_covers_what_the_pipeline_reads() {
-        assert_eq!(reach(&FilterPipeline::WINDOW, 3), 3);
+        // The window's radius and the guide's one pixel.
+        assert_eq!(reach(&FilterPipeline::WINDOW, 3), 4);
         assert_eq!(halo(&FilterPipeline::WINDOW, 3), 8);
         assert_eq!(halo(&FilterPipeline::WINDOW, 10), 16);
         let atrous = FilterPipeline {
@@ -159,12 +162,12 @@ mod tests {
             demodulate: true,
             form: Form::Atrous { passes: 5, stencil: Default::default() },
         };
-        // 2 (pre-pass) + 2 · (1 + 2 + 4 + 8 + 16).
-        assert_eq!(reach(&atrous, 3), 64);
-        assert_eq!(halo(&atrous, 3), 64);
+        // 2 (pre-pass) + 1 (guide) + 2 · (1 + 2 + 4 + 8 + 16).
+        assert_eq!(reach(&atrous, 3), 65);
+        assert_eq!(halo(&atrous, 3), 72);
         let keep = FilterPipeline { outliers: Some(Outliers { k: 2.0, keep: true }), ..atrous };
         // The spread of what the clamp removed reaches 31 more.
-        assert_eq!(reach(&keep, 3), 95);
+        assert_eq!(reach(&keep, 3), 96);
     }
 
     #[test]
