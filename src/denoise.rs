@@ -234,13 +234,17 @@ mod tests {
         assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous128Guide"));
         assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep), "keeps the light: {}", chosen.pipeline);
 
-        // Without depth, the next that needs none; the message says what was passed over.
+        // Without depth the default still applies: it reads none.
         let no_depth = provided(&[Texture, Normal, WorldPosition], &[ScalarVar::ColorVariance]);
-        let chosen = Choice::best_for(&no_depth).unwrap();
-        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous3x3Keep"));
+        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous128Guide"));
+
+        // Without a position, the best that reads none; the message says what was passed over.
+        let no_position = provided(&[Texture, Normal, Depth], &[ScalarVar::ColorVariance]);
+        let chosen = Choice::best_for(&no_position).unwrap();
+        assert!(!chosen.expr.features().contains(&WorldPosition), "{:?}", chosen.name);
         let because = chosen.chosen_because.unwrap();
-        assert!(because.contains("@evolvedAtrous128Guide needs depth"), "{because}");
-        assert!(because.contains("@evolvedAtrous128Keep needs depth"), "{because}");
+        assert!(because.contains("@evolvedAtrous128Guide needs worldPosition"), "{because}");
+        assert!(because.contains("@evolvedAtrous128Keep needs"), "{because}");
 
         // Demodulation needs the albedo even where the weight does not read it.
         let no_albedo = provided(&[Normal, WorldPosition, Depth], &[ScalarVar::ColorVariance]);
