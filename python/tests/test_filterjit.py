@@ -119,12 +119,14 @@ def test_oidn_side_by_side(render):
 def test_the_default_filter_follows_the_inputs_given(render):
     name, pipeline, _ = filterjit.choose(list(inputs(render)))
     assert name == "@" + filterjit.SHIPPED_BY_QUALITY[0], name
-    # The best reads depth: without it, the next best, and why.
-    name, _, why = filterjit.choose(list(inputs(render, "depth")))
-    assert "needs depth" in why and name != "@" + filterjit.SHIPPED_BY_QUALITY[0], (name, why)
+    # The best reads no depth: without it, still the best.
+    assert filterjit.choose(list(inputs(render, "depth")))[0] == "@" + filterjit.SHIPPED_BY_QUALITY[0]
+    # It reads the position: without it, the next best that reads none, and why.
+    name, _, why = filterjit.choose(list(inputs(render, "position")))
+    assert "needs worldPosition" in why and name != "@" + filterjit.SHIPPED_BY_QUALITY[0], (name, why)
     assert filterjit.choose([]) [0] == "@bilateral"
     # What choose names is what denoise runs: the same pixels as asking for it by name.
-    without = inputs(render, "depth")
+    without = inputs(render, "position")
     chosen = filterjit.denoise(render["color"], **without)
     named = filterjit.denoise(render["color"], **without, filter=name)
     assert np.array_equal(chosen, named)
