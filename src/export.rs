@@ -382,7 +382,7 @@ pub fn export_pipeline(
             Some(code)
         }
     };
-    let guide = match kernel.source().layout.inputs.contains(&Input::Feature(Feature::Guide)) {
+    let guide = match kernel.source().layout.reads_guide() {
         false => None,
         true => {
             let guide = jit::compile_guide(KernelKind::Export(format))?;

@@ -153,20 +153,15 @@ export class Filter {
       for (const b of storage(prepass)) target(b.role, b.format);
       dispatch("prepass", prepass.uniform_values, {});
     }
-    const spread = this.manifest.spread;
-    if (spread) {
-      spread.sequence.forEach((step, n) => {
-        // Ping-ponged images alternate between two textures; each dispatch writes the one it does not read.
-        for (const b of storage(spread)) target(step.images[b.role] ?? b.role, b.format);
-        dispatch("spread", step.uniform_values, step.images);
-      });
-    }
-    const guide = this.manifest.guide;
-    if (guide) {
-      // The colour the first pass compares: the image the form filters, blurred.
-      for (const step of guide.sequence) {
-        for (const b of storage(guide)) target(step.images[b.role] ?? b.role, b.format);
-        dispatch("guide", { ...guide.uniform_values, ...step.uniform_values }, step.images);
+    // The spread, then the guide, dispatch by dispatch: each names the image every role binds (the
+    // spread's ping-pong between two textures, each dispatch writing the one it does not read); its
+    // uniform takes the stage's values, then its own.
+    for (const name of ["spread", "guide"]) {
+      const stage = this.manifest[name];
+      if (!stage) continue;
+      for (const step of stage.sequence) {
+        for (const b of storage(stage)) target(step.images[b.role] ?? b.role, b.format);
+        dispatch(name, { ...stage.uniform_values, ...step.uniform_values }, step.images);
       }
     }
     let colour = this.manifest.filters;

@@ -9,8 +9,7 @@ use std::time::{Duration, Instant};
 
 use super::filter::{rows_per_dispatch, uniform_bytes};
 use super::{Gpu, GpuError};
-use crate::jit::{self, Input, KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
-use crate::lang::Feature;
+use crate::jit::{self, KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
 use crate::pipeline::GUIDE_STENCIL;
 
 /// The guide's kernel: one à-trous pass of the constant weight, nothing multiplied back.
@@ -26,7 +25,7 @@ impl Gpu {
     /// do this before their GL turn, since creating a pipeline takes the
     /// turn itself and turns never nest (the guide is dispatched inside one).
     pub(super) fn prepare_guide_for(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
-        if kernel.source().layout.inputs.contains(&Input::Feature(Feature::Guide)) {
+        if kernel.source().layout.reads_guide() {
             self.pipeline(guide_kernel()?)?;
         }
         Ok(())

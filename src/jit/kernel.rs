@@ -86,6 +86,12 @@ impl KernelLayout {
     pub fn describe(&self) -> String {
         self.inputs.iter().map(|i| i.describe()).collect::<Vec<_>>().join(",")
     }
+
+    /// Whether the kernel binds the first pass's `guide`, which the device
+    /// and an exported pipeline make in a dispatch of their own.
+    pub fn reads_guide(&self) -> bool {
+        self.inputs.contains(&Input::Feature(Feature::Guide))
+    }
 }
 
 /// What a kernel computes. Both kinds share the binding interface.

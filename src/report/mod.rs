@@ -413,7 +413,7 @@ fn measure(
     let first = gpu.filter(kernel, buffers, scene, radius)?;
     gpu.filter(kernel, timing.buffers, timing.scene, radius)?;
     // The guide runs once a frame too, where the weight reads it (the warm-up made it).
-    let guide = match kernel.source().layout.inputs.contains(&jit::Input::Feature(crate::lang::Feature::Guide)) {
+    let guide = match kernel.source().layout.reads_guide() {
         true => timing.buffers.guide_time().unwrap_or_default().as_secs_f64(),
         false => 0.0,
     };
