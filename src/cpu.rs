@@ -211,12 +211,26 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
             let i = (y * w + x) as usize;
             let mut c = f64s(scene.color[i]);
             let mut measured = [0.0f64; 3];
-            if let Some(pipeline::Outliers { k, .. }) = pipeline.outliers {
-                let neighbours: Vec<f64> = pipeline::outlier_neighbours()
+            if let Some(pipeline::Outliers { k, trim, .. }) = pipeline.outliers {
+                let mut neighbours: Vec<f64> = pipeline::outlier_neighbours()
                     .map(|[dx, dy]| (x + dx as i64, y + dy as i64))
                     .filter(|&(xj, yj)| xj >= 0 && yj >= 0 && xj < w && yj < h)
                     .map(|(xj, yj)| pipeline::luminance(f64s(scene.color[(yj * w + xj) as usize])))
                     .collect();
+                if trim {
+                    // The first of the brightest, in the neighbourhood's order, is left out.
+                    let brightest = neighbours
+                        .iter()
+                        .enumerate()
+                        .fold(None, |best: Option<(usize, f64)>, (j, &l)| match best {
+                            Some((_, b)) if b >= l => best,
+                            _ => Some((j, l)),
+                        })
+                        .map(|(j, _)| j);
+                    if let Some(j) = brightest {
+                        neighbours.remove(j);
+                    }
+                }
                 if !neighbours.is_empty() {
                     let n = neighbours.len() as f64;
                     let mean = neighbours.iter().sum::<f64>() / n;

@@ -25,6 +25,8 @@ use crate::scene::{Holds, Needs, Request};
 /// taken; `bilateral` reads colour alone, so there always is one
 /// (docs/BENCHMARKS.md, "Fitness that charges the light").
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
+    "evolvedAtrous128Trim",
+    "evolvedAtrous128Trim3x3",
     "evolvedAtrous128Guide",
     "evolvedAtrous128Guide3x3",
     "evolvedAtrous128Keep",
@@ -225,25 +227,25 @@ mod tests {
         let best = Choice::best_for(&all).unwrap();
         assert_eq!(best.name.as_deref(), Some(SHIPPED_BY_QUALITY[0]));
         assert!(best.missing(&all).is_empty());
-        assert_eq!(best.pipeline.to_string(), "outliers=2,keep,demodulate,atrous=4");
+        assert_eq!(best.pipeline.to_string(), "outliers=2.5,trim,keep,demodulate,atrous=4");
 
         // It reads no variance: a render without one (Cycles, Mitsuba's plain `aov`) gets it too.
         let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
         let chosen = Choice::best_for(&no_variance).unwrap();
         assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
-        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous128Guide"));
+        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous128Trim"));
         assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep), "keeps the light: {}", chosen.pipeline);
 
         // Without depth the default still applies: it reads none.
         let no_depth = provided(&[Texture, Normal, WorldPosition], &[ScalarVar::ColorVariance]);
-        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous128Guide"));
+        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous128Trim"));
 
         // Without a position, the best that reads none; the message says what was passed over.
         let no_position = provided(&[Texture, Normal, Depth], &[ScalarVar::ColorVariance]);
         let chosen = Choice::best_for(&no_position).unwrap();
         assert!(!chosen.expr.features().contains(&WorldPosition), "{:?}", chosen.name);
         let because = chosen.chosen_because.unwrap();
-        assert!(because.contains("@evolvedAtrous128Guide needs worldPosition"), "{because}");
+        assert!(because.contains("@evolvedAtrous128Trim needs worldPosition"), "{because}");
         assert!(because.contains("@evolvedAtrous128Keep needs"), "{because}");
 
         // Demodulation needs the albedo even where the weight does not read it.

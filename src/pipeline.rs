@@ -102,6 +102,10 @@ pub enum Form {
 pub struct Outliers {
     /// A pixel whose luminance exceeds its neighbours' mean + k·std is scaled down to it.
     pub k: f32,
+    /// Whether the rule's mean and deviation leave out the brightest neighbour
+    /// (`trim`): two bright samples side by side otherwise raise each other's
+    /// limit and both pass (docs/BENCHMARKS.md, "A trimmed outlier rule").
+    pub trim: bool,
     /// Whether what the clamp removed is put back, spread over the
     /// neighbourhood (`keep`): a clamp alone darkens renders whose light
     /// arrives in rare bright samples (docs/BENCHMARKS.md, "Where the light goes").
@@ -227,11 +231,16 @@ impl FromStr for FilterPipeline {
                     if pipeline.outliers.is_some() || pipeline.demodulate {
                         return Err(error("`outliers` is the first stage, and appears once".into()));
                     }
-                    pipeline.outliers = Some(Outliers { k, keep: false });
+                    pipeline.outliers = Some(Outliers { k, trim: false, keep: false });
                 }
+                ("trim", None) => match &mut pipeline.outliers {
+                    Some(outliers) if !outliers.trim && !outliers.keep && !pipeline.demodulate => outliers.trim = true,
+                    Some(_) => return Err(error("`trim` comes once, right after `outliers=K`".into())),
+                    None => return Err(error("`trim` changes the rule of `outliers=K`: write it after outliers=K".into())),
+                },
                 ("keep", None) => match &mut pipeline.outliers {
                     Some(outliers) if !outliers.keep && !pipeline.demodulate => outliers.keep = true,
-                    Some(_) => return Err(error("`keep` comes once, right after `outliers=K`".into())),
+                    Some(_) => return Err(error("`keep` comes once, right after `outliers=K` (and `trim`)".into())),
                     None => {
                         return Err(error("`keep` puts back what `outliers=K` removes: write it after outliers=K".into()))
                     }
@@ -262,7 +271,7 @@ impl FromStr for FilterPipeline {
                 }
                 (other, _) => {
                     return Err(error(format!(
-                        "unknown stage `{other}`; the stages are outliers=K, keep, demodulate, window, atrous=N, atrous3x3=N"
+                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, demodulate, window, atrous=N, atrous3x3=N"
                     )))
                 }
             }
@@ -277,8 +286,11 @@ impl FromStr for FilterPipeline {
 impl fmt::Display for FilterPipeline {
     /// The canonical text: `parse(print(p)) == p`.
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if let Some(Outliers { k, keep }) = self.outliers {
+        if let Some(Outliers { k, trim, keep }) = self.outliers {
             write!(f, "outliers={k},")?;
+            if trim {
+                write!(f, "trim,")?;
+            }
             if keep {
                 write!(f, "keep,")?;
             }
@@ -331,6 +343,8 @@ mod tests {
             "outliers=2,demodulate,atrous3x3=6",
             "outliers=2,keep,demodulate,atrous3x3=4",
             "outliers=3,keep,window",
+            "outliers=2.5,trim,keep,demodulate,atrous=4",
+            "outliers=2,trim,window",
         ] {
             let p: FilterPipeline = text.parse().unwrap();
             assert_eq!(p.to_string(), text);
@@ -351,6 +365,9 @@ mod tests {
             ("keep,window", "after outliers=K"),
             ("outliers=2,demodulate,keep,window", "right after"),
             ("outliers=2,keep,keep,window", "once"),
+            ("trim,window", "after outliers=K"),
+            ("outliers=2,keep,trim,window", "right after"),
+            ("outliers=2,trim,trim,window", "once"),
         ] {
             let e = text.parse::<FilterPipeline>().unwrap_err().to_string();
             assert!(e.contains(needle), "{text}: {e}");

@@ -53,6 +53,8 @@ fn the_pre_pass_alone_agrees_with_the_cpu() {
             "outliers=1.5,demodulate,window",
             "outliers=2,keep,window",
             "outliers=1.5,keep,demodulate,window",
+            "outliers=2,trim,window",
+            "outliers=1,trim,keep,demodulate,window",
         ] {
             let p = pipeline(text);
             let on_gpu = gpu_filter(&gpu, &expr, &scene, &p, 0);
@@ -81,6 +83,33 @@ fn the_outlier_rule_tames_a_firefly_and_keeps_a_flat_image() {
     let gpu = gpu();
     let on_gpu = gpu_filter(&gpu, &parse_expr("1").unwrap(), &scene, &p, 0);
     assert!((on_gpu[40][1] - prepared.color[40][1]).abs() < 1e-5, "GPU {:?}", on_gpu[40]);
+}
+
+#[test]
+fn trim_catches_two_fireflies_side_by_side() {
+    // Two bright samples next to each other on a flat 9x9 image: each one is
+    // in the other's neighbourhood and raises its limit, so the plain rule
+    // lets both through; leaving out the brightest neighbour catches both.
+    let mut scene = Scene::from_color("pair", 9, 9, vec![[0.5, 0.5, 0.5]; 81]);
+    scene.color[40] = [60.0, 60.0, 60.0];
+    scene.color[41] = [30.0, 30.0, 30.0];
+    let luminance = |c: [f32; 3]| filterjit::pipeline::luminance(c.map(f64::from));
+    let plain = cpu::prepass(&scene, &pipeline("outliers=2.5,window")).unwrap();
+    assert!(luminance(plain.color[41]) > 10.0, "the plain rule keeps the dimmer one: {:?}", plain.color[41]);
+    let trimmed = cpu::prepass(&scene, &pipeline("outliers=2.5,trim,window")).unwrap();
+    for k in [40, 41] {
+        // Without its partner the neighbourhood is flat: the limit is 0.5.
+        let l = luminance(trimmed.color[k]);
+        assert!((l - 0.5).abs() < 1e-6, "pixel {k}: luminance {l}");
+    }
+    // A pixel beside the pair: its two bright neighbours, one left out, still
+    // raise its limit far above its own 0.5; it is unchanged.
+    assert_eq!(trimmed.color[31], [0.5, 0.5, 0.5]);
+    let gpu = gpu();
+    let on_gpu = gpu_filter(&gpu, &parse_expr("1").unwrap(), &scene, &pipeline("outliers=2.5,trim,window"), 0);
+    let on_cpu = trimmed.color.iter().map(|c| c.map(f64::from)).collect::<Vec<_>>();
+    let (fraction, worst) = agree_fraction(&on_gpu, &on_cpu);
+    assert_eq!(fraction, 1.0, "worst relative difference {worst:e}");
 }
 
 #[test]
@@ -159,6 +188,7 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "outliers=0.5,atrous=2",
         "outliers=2,demodulate,atrous3x3=4",
         "outliers=2,keep,demodulate,atrous3x3=4",
+        "outliers=2.5,trim,keep,demodulate,atrous=4",
         "atrous3x3=2",
     ] {
         let p = pipeline(text);
@@ -189,6 +219,7 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
         "demodulate,window",
         "outliers=2,atrous3x3=3",
         "outliers=2,keep,demodulate,atrous3x3=2",
+        "outliers=2.5,trim,keep,demodulate,atrous=2",
     ] {
         let p = pipeline(text);
         let kernels: Vec<_> = exprs

@@ -158,14 +158,14 @@ mod tests {
         assert_eq!(halo(&FilterPipeline::WINDOW, 3), 8);
         assert_eq!(halo(&FilterPipeline::WINDOW, 10), 16);
         let atrous = FilterPipeline {
-            outliers: Some(Outliers { k: 2.0, keep: false }),
+            outliers: Some(Outliers { k: 2.0, trim: false, keep: false }),
             demodulate: true,
             form: Form::Atrous { passes: 5, stencil: Default::default() },
         };
         // 2 (pre-pass) + 1 (guide) + 2 · (1 + 2 + 4 + 8 + 16).
         assert_eq!(reach(&atrous, 3), 65);
         assert_eq!(halo(&atrous, 3), 72);
-        let keep = FilterPipeline { outliers: Some(Outliers { k: 2.0, keep: true }), ..atrous };
+        let keep = FilterPipeline { outliers: Some(Outliers { k: 2.0, trim: false, keep: true }), ..atrous };
         // The spread of what the clamp removed reaches 31 more.
         assert_eq!(reach(&keep, 3), 96);
     }

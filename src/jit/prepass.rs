@@ -17,7 +17,8 @@ pub struct PrepassParams {
     /// The outlier rule's k.
     pub k: f32,
     /// Bit 0: outliers; bit 1: demodulation; bit 2: `keep`, under which the
-    /// colour is written clamped but undivided (the spread kernel divides it).
+    /// colour is written clamped but undivided (the spread kernel divides it);
+    /// bit 3: `trim`, the rule leaves out the brightest neighbour.
     pub stages: u32,
 }
 
@@ -26,7 +27,9 @@ impl PrepassParams {
         let outliers = pipeline.outliers.map_or(0, |_| 1);
         let demodulate = if pipeline.demodulate { 2 } else { 0 };
         let keep = if pipeline.outliers.is_some_and(|o| o.keep) { 4 } else { 0 };
-        PrepassParams { width, height, k: pipeline.outliers.map_or(0.0, |o| o.k), stages: outliers | demodulate | keep }
+        let trim = if pipeline.outliers.is_some_and(|o| o.trim) { 8 } else { 0 };
+        let stages = outliers | demodulate | keep | trim;
+        PrepassParams { width, height, k: pipeline.outliers.map_or(0.0, |o| o.k), stages }
     }
 }
 
