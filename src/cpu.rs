@@ -217,19 +217,15 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
                     .filter(|&(xj, yj)| xj >= 0 && yj >= 0 && xj < w && yj < h)
                     .map(|(xj, yj)| pipeline::luminance(f64s(scene.color[(yj * w + xj) as usize])))
                     .collect();
-                if trim {
+                if trim && !neighbours.is_empty() {
                     // The first of the brightest, in the neighbourhood's order, is left out.
-                    let brightest = neighbours
-                        .iter()
-                        .enumerate()
-                        .fold(None, |best: Option<(usize, f64)>, (j, &l)| match best {
-                            Some((_, b)) if b >= l => best,
-                            _ => Some((j, l)),
-                        })
-                        .map(|(j, _)| j);
-                    if let Some(j) = brightest {
-                        neighbours.remove(j);
+                    let mut brightest = 0;
+                    for (j, &l) in neighbours.iter().enumerate() {
+                        if l > neighbours[brightest] {
+                            brightest = j;
+                        }
                     }
+                    neighbours.remove(brightest);
                 }
                 if !neighbours.is_empty() {
                     let n = neighbours.len() as f64;

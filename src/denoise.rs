@@ -25,6 +25,7 @@ use crate::scene::{Holds, Needs, Request};
 /// taken; `bilateral` reads colour alone, so there always is one
 /// (docs/BENCHMARKS.md, "Fitness that charges the light").
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
+    "evolvedAtrous64Trim",
     "evolvedAtrous128Trim",
     "evolvedAtrous128Trim3x3",
     "evolvedAtrous128Guide",
@@ -233,19 +234,19 @@ mod tests {
         let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
         let chosen = Choice::best_for(&no_variance).unwrap();
         assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
-        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous128Trim"));
+        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64Trim"));
         assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep), "keeps the light: {}", chosen.pipeline);
 
         // Without depth the default still applies: it reads none.
         let no_depth = provided(&[Texture, Normal, WorldPosition], &[ScalarVar::ColorVariance]);
-        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous128Trim"));
+        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous64Trim"));
 
         // Without a position, the best that reads none; the message says what was passed over.
         let no_position = provided(&[Texture, Normal, Depth], &[ScalarVar::ColorVariance]);
         let chosen = Choice::best_for(&no_position).unwrap();
         assert!(!chosen.expr.features().contains(&WorldPosition), "{:?}", chosen.name);
         let because = chosen.chosen_because.unwrap();
-        assert!(because.contains("@evolvedAtrous128Trim needs worldPosition"), "{because}");
+        assert!(because.contains("@evolvedAtrous64Trim needs worldPosition"), "{because}");
         assert!(because.contains("@evolvedAtrous128Keep needs"), "{because}");
 
         // Demodulation needs the albedo even where the weight does not read it.

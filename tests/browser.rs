@@ -63,7 +63,7 @@ fn the_web_module_runs_an_exported_filter_as_filter_does() {
         return;
     }
     let dir = temp_dir("browser", "module");
-    let name = "@evolvedAtrous128Trim";
+    let name = "@evolvedAtrous64Trim";
     let bin = env!("CARGO_BIN_EXE_filterjit");
     let shader = dir.join("denoise.wgsl");
     let o = Command::new(bin).args(["export", name, "--format", "rgba32float", "-o"]).arg(&shader).output().unwrap();

@@ -141,7 +141,7 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         // The guide: its own dispatch before the form, bound in pass 0 only;
         // after the whole pre-pass, and without one.
         (named("evolvedAtrous128Guide"), "outliers=2,keep,demodulate,atrous=4"),
-        (named("evolvedAtrous128Trim"), "outliers=2.5,trim,keep,demodulate,atrous=4"),
+        (named("evolvedAtrous64Trim"), "outliers=2.5,trim,keep,demodulate,atrous=4"),
         (parse_expr("exp(-(distance2(guide) * 2 + distance2(normal) * 4))").unwrap(), "atrous3x3=3"),
         (parse_expr("exp(-(distance2(guide, color) + distance2(pixel) / 8))").unwrap(), "window"),
         // What the outlier rule measured, from the exported pre-pass's packed `local` texture.

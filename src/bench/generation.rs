@@ -53,7 +53,7 @@ pub(super) fn measure(
             variables: variances,
             constants: crate::lang::ops::THESIS_CONSTANTS.to_vec(),
         };
-        let mut engine = gp::Engine::new(gp_settings, terminals, seed_expr, &mut evaluator);
+        let mut engine = gp::Engine::new(gp_settings, terminals, seed_expr, &mut evaluator)?;
         engine.initial()?;
         let t = Instant::now();
         let (_, report) = engine.step()?.expect("one process holds every island");

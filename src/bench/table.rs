@@ -112,13 +112,14 @@ pub fn table(r: &Report) -> String {
             "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: device time of pre-pass, guide + passes; OIDN: CPU wall time; warm median [min, max], ms; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
             r.noisy_light.map_or("-".into(), |l| format!("{l:.3}"))
         );
+        let pipeline_width = r.frames.iter().map(|f| f.pipeline.len()).max().unwrap_or(0).max("pipeline".len());
         t += &format!(
-            "  {:<34} {:<32} {:>10} {:>22} {:>10} {:>8} {:>7}\n",
+            "  {:<34} {:<pipeline_width$} {:>10} {:>22} {:>10} {:>8} {:>7}\n",
             "method", "pipeline", "compile ms", "warm ms", "ms/Mpx", "/ OIDN", "light"
         );
         for f in &r.frames {
             t += &format!(
-                "  {:<34} {:<32} {:>10} {:>22} {:>10.1} {:>8} {:>7}\n",
+                "  {:<34} {:<pipeline_width$} {:>10} {:>22} {:>10.1} {:>8} {:>7}\n",
                 f.method,
                 f.pipeline,
                 f.compile_ms.map_or("-".into(), |v| format!("{v:.1}")),

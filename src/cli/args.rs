@@ -200,11 +200,12 @@ pub(crate) enum Command {
 pub(crate) enum Preset {
     /// Improve on the best shipped filter (`filter`'s default): seeded with it
     /// in its pipeline and scored against it (`--fitness-pool guarded`, 2
-    /// elites, so the best is never worse than it on the training scenes), 4
-    /// islands of 16, 8 generations, 32x32 scenes, only what a Mitsuba or
-    /// engine G-buffer holds plus the outlier rule's measures. About a minute
-    /// on a 2-core CPU once the scenes are rendered (a minute and a half with
-    /// the first renders).
+    /// elites, so the best is never worse than it on the training scenes; the
+    /// light it moves charged, `--fitness-light 0.05`), 4
+    /// islands of 12, 6 generations, expressions up to 150 nodes (the seed has
+    /// 103), 64x64 scenes with 256-spp references, only what a Mitsuba or
+    /// engine G-buffer holds plus the outlier rule's measures. About two
+    /// minutes on a 2-core CPU with the first renders, one once they are cached.
     Shipped,
     /// 4 islands of 25, 15 generations, 32x32 scenes, radius 3, the thesis's
     /// window and rules, seeded with `@bilateral`: minutes on a 2-core CPU.
@@ -330,19 +331,19 @@ pub(crate) struct EvolveArgs {
     pub(crate) test_scenes: Vec<String>,
     #[command(flatten)]
     pub(crate) render: RenderArgs,
-    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous128Trim; quick, thesis: @bilateral; realtime: @svgfAtrous].
+    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous64Trim; quick, thesis: @bilateral; realtime: @svgfAtrous].
     #[arg(long)]
     pub(crate) seed_expr: Option<String>,
     /// Number of islands [every preset: 4].
     #[arg(long)]
     pub(crate) islands: Option<usize>,
-    /// Individuals per island [shipped: 16, quick: 25, thesis: 100, realtime: 40].
+    /// Individuals per island [shipped: 12, quick: 25, thesis: 100, realtime: 40].
     #[arg(long)]
     pub(crate) island_size: Option<usize>,
-    /// Generations to run: the stopping rule [shipped: 8, quick: 15, thesis: 200, realtime: 30].
+    /// Generations to run: the stopping rule [shipped: 6, quick: 15, thesis: 200, realtime: 30].
     #[arg(long)]
     pub(crate) generations: Option<u32>,
-    /// Longest expression, in nodes [75].
+    /// Longest expression, in nodes [shipped: 150; quick, thesis, realtime: 75, the thesis's].
     #[arg(long)]
     pub(crate) max_length: Option<usize>,
     /// Tournament size [8].
@@ -445,8 +446,8 @@ pub(crate) struct EvolveArgs {
     /// Charge each training scene's error for the light the filter moves:
     /// relMSE × (1 + (ln(light) / TOL)²), light being the output's mean
     /// luminance over the noisy input's on the scored pixels (0.05: a 5 %
-    /// loss doubles a scene's error), or `off` for relMSE alone [every
-    /// preset: off; docs/BENCHMARKS.md, "Fitness that charges the light"].
+    /// loss doubles a scene's error), or `off` for relMSE alone [shipped: 0.05;
+    /// quick, thesis, realtime: off; docs/BENCHMARKS.md, "Fitness that charges the light"].
     /// Kept in the checkpoint.
     #[arg(long, value_name = "TOL|off")]
     pub(crate) fitness_light: Option<LightTolerance>,

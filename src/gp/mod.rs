@@ -371,9 +371,13 @@ fn median(values: &mut [f64]) -> f64 {
 
 impl<'e> Engine<'e> {
     /// A search whose islands all live in this process.
-    pub fn new(settings: Settings, terminals: Terminals, seed_expr: Expr, evaluator: &'e mut dyn Evaluator) -> Self {
+    pub fn new(
+        settings: Settings,
+        terminals: Terminals,
+        seed_expr: Expr,
+        evaluator: &'e mut dyn Evaluator,
+    ) -> anyhow::Result<Self> {
         Self::with_transport(settings, terminals, seed_expr, evaluator, Box::new(InProcess))
-            .expect("one process holds any number of islands")
     }
 
     /// A search whose islands are shared among the processes `transport`
@@ -390,6 +394,17 @@ impl<'e> Engine<'e> {
             anyhow::bail!(
                 "{} islands cannot be shared among {ranks} processes: give each at least one",
                 settings.islands
+            );
+        }
+        if seed_expr.len() > settings.max_length {
+            // Every offspring of it would be too long and fall back to its
+            // parent: the population would stay copies of the seed.
+            anyhow::bail!(
+                "the seed expression has {} nodes, more than --max-length {}: none of its offspring would fit, \
+                 so the search could not move from it; give --max-length {} or more",
+                seed_expr.len(),
+                settings.max_length,
+                seed_expr.len()
             );
         }
         let held = transport::share(settings.islands, transport.rank(), ranks);
@@ -883,7 +898,7 @@ mod tests {
     fn run_in_process(settings: Settings) -> Vec<State> {
         let mut evaluator = TextFitness;
         let multi = settings.objectives == Objectives::ErrorCost;
-        let mut engine = Engine::new(settings, terminals(), seed(), &mut evaluator);
+        let mut engine = Engine::new(settings, terminals(), seed(), &mut evaluator).unwrap();
         if multi {
             engine.set_radii(1..=3);
         }
@@ -993,7 +1008,8 @@ mod tests {
         let with = in_process(4);
         let mut evaluator = TextFitness;
         let mut engine =
-            Engine::new(Settings { migration_interval: 0, ..settings(4) }, terminals(), seed(), &mut evaluator);
+            Engine::new(Settings { migration_interval: 0, ..settings(4) }, terminals(), seed(), &mut evaluator)
+                .unwrap();
         engine.initial().unwrap();
         let mut without = Vec::new();
         for _ in 0..6 {
@@ -1006,7 +1022,7 @@ mod tests {
     fn a_resumed_process_continues_exactly() {
         let expected = in_process(4);
         let mut evaluator = TextFitness;
-        let mut engine = Engine::new(settings(4), terminals(), seed(), &mut evaluator);
+        let mut engine = Engine::new(settings(4), terminals(), seed(), &mut evaluator).unwrap();
         engine.resume(&expected[3]).unwrap();
         let next = engine.step().unwrap().unwrap().0;
         assert_eq!(texts(&[next]), texts(&expected[4..5]));
@@ -1021,5 +1037,21 @@ mod tests {
             .err()
             .expect("an error");
         assert!(error.to_string().contains("2 islands cannot be shared among 3 processes"), "{error}");
+    }
+
+    #[test]
+    fn a_seed_longer_than_the_limit_is_refused_rather_than_left_unmoved() {
+        // Every mutation of a seed over the limit would be too long and fall
+        // back to the seed itself: the search would stand still.
+        let mut evaluator = TextFitness;
+        let long = Settings { max_length: seed().len() - 1, ..settings(2) };
+        let error = Engine::new(long, terminals(), seed(), &mut evaluator).err().expect("an error");
+        let said = error.to_string();
+        assert!(
+            said.contains(&format!("{} nodes, more than --max-length {}", seed().len(), seed().len() - 1)),
+            "{said}"
+        );
+        let fits = Settings { max_length: seed().len(), ..settings(2) };
+        assert!(Engine::new(fits, terminals(), seed(), &mut evaluator).is_ok());
     }
 }
