@@ -204,8 +204,8 @@ pub(crate) enum Preset {
     /// light it moves charged, `--fitness-light 0.05`), 4
     /// islands of 12, 6 generations, expressions up to 150 nodes (the seed has
     /// 103), 64x64 scenes with 256-spp references, only what a Mitsuba or
-    /// engine G-buffer holds plus the outlier rule's measures. About two
-    /// minutes on a 2-core CPU with the first renders, one once they are cached.
+    /// engine G-buffer holds plus the outlier rule's measures. About two minutes
+    /// on a 2-core CPU with the first renders, a minute and a quarter once they are cached.
     Shipped,
     /// 4 islands of 25, 15 generations, 32x32 scenes, radius 3, the thesis's
     /// window and rules, seeded with `@bilateral`: minutes on a 2-core CPU.
