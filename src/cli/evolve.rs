@@ -333,10 +333,10 @@ impl PresetValues {
                     .and_then(|r| r.pipeline)
                     .expect("the best shipped filter is stored with its pipeline");
                 PresetValues {
-                    // Smaller than quick's: a pass kernel takes longer to compile than a window's.
-                    // Room to grow: the seed has about a hundred nodes, more
-                    // than the thesis's limit of 75, under which none of its
-                    // offspring would fit and the search would not move.
+                    // Fewer than quick's (a pass kernel takes longer to compile
+                    // than a window's), and room to grow: the seed has about a
+                    // hundred nodes, more than the thesis's limit of 75, under
+                    // which none of its offspring would fit.
                     gp: Settings { island_size: 12, generations: 6, max_length: 150, ..Settings::default() },
                     // The shipped filters are made for renders of hundreds of
                     // pixels a side: on 32x32 scenes the seed loses to a
