@@ -8,14 +8,44 @@ pub fn named() -> Vec<(&'static str, &'static str)> {
     parse_named(EXPRESSIONS)
 }
 
-/// Parse `name = expression` lines; `#` starts a comment line.
-pub fn parse_named(text: &str) -> Vec<(&str, &str)> {
-    text.lines()
+/// Parse `name = expression` lines; `#` starts a comment line. An entry
+/// `name = @other` is another entry's expression under a name of its own
+/// (its own pipeline and measurements: the same weight in another pipeline
+/// is written once); it reads as that entry's text. An alias of a name the
+/// text does not hold, or of itself through others, stays `@other`: it
+/// fails to parse, and [`resolve`] names it.
+pub fn parse_named<'t>(text: &'t str) -> Vec<(&'t str, &'t str)> {
+    let raw: Vec<(&'t str, &'t str)> = text
+        .lines()
         .map(str::trim)
         .filter(|l| !l.is_empty() && !l.starts_with('#'))
         .filter_map(|l| l.split_once('='))
         .map(|(name, expr)| (name.trim(), expr.trim()))
-        .collect()
+        .collect();
+    let target = |mut expr: &'t str| -> Option<&'t str> {
+        // As many steps as entries: a longer chain is a cycle.
+        for _ in 0..raw.len() {
+            let Some(other) = alias_target(expr) else { return Some(expr) };
+            expr = raw.iter().find(|(n, _)| *n == other)?.1;
+        }
+        None
+    };
+    raw.iter().map(|&(name, expr)| (name, target(expr).unwrap_or(expr))).collect()
+}
+
+/// The entry whose expression entry `name` of `text` is written as (`name = @other`), if it is an alias.
+pub fn alias_of<'t>(text: &'t str, name: &str) -> Option<&'t str> {
+    text.lines()
+        .map(str::trim)
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| l.split_once('='))
+        .find(|(n, _)| n.trim() == name)
+        .and_then(|(_, expr)| alias_target(expr.trim()))
+}
+
+/// The entry an expression text `@name` stands for, if it is one.
+fn alias_target(expr: &str) -> Option<&str> {
+    expr.strip_prefix('@').map(str::trim)
 }
 
 /// The text of a shipped expression.
@@ -111,6 +141,10 @@ pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
                 None => entries.first(),
             };
             match found {
+                Some((name, text)) if alias_target(text).is_some() => bail!(
+                    "{}: `{name} = {text}` names an entry the file does not hold (or one that names it back)",
+                    path.display()
+                ),
                 Some((name, text)) => {
                     let pipeline = pipeline_of(&content, name)
                         .transpose()
@@ -169,6 +203,20 @@ mod tests {
         assert_eq!(measured_of(text, "b"), None, "not carried over from the entry before");
         assert_eq!(measured_of(text, "c"), Some("C did that"));
         assert_eq!(measured_of(text, "d"), None);
+    }
+
+    #[test]
+    fn an_alias_reads_as_its_entry_with_its_own_pipeline() {
+        let text = "# pipeline: atrous=4\na = exp(-color)\n# pipeline: atrous3x3=4\nb = @a\nc = @b\nd = @missing\ne = @f\nf = @e\n";
+        let entries = parse_named(text);
+        let of = |n: &str| entries.iter().find(|(k, _)| *k == n).unwrap().1;
+        assert_eq!(of("b"), "exp(-color)");
+        assert_eq!(of("c"), "exp(-color)", "through another alias");
+        assert_eq!(of("d"), "@missing", "left to fail");
+        assert_eq!(of("e"), "@f", "a cycle is left to fail");
+        assert_eq!(pipeline_of(text, "b").unwrap().unwrap().to_string(), "atrous3x3=4");
+        assert_eq!(pipeline_of(text, "a").unwrap().unwrap().to_string(), "atrous=4");
+        assert_eq!((alias_of(text, "a"), alias_of(text, "c")), (None, Some("b")));
     }
 
     #[test]

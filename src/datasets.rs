@@ -25,7 +25,6 @@ pub fn resolve(
     let mut out = Vec::new();
     for arg in args {
         let path = Path::new(arg);
-        let is_dataset = path.is_dir() || path.extension().is_some_and(|e| e == "exr");
         if path.is_dir() && !scene::is_dataset_dir(path) {
             // A folder of datasets: each subfolder that is one, in name order.
             let inside = scene::datasets_in(path)?;
@@ -37,7 +36,7 @@ pub fn resolve(
                 );
             }
             out.extend(inside);
-        } else if is_dataset {
+        } else if !is_rendered(arg) {
             out.push(path.to_path_buf());
         } else {
             let d = render::describe(arg)?;
@@ -45,6 +44,13 @@ pub fn resolve(
         }
     }
     Ok(out)
+}
+
+/// Whether [`resolve`] renders `arg` (a built-in name or a .toml description)
+/// rather than reading it as stored (a dataset directory or an EXR file).
+pub fn is_rendered(arg: &str) -> bool {
+    let path = Path::new(arg);
+    !(path.is_dir() || path.extension().is_some_and(|e| e == "exr"))
 }
 
 /// Features and variances every one of the datasets provides.

@@ -167,6 +167,8 @@ pub struct Shipped {
     pub rank: Option<usize>,
     /// What it was measured to do on the public renders (its `# measured:` line).
     pub measured: Option<&'static str>,
+    /// The entry whose weight it shares, where the file writes it as `@other`.
+    pub weight_of: Option<&'static str>,
     pub text: &'static str,
 }
 
@@ -191,6 +193,7 @@ pub fn shipped() -> Result<Vec<Shipped>> {
                 reads,
                 rank: SHIPPED_BY_QUALITY.iter().position(|n| *n == name).map(|k| k + 1),
                 measured: corpus::measured_of(corpus::EXPRESSIONS, name),
+                weight_of: corpus::alias_of(corpus::EXPRESSIONS, name),
                 text,
             })
         })

@@ -422,6 +422,9 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
     assert!(trimmed.contains("pipeline outliers=2.5,trim,keep,"), "{trimmed}");
     let free = block("evolvedAtrous128Keep");
     assert!(!free.contains("colorVariance") && free.contains("default   6. choice"), "{free}");
+    // Written `evolvedAtrous128Keep = @evolvedAtrous128` in the shipped file: the weight is named, not repeated.
+    assert!(free.contains("weight    @evolvedAtrous128's") && !free.contains("exp("), "{free}");
+    assert!(trimmed.contains("    exp(-("), "an entry of its own shows its expression: {trimmed}");
 }
 
 /// A render without a per-pixel variance (the Mitsuba sample with its

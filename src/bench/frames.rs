@@ -41,6 +41,18 @@ pub struct FrameResult {
     /// The output's mean luminance over the reference's, on the bench scene
     /// itself (the frame is that scene tiled, without a reference).
     pub light: Option<f64>,
+    /// Where a shipped filter's frame goes: the medians of its pre-pass
+    /// (outliers, `keep`'s spread, demodulation), its guide and its passes,
+    /// in ms (none for OIDN). They need not add up to `warm_ms`'s median.
+    pub parts_ms: Option<FrameParts>,
+}
+
+/// The medians of a frame's three parts, in ms.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct FrameParts {
+    pub prepass: f64,
+    pub guide: f64,
+    pub passes: f64,
 }
 
 /// Side of the frame the pipeline's stages are timed on (the size OIDN is compared at).
@@ -150,13 +162,18 @@ pub(super) fn whole_frames(
         prepared.push((name, pipeline, kernel, compile, light));
     }
     let mut times = vec![Vec::new(); prepared.len()];
+    let mut parts = vec![[Vec::new(), Vec::new(), Vec::new()]; prepared.len()];
     for _ in 0..repeats.max(1) * 2 {
         for (k, (_, pipeline, kernel, _, _)) in prepared.iter().enumerate() {
             let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
             let passes = gpu.filter(kernel, &mut buffers, &frame, radius)?.dispatch;
             // The guide, where the weight reads it, is made by the filter's first run.
-            let once = buffers.prepass_time().unwrap_or_default() + buffers.guide_time().unwrap_or_default();
-            times[k].push(ms(once + passes));
+            let (prepass, guide) =
+                (buffers.prepass_time().unwrap_or_default(), buffers.guide_time().unwrap_or_default());
+            times[k].push(ms(prepass + guide + passes));
+            for (part, t) in parts[k].iter_mut().zip([prepass, guide, passes]) {
+                part.push(ms(t));
+            }
         }
     }
     let oidn = match peer {
@@ -173,8 +190,11 @@ pub(super) fn whole_frames(
     let mut results: Vec<FrameResult> = prepared
         .into_iter()
         .zip(times)
-        .map(|((name, pipeline, _, compile_ms, light), times)| {
+        .zip(parts)
+        .map(|(((name, pipeline, _, compile_ms, light), times), [prepass, guide, passes])| {
             let warm_ms = stat(times);
+            let parts_ms =
+                FrameParts { prepass: stat(prepass).median, guide: stat(guide).median, passes: stat(passes).median };
             FrameResult {
                 method: format!("@{name}"),
                 pipeline: pipeline.to_string(),
@@ -183,6 +203,7 @@ pub(super) fn whole_frames(
                 over_oidn: over(warm_ms.median),
                 warm_ms,
                 light,
+                parts_ms: Some(parts_ms),
             }
         })
         .collect();
@@ -195,6 +216,7 @@ pub(super) fn whole_frames(
             over_oidn: Some(1.0),
             warm_ms,
             light,
+            parts_ms: None,
         });
     }
     Ok(results)

@@ -38,6 +38,18 @@ pub(crate) fn evolve(env: &Environment, args: EvolveArgs) -> Result<()> {
     )
 }
 
+/// The header's word on the scenes' size: the render size applies only to
+/// the scenes rendered (built-in names, .toml files), not to datasets read as stored.
+fn scene_sizes(config: &filterjit::evolve::RunConfig) -> String {
+    let (w, h) = (config.render.width, config.render.height);
+    let all = || config.training.iter().chain(&config.test);
+    match (all().all(|s| filterjit::datasets::is_rendered(s)), all().any(|s| filterjit::datasets::is_rendered(s))) {
+        (true, _) => format!("scenes {w}x{h}"),
+        (false, true) => format!("rendered scenes {w}x{h}, datasets as stored"),
+        (false, false) => "datasets as stored".to_string(),
+    }
+}
+
 /// `evolve` as one of the processes `transport` reaches: the `node_rank`-th
 /// on its machine, with `cores` cores to itself. Only the root prints.
 pub(crate) fn evolve_on(
@@ -82,15 +94,14 @@ pub(crate) fn evolve_on(
     }
     if root {
         eprintln!(
-            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, scenes {}x{}{}, {} per fitness kernel, on {}{}{}",
+            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, {}{}, {} per fitness kernel, on {}{}{}",
             settings.islands,
             settings.island_size,
             settings.generations,
             settings.max_length,
             config.radius,
             config.pipeline,
-            config.render.width,
-            config.render.height,
+            scene_sizes(&config),
             match config.fitness_tiles {
                 Some(t) => format!(" scored on {} tiles of {}x{} each", t.count, t.size, t.size),
                 None => String::new(),

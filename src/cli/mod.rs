@@ -246,7 +246,10 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                 if let Some(measured) = s.measured {
                     println!("    measured  {measured}");
                 }
-                println!("    {}", s.text);
+                match s.weight_of {
+                    Some(other) => println!("    weight    @{other}'s"),
+                    None => println!("    {}", s.text),
+                }
             }
             Ok(())
         }
