@@ -40,6 +40,21 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
     "bilateral",
 ];
 
+/// Shipped filters with a variant for renders whose light is sparse, and
+/// that variant: the same inputs and pipeline, the weight's pixel term
+/// widened from pass to pass. A chosen filter (never one asked for) gives way
+/// to its variant where the noisy input's median pixel is black or nearly
+/// ([`SPARSE_MEDIAN_OVER_MEAN`]): at a few samples a pixel most pixels
+/// caught no light, and the filter must gather from farther to estimate it
+/// (docs/BENCHMARKS.md, "A wider reach where the light is sparse").
+pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] = &[("evolvedAtrous64Trim", "evolvedAtrous64TrimSparse")];
+
+/// The noisy input's median pixel luminance over its mean below which its
+/// light counts as sparse ([`crate::metrics::Tails::median_over_mean`]).
+/// The built-in scenes are either 0.000 (two, rooms lit through an opening
+/// or round a corner) or above 0.27 at 4 spp (docs/SCENES.md).
+pub const SPARSE_MEDIAN_OVER_MEAN: f64 = 0.05;
+
 pub const DEFAULT_RADIUS: u32 = 5;
 
 /// The inputs a render has: stored features (colour and pixel position
@@ -101,6 +116,30 @@ impl Choice {
             passed_over.push(format!("@{name} needs {}", missing.join(", ")));
         }
         bail!("no shipped filter fits this render: {}", passed_over.join("; "))
+    }
+
+    /// This choice for a render whose noisy colour is `color`: a chosen
+    /// filter with a sparse-light variant ([`SPARSE_LIGHT_VARIANTS`]) gives
+    /// way to it where the render's light is sparse; anything else, and any
+    /// filter asked for, stays. The variant reads what its filter reads, so
+    /// the render loaded for the first serves the second.
+    pub fn for_light<A: Copy + Into<f64>>(self, color: &[[A; 3]]) -> Result<Choice> {
+        let (Some(because), Some(name)) = (&self.chosen_because, &self.name) else { return Ok(self) };
+        let Some((_, variant)) = SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| base == name) else { return Ok(self) };
+        let Some(tails) = crate::metrics::tails(color) else { return Ok(self) };
+        if tails.median_over_mean >= SPARSE_MEDIAN_OVER_MEAN {
+            return Ok(self);
+        }
+        let asked = Choice::asked(&format!("@{variant}"), None, None)?;
+        Ok(Choice {
+            name: asked.name,
+            expr: asked.expr,
+            chosen_because: Some(format!(
+                "{because}; its variant for sparse light, as the render's median pixel is {:.3} of its mean luminance (under {SPARSE_MEDIAN_OVER_MEAN})",
+                tails.median_over_mean
+            )),
+            ..self
+        })
     }
 
     /// The filter asked for, or else the best shipped one for what the render provides.
@@ -169,6 +208,8 @@ pub struct Shipped {
     pub measured: Option<&'static str>,
     /// The entry whose weight it shares, where the file writes it as `@other`.
     pub weight_of: Option<&'static str>,
+    /// The chosen filter it stands in for where a render's light is sparse ([`SPARSE_LIGHT_VARIANTS`]).
+    pub sparse_light_variant_of: Option<&'static str>,
     pub text: &'static str,
 }
 
@@ -194,6 +235,7 @@ pub fn shipped() -> Result<Vec<Shipped>> {
                 rank: SHIPPED_BY_QUALITY.iter().position(|n| *n == name).map(|k| k + 1),
                 measured: corpus::measured_of(corpus::EXPRESSIONS, name),
                 weight_of: corpus::alias_of(corpus::EXPRESSIONS, name),
+                sparse_light_variant_of: SPARSE_LIGHT_VARIANTS.iter().find(|(_, v)| *v == name).map(|(base, _)| *base),
                 text,
             })
         })
@@ -266,5 +308,53 @@ mod tests {
         assert!(choice.chosen_because.is_none());
         let err = Choice::asked("@noSuchFilter", None, None).unwrap_err().to_string();
         assert!(err.contains("no shipped expression `@noSuchFilter`"), "{err}");
+    }
+
+    #[test]
+    fn where_the_median_pixel_is_black_the_chosen_filter_gives_way_to_its_sparse_light_variant() {
+        use Feature::*;
+        let all = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
+        // 100 pixels, 90 black: the median is black.
+        let mut sparse = vec![[0.0f32; 3]; 100];
+        for (k, pixel) in sparse.iter_mut().enumerate().take(10) {
+            *pixel = [k as f32 + 1.0; 3];
+        }
+        let even = vec![[0.5f32; 3]; 100];
+        let chosen = Choice::best_for(&all).unwrap();
+        let (base, variant) = SPARSE_LIGHT_VARIANTS[0];
+        assert_eq!(chosen.name.as_deref(), Some(base));
+
+        let swapped = chosen.clone().for_light(&sparse).unwrap();
+        assert_eq!(swapped.name.as_deref(), Some(variant));
+        assert_eq!(swapped.pipeline, chosen.pipeline);
+        let because = swapped.chosen_because.as_deref().unwrap();
+        assert!(because.contains("sparse light") && because.contains("0.000 of its mean"), "{because}");
+        let kept = chosen.clone().for_light(&even).unwrap();
+        assert_eq!(kept.name.as_deref(), Some(base), "an even light keeps the filter");
+
+        // One asked for by name stays, sparse or not.
+        let asked = Choice::asked(&format!("@{base}"), None, None).unwrap();
+        assert_eq!(asked.for_light(&sparse).unwrap().name.as_deref(), Some(base));
+        // A pipeline the user gave stays with the variant.
+        let given: FilterPipeline = "outliers=2,keep,demodulate,atrous=5".parse().unwrap();
+        let chosen = Choice::asked_or_best(None, Some(given), None, &all).unwrap();
+        assert_eq!(chosen.for_light(&sparse).unwrap().pipeline, given);
+    }
+
+    #[test]
+    fn a_sparse_light_variant_reads_what_its_filter_reads() {
+        for (base, variant) in SPARSE_LIGHT_VARIANTS {
+            let (a, b) = (
+                Choice::asked(&format!("@{base}"), None, None).unwrap(),
+                Choice::asked(&format!("@{variant}"), None, None).unwrap(),
+            );
+            assert_eq!(a.pipeline, b.pipeline, "@{variant}");
+            let inputs = |c: &Choice| {
+                let r = c.request();
+                (r.features, r.variances, r.albedo)
+            };
+            assert_eq!(inputs(&a), inputs(&b), "@{variant}: the render loaded for @{base} must serve it");
+            assert!(SHIPPED_BY_QUALITY.contains(base));
+        }
     }
 }

@@ -427,6 +427,51 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
     assert!(trimmed.contains("    exp(-("), "an entry of its own shows its expression: {trimmed}");
 }
 
+/// `filter` without `--expr` reads the render's light: where its median
+/// pixel is black (the built-in room lit through a ceiling slot, at 4 spp)
+/// the default gives way to its sparse-light variant and stderr says why;
+/// a tamely lit render (the Mitsuba Cornell sample) keeps the default.
+#[test]
+fn filter_without_expr_takes_the_sparse_light_variant_where_the_median_pixel_is_black() {
+    let (base, variant) = filterjit::denoise::SPARSE_LIGHT_VARIANTS[0];
+    let dir = crate::common::temp_dir("cli", "sparse-light");
+    let dataset = dir.join("skylight-slot");
+    let run = filterjit(&[
+        "render",
+        "skylight-slot",
+        "--size",
+        "32x32",
+        "--spp",
+        "4",
+        "--reference-spp",
+        "16",
+        "-o",
+        dataset.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let run = filterjit(&["filter", dataset.to_str().unwrap(), "-o", dir.join("out.exr").to_str().unwrap()]);
+    let stderr = text(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(stderr.contains(&format!("filter    @{variant} (pipeline ")), "{stderr}");
+    assert!(stderr.contains("variant for sparse light") && stderr.contains("median pixel is 0.000"), "{stderr}");
+    // The same render with the filter named: no swap.
+    let run = filterjit(&[
+        "filter",
+        "--expr",
+        &format!("@{base}"),
+        dataset.to_str().unwrap(),
+        "-o",
+        dir.join("named.exr").to_str().unwrap(),
+    ]);
+    assert!(run.status.success() && !text(&run.stderr).contains("sparse"), "{}", text(&run.stderr));
+
+    let run =
+        filterjit(&["filter", mitsuba_sample().to_str().unwrap(), "-o", dir.join("cornell.exr").to_str().unwrap()]);
+    let stderr = text(&run.stderr);
+    assert!(run.status.success() && stderr.contains(&format!("filter    @{base} (pipeline ")), "{stderr}");
+    assert!(!stderr.contains("sparse"), "{stderr}");
+}
+
 /// A render without a per-pixel variance (the Mitsuba sample with its
 /// `variance.exr` withheld) gets the best shipped filter that needs none (now
 /// the best of all, which reads no variance), and stderr says which; it

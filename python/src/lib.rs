@@ -235,6 +235,8 @@ fn denoise<'py>(
     };
     let request = scene::Request { reference: false, ..choice.request() };
     let scene = scene::prepare(images, &request).map_err(value)?;
+    // As `filterjit filter`: a chosen filter may give way to its variant for the render's light.
+    let choice = choice.for_light(&scene.color).map_err(value)?;
     let kernel = kernel(&choice)?;
     let gpu = device()?;
     let filtered = py.detach(|| filterjit::denoise::filter(&gpu, &choice, &kernel, &scene)).map_err(runtime)?;
@@ -277,7 +279,9 @@ fn kernel(choice: &Choice) -> PyResult<Arc<ValidatedKernel>> {
 
 /// The shipped filter :func:`denoise` takes when given ``inputs`` (names
 /// among ``albedo``, ``normal``, ``position``, ``depth``, ``variance``; the
-/// colour is always there): ``(name, pipeline, why)``.
+/// colour is always there): ``(name, pipeline, why)``. Where the colour's
+/// median pixel is black, :func:`denoise` takes its sparse-light variant
+/// instead, where it has one (``filterjit list``).
 #[pyfunction]
 fn choose(inputs: &Bound<'_, PyAny>) -> PyResult<(String, String, String)> {
     let mut features = BTreeSet::new();

@@ -243,6 +243,12 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                         "    default   {rank}. choice of `filter` without --expr, where the render has what it reads"
                     );
                 }
+                if let Some(base) = s.sparse_light_variant_of {
+                    println!(
+                        "    default   in place of @{base}, where the render's median pixel is below {} of its mean luminance",
+                        filterjit::denoise::SPARSE_MEDIAN_OVER_MEAN
+                    );
+                }
                 if let Some(measured) = s.measured {
                     println!("    measured  {measured}");
                 }
@@ -297,22 +303,20 @@ pub(crate) fn filter(
         None => {
             let (features, variances) = scene::provides(scene_path, read.view_layer.as_deref())
                 .with_context(|| format!("reading scene {}", scene_path.display()))?;
-            let choice = Choice::asked_or_best(None, pipeline, radius, &Provided { features, variances })?;
-            eprintln!(
-                "filter    {} (pipeline {}): {}",
-                choice.describe(),
-                choice.pipeline,
-                choice.chosen_because.as_deref().unwrap_or_default()
-            );
-            choice
+            Choice::asked_or_best(None, pipeline, radius, &Provided { features, variances })?
         }
     };
-    let (expr, pipeline, radius) = (&choice.expr, choice.pipeline, choice.radius);
     let ReadScene { reference, spp, absent, view_layer } = read;
     let request = Request { reference_path: reference, spp, absent, view_layer, ..choice.request() };
     let load_start = Instant::now();
     let scene = scene::load(scene_path, &request).with_context(|| format!("loading scene {}", scene_path.display()))?;
     let load_time = load_start.elapsed();
+    // A chosen filter may give way to its variant for the render's light (one read by the same request).
+    let choice = choice.for_light(&scene.color)?;
+    if let Some(because) = &choice.chosen_because {
+        eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
+    }
+    let (expr, pipeline, radius) = (&choice.expr, choice.pipeline, choice.radius);
     for note in &scene.notes {
         if note.contains("absent") || note.contains("non-finite") {
             eprintln!("note: {note}");
