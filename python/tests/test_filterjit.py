@@ -132,6 +132,21 @@ def test_the_default_filter_follows_the_inputs_given(render):
     assert np.array_equal(chosen, named)
 
 
+def test_where_the_median_pixel_is_black_denoise_takes_the_sparse_light_variant(render):
+    """As `filterjit filter` without --expr: a colour whose median pixel is
+    black (here nine pixels in ten blacked out) gets the default's variant
+    for sparse light; the render as it is keeps the default."""
+    y, x = np.mgrid[0:SIZE, 0:SIZE]
+    sparse = np.where(((7 * x + 13 * y) % 10 == 0)[..., None], render["color"] * 10, 0).astype(np.float32)
+    given = inputs(render)
+    default = "@" + filterjit.SHIPPED_BY_QUALITY[0]
+    variant = default + "Sparse"
+    chosen = filterjit.denoise(sparse, **given)
+    assert np.array_equal(chosen, filterjit.denoise(sparse, **given, filter=variant))
+    assert not np.array_equal(chosen, filterjit.denoise(sparse, **given, filter=default))
+    assert np.array_equal(filterjit.denoise(render["color"], **given), filterjit.denoise(render["color"], **given, filter=default))
+
+
 def cli():
     explicit = os.environ.get("FILTERJIT_BIN")
     candidates = [pathlib.Path(explicit)] if explicit else [
