@@ -51,8 +51,8 @@ pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] = &[("evolvedAtrous64Trim", "ev
 
 /// The noisy input's median pixel luminance over its mean below which its
 /// light counts as sparse ([`crate::metrics::Tails::median_over_mean`]).
-/// The built-in scenes are either 0.000 (two, rooms lit through an opening
-/// or round a corner) or above 0.27 at 4 spp (docs/SCENES.md).
+/// At 4 spp the built-in scenes are either 0.000 (two, lit through an
+/// opening or round a corner) or 0.27 and above (docs/SCENES.md).
 pub const SPARSE_MEDIAN_OVER_MEAN: f64 = 0.05;
 
 pub const DEFAULT_RADIUS: u32 = 5;
