@@ -15,13 +15,7 @@ pub fn named() -> Vec<(&'static str, &'static str)> {
 /// text does not hold, or of itself through others, stays `@other`: it
 /// fails to parse, and [`resolve`] names it.
 pub fn parse_named<'t>(text: &'t str) -> Vec<(&'t str, &'t str)> {
-    let raw: Vec<(&'t str, &'t str)> = text
-        .lines()
-        .map(str::trim)
-        .filter(|l| !l.is_empty() && !l.starts_with('#'))
-        .filter_map(|l| l.split_once('='))
-        .map(|(name, expr)| (name.trim(), expr.trim()))
-        .collect();
+    let raw = entries(text);
     let target = |mut expr: &'t str| -> Option<&'t str> {
         // As many steps as entries: a longer chain is a cycle.
         for _ in 0..raw.len() {
@@ -33,14 +27,19 @@ pub fn parse_named<'t>(text: &'t str) -> Vec<(&'t str, &'t str)> {
     raw.iter().map(|&(name, expr)| (name, target(expr).unwrap_or(expr))).collect()
 }
 
-/// The entry whose expression entry `name` of `text` is written as (`name = @other`), if it is an alias.
-pub fn alias_of<'t>(text: &'t str, name: &str) -> Option<&'t str> {
+/// The `name = expression` lines of `text` as written, aliases unresolved.
+fn entries(text: &str) -> Vec<(&str, &str)> {
     text.lines()
         .map(str::trim)
-        .filter(|l| !l.starts_with('#'))
+        .filter(|l| !l.is_empty() && !l.starts_with('#'))
         .filter_map(|l| l.split_once('='))
-        .find(|(n, _)| n.trim() == name)
-        .and_then(|(_, expr)| alias_target(expr.trim()))
+        .map(|(name, expr)| (name.trim(), expr.trim()))
+        .collect()
+}
+
+/// The entry whose expression entry `name` of `text` is written as (`name = @other`), if it is an alias.
+pub fn alias_of<'t>(text: &'t str, name: &str) -> Option<&'t str> {
+    entries(text).into_iter().find(|(n, _)| *n == name).and_then(|(_, expr)| alias_target(expr))
 }
 
 /// The entry an expression text `@name` stands for, if it is one.

@@ -96,13 +96,13 @@ pub fn tails<A: Copy + Into<f64>>(image: &[[A; 3]]) -> Option<Tails> {
     if lum.is_empty() || total <= 0.0 {
         return None;
     }
-    lum.sort_by(|a, b| b.total_cmp(a));
-    let top = lum.len().div_ceil(100);
-    let mean = total / lum.len() as f64;
-    Some(Tails {
-        median_over_mean: lum[lum.len() / 2] / mean,
-        top_percent_share: lum[..top].iter().sum::<f64>() / total,
-    })
+    // Selections, not a sort: `filter` and `denoise` ask this of every frame they choose for.
+    let brightest_first = |a: &f64, b: &f64| b.total_cmp(a);
+    let (n, mean) = (lum.len(), total / lum.len() as f64);
+    let median = *lum.select_nth_unstable_by(n / 2, brightest_first).1;
+    let top = n.div_ceil(100);
+    let _ = lum.select_nth_unstable_by(top - 1, brightest_first);
+    Some(Tails { median_over_mean: median / mean, top_percent_share: lum[..top].iter().sum::<f64>() / total })
 }
 
 /// How far a mean-luminance ratio may stray from 1 before a method is said
