@@ -12,6 +12,23 @@ fn text(bytes: &[u8]) -> String {
     String::from_utf8_lossy(bytes).into_owned()
 }
 
+/// `filterjit render SCENE --size SIZE --spp SPP --reference-spp REFERENCE_SPP -o OUT`.
+fn render(scene: &str, size: &str, spp: u32, reference_spp: u32, out: &std::path::Path) -> Output {
+    let (spp, reference_spp) = (spp.to_string(), reference_spp.to_string());
+    filterjit(&[
+        "render",
+        scene,
+        "--size",
+        size,
+        "--spp",
+        &spp,
+        "--reference-spp",
+        &reference_spp,
+        "-o",
+        out.to_str().unwrap(),
+    ])
+}
+
 /// Value of a row of the error table, e.g. `filtered`.
 pub(crate) fn relmse(stdout: &str, row: &str) -> f64 {
     let line = stdout
@@ -168,18 +185,7 @@ fn compile_prints_validated_wgsl_and_unknown_names_are_listed() {
 fn render_then_filter_a_builtin_scene_with_every_thesis_expression() {
     let dir = std::env::temp_dir().join(format!("filterjit-cli-render-{}", std::process::id()));
     let dataset = dir.join("glossy-floor");
-    let run = filterjit(&[
-        "render",
-        "glossy-floor",
-        "--size",
-        "24x16",
-        "--spp",
-        "2",
-        "--reference-spp",
-        "8",
-        "-o",
-        dataset.to_str().unwrap(),
-    ]);
+    let run = render("glossy-floor", "24x16", 2, 8, &dataset);
     assert!(run.status.success(), "{}", text(&run.stderr));
     assert!(text(&run.stdout).contains("samples/s"), "{}", text(&run.stdout));
     // Our datasets carry every feature, so the thesis expressions need no --absent.
@@ -436,18 +442,7 @@ fn filter_without_expr_takes_the_sparse_light_variant_where_the_median_pixel_is_
     let (base, variant) = filterjit::denoise::SPARSE_LIGHT_VARIANTS[0];
     let dir = crate::common::temp_dir("cli", "sparse-light");
     let dataset = dir.join("skylight-slot");
-    let run = filterjit(&[
-        "render",
-        "skylight-slot",
-        "--size",
-        "32x32",
-        "--spp",
-        "4",
-        "--reference-spp",
-        "16",
-        "-o",
-        dataset.to_str().unwrap(),
-    ]);
+    let run = render("skylight-slot", "32x32", 4, 16, &dataset);
     assert!(run.status.success(), "{}", text(&run.stderr));
     let run = filterjit(&["filter", dataset.to_str().unwrap(), "-o", dir.join("out.exr").to_str().unwrap()]);
     let stderr = text(&run.stderr);
