@@ -2,7 +2,7 @@
 //! with the semantics of [`crate::semantics`]. Slow and simple on purpose.
 
 use crate::lang::{Expr, Feature, ScalarVar};
-use crate::pipeline::{self, FilterPipeline, Form};
+use crate::pipeline::{self, FilterPipeline, Form, Keep};
 use crate::scene::Scene;
 use crate::semantics;
 
@@ -246,7 +246,7 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
             clamped.push(c);
         }
     }
-    if pipeline.outliers.is_some_and(|o| o.keep) {
+    if let Some(keep) = pipeline.keep() {
         // Stored as f32 between stages, as on the device.
         let clamped32: Vec<[f32; 3]> = clamped.iter().map(|c| c.map(|v| v as f32)).collect();
         let removed: Vec<[f32; 3]> = scene
@@ -255,7 +255,17 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
             .zip(&clamped32)
             .map(|(raw, c)| [0, 1, 2].map(|q| (raw[q] as f64 - c[q] as f64) as f32))
             .collect();
-        let spread = spread(&removed, scene.width, scene.height);
+        let spread = match keep {
+            Keep::Even => spread(&removed, scene.width, scene.height),
+            Keep::Surface => {
+                let missing = || MissingInput {
+                    scene: scene.name.clone(),
+                    missing: crate::scene::Missing::Feature(Feature::Normal),
+                };
+                let normals = scene.feature(Feature::Normal).ok_or_else(missing)?;
+                spread_surface(&removed, &clamped32, normals, scene.width, scene.height)
+            }
+        };
         for ((c, kept), s) in clamped.iter_mut().zip(&clamped32).zip(&spread) {
             *c = [0, 1, 2].map(|q| kept[q] as f64 + s[q] as f64);
         }
@@ -303,6 +313,73 @@ pub fn spread(image: &[[f32; 3]], width: usize, height: usize) -> Vec<[f32; 3]> 
             }
         }
         current = next;
+    }
+    current
+}
+
+/// `keep=surface`'s spread (docs/SEMANTICS.md, "The pipeline") of `removed`
+/// over an image whose clamped colour is `clamped` and whose normals are
+/// `normals`: `pipeline::SURFACE_KEEP_PASSES` levels in which every pixel j
+/// hands each tap t = j + d·step of the 3×3 B-spline inside the image the share
+/// h(d) · normal term(j, t) · light(t), normalised over j's taps, so the image's
+/// total is kept exactly. Stored as f32 between levels, as on the device.
+pub fn spread_surface(
+    removed: &[[f32; 3]],
+    clamped: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    width: usize,
+    height: usize,
+) -> Vec<[f32; 3]> {
+    let (w, h) = (width as i64, height as i64);
+    let half = pipeline::KEEP_STENCIL.half_width() as i64;
+    let f64s = |c: [f32; 3]| c.map(|v| v as f64);
+    let mut total = Neumaier::default();
+    for c in clamped {
+        total.add(pipeline::luminance(f64s(*c)));
+    }
+    let floor = pipeline::SURFACE_KEEP_LIGHT_FLOOR * total.total() / (width * height).max(1) as f64;
+    let light: Vec<f64> =
+        clamped.iter().map(|c| pipeline::surface_light_term(pipeline::luminance(f64s(*c)), floor)).collect();
+    let normal = |x: i64, y: i64| f64s(normals[(y * w + x) as usize]);
+    let taps = || (-half..=half).flat_map(move |dy| (-half..=half).map(move |dx| (dx, dy)));
+    let stencil =
+        |dx: i64, dy: i64| pipeline::KEEP_STENCIL.weight(dx as i32) * pipeline::KEEP_STENCIL.weight(dy as i32);
+    let mut current = removed.to_vec();
+    for level in 0..pipeline::SURFACE_KEEP_PASSES {
+        let step = FilterPipeline::step(level) as i64;
+        // Each source's share of its value per unit of weight: value / Z_j.
+        let shares: Vec<[f64; 3]> = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let mut z = Neumaier::default();
+                for (dx, dy) in taps() {
+                    let (xt, yt) = (x + dx * step, y + dy * step);
+                    if xt >= 0 && yt >= 0 && xt < w && yt < h {
+                        let n = pipeline::surface_normal_term(normal(x, y), normal(xt, yt));
+                        z.add(stencil(dx, dy) * n * light[(yt * w + xt) as usize]);
+                    }
+                }
+                f64s(current[(y * w + x) as usize]).map(|v| v / z.total())
+            })
+            .collect();
+        current = (0..h)
+            .flat_map(|y| (0..w).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                let mut sum = [Neumaier::default(); 3];
+                for (dx, dy) in taps() {
+                    // The source j = i - d·step hands i its share for offset d.
+                    let (xj, yj) = (x - dx * step, y - dy * step);
+                    if xj >= 0 && yj >= 0 && xj < w && yj < h {
+                        let n = pipeline::surface_normal_term(normal(x, y), normal(xj, yj));
+                        for (s, v) in sum.iter_mut().zip(shares[(yj * w + xj) as usize]) {
+                            s.add(stencil(dx, dy) * n * v);
+                        }
+                    }
+                }
+                let l = light[(y * w + x) as usize];
+                sum.map(|s| (l * s.total()) as f32)
+            })
+            .collect();
     }
     current
 }

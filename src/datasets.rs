@@ -82,7 +82,7 @@ pub fn load_all(
         .iter()
         .map(|d| {
             let request = Request {
-                features: features.clone(),
+                features: features.iter().copied().chain(pipeline.features()).collect(),
                 variances: variances.clone(),
                 reference: true,
                 albedo: pipeline.demodulate,

@@ -25,6 +25,7 @@ use crate::scene::{Holds, Needs, Request};
 /// taken; `bilateral` reads colour alone, so there always is one
 /// (docs/BENCHMARKS.md, "Fitness that charges the light").
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
+    "evolvedAtrous64Surface",
     "evolvedAtrous64Trim",
     "evolvedAtrous128Trim",
     "evolvedAtrous128Trim3x3",
@@ -47,7 +48,8 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
 /// ([`SPARSE_MEDIAN_OVER_MEAN`]): at a few samples a pixel most pixels
 /// caught no light, and the filter must gather from farther to estimate it
 /// (docs/BENCHMARKS.md, "A wider reach where the light is sparse").
-pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] = &[("evolvedAtrous64Trim", "evolvedAtrous64TrimSparse")];
+pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] =
+    &[("evolvedAtrous64Surface", "evolvedAtrous64SurfaceSparse"), ("evolvedAtrous64Trim", "evolvedAtrous64TrimSparse")];
 
 /// The noisy input's median pixel luminance over its mean below which its
 /// light counts as sparse ([`crate::metrics::Tails::median_over_mean`]).
@@ -171,12 +173,14 @@ impl Choice {
             measured: self.pipeline.outliers.is_some(),
             albedo: provided.features.contains(&Feature::Texture),
         };
-        Needs::of(&self.expr, self.pipeline.demodulate).missing(holds).iter().map(|m| m.to_string()).collect()
+        Needs::of_filter(&self.expr, &self.pipeline).missing(holds).iter().map(|m| m.to_string()).collect()
     }
 
     /// What a scene must hold for this filter (its reference too, for errors).
     pub fn request(&self) -> Request {
-        Request { albedo: self.pipeline.demodulate, ..Request::for_expr(&self.expr) }
+        let mut request = Request { albedo: self.pipeline.demodulate, ..Request::for_expr(&self.expr) };
+        request.features.extend(self.pipeline.features());
+        request
     }
 
     /// How the filter is called in messages: `@name` or the expression.
@@ -219,7 +223,7 @@ pub fn shipped() -> Result<Vec<Shipped>> {
         .into_iter()
         .map(|(name, text)| {
             let choice = Choice::asked(&format!("@{name}"), None, None)?;
-            let needs = Needs::of(&choice.expr, choice.pipeline.demodulate);
+            let needs = Needs::of_filter(&choice.expr, &choice.pipeline);
             let mut reads = vec!["color"];
             let bases: BTreeSet<&'static str> =
                 needs.features.iter().filter(|f| **f != Feature::Color).map(|f| f.base().name()).collect();
@@ -280,7 +284,7 @@ mod tests {
         let chosen = Choice::best_for(&no_variance).unwrap();
         assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
         assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64Trim"));
-        assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep), "keeps the light: {}", chosen.pipeline);
+        assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep.is_some()), "keeps the light: {}", chosen.pipeline);
 
         // Without depth the default still applies: it reads none.
         let no_depth = provided(&[Texture, Normal, WorldPosition], &[ScalarVar::ColorVariance]);

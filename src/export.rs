@@ -13,7 +13,7 @@ use serde::Serialize;
 use crate::jit::interface::{BindingInterface, Resource, UniformField};
 use crate::jit::{self, Input, KernelKind, OutputFormat, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
 use crate::lang::{Expr, Feature, ScalarVar};
-use crate::pipeline::FilterPipeline;
+use crate::pipeline::{FilterPipeline, Keep};
 
 /// Shading languages an expression can be exported to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize)]
@@ -368,14 +368,18 @@ pub fn export_pipeline(
             Some(code)
         }
     };
-    let spread = match pipeline.outliers.is_some_and(|o| o.keep) {
-        false => None,
-        true => {
-            let interface = jit::BindingInterface::spread(Some(format));
-            let module = jit::spread_module(Some(format)).map_err(jit::CompileError::from)?;
-            let (code, entry_point) = translate(&module, &jit::spread_wgsl(Some(format)), &interface, target)?;
+    let spread = match pipeline.keep() {
+        None => None,
+        Some(keep) => {
+            let interface = match keep {
+                Keep::Even => jit::BindingInterface::spread(Some(format)),
+                Keep::Surface => jit::BindingInterface::spread_surface(Some(format)),
+            };
+            let (wgsl, module) = jit::spread_kernel(keep, Some(format));
+            let module = module.map_err(jit::CompileError::from)?;
+            let (code, entry_point) = translate(&module, &wgsl, &interface, target)?;
             manifest.spread = Some(Stage {
-                sequence: spread_sequence(),
+                sequence: spread_sequence(keep),
                 ..Stage::of(&interface, entry_point, &manifest.dispatch, target, format, Stages::Spread)
             });
             manifest.filters = "kept".into();
@@ -446,9 +450,11 @@ impl Stage {
 /// The spread's dispatches (`jit::SpreadParams::sequence`) with the images
 /// each binds: the noisy colour or a scratch image (`spread0`, `spread1`)
 /// in, a scratch image out, except the last, which writes `kept`, the colour
-/// the form filters.
-fn spread_sequence() -> Vec<StageDispatch> {
-    let sequence = jit::SpreadParams::sequence(0, 0);
+/// the form filters. `keep=surface`'s also bind the `normal` input and
+/// `total`, which its first dispatch writes (binding `modulation` in its
+/// place, unread, while it does).
+fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
+    let sequence = jit::SpreadParams::sequence(keep, 0, 0);
     let last = sequence.len() - 1;
     sequence
         .iter()
@@ -458,18 +464,28 @@ fn spread_sequence() -> Vec<StageDispatch> {
                 jit::SpreadSource::Noisy => "color".to_string(),
                 jit::SpreadSource::Scratch(k) => format!("spread{k}"),
             };
-            let target = if n == last { "kept".to_string() } else { format!("spread{target}") };
+            let output = match target {
+                _ if n == last => "kept".to_string(),
+                jit::SpreadTarget::Scratch(k) => format!("spread{k}"),
+                jit::SpreadTarget::Total => "total".to_string(),
+            };
+            let mut images: BTreeMap<String, String> = [
+                ("color", source),
+                ("image", "prepared".into()),
+                ("modulation", "modulation".into()),
+                ("output", output),
+            ]
+            .map(|(role, image)| (role.to_string(), image))
+            .into();
+            if keep == Keep::Surface {
+                let total = if *target == jit::SpreadTarget::Total { "modulation" } else { "total" };
+                images.insert("normal".into(), "normal".into());
+                images.insert("total".into(), total.into());
+            }
             StageDispatch {
                 uniform_values: [("step".to_string(), params.step as f64), ("stage".to_string(), params.stage as f64)]
                     .into(),
-                images: [
-                    ("color", source),
-                    ("image", "prepared".into()),
-                    ("modulation", "modulation".into()),
-                    ("output", target),
-                ]
-                .map(|(role, image)| (role.to_string(), image))
-                .into(),
+                images,
             }
         })
         .collect()
@@ -498,10 +514,18 @@ fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
         colour = "`prepared`";
     }
     if let Some(stage) = &manifest.spread {
+        let surface = match pipeline.keep() {
+            Some(Keep::Surface) => {
+                " along the surface (the first dispatch sums the clamped luminance into `total`, which the others \
+                 read; `normal` is the normal input)"
+            }
+            _ => "",
+        };
         steps.push(format!(
             "spread (`keep`), {} dispatches of the spread shader as its `sequence` says (uniform `step` and `stage`, \
              the image each role binds): what the clamp removed (the noisy colour minus `prepared`) is handed out \
-             over the neighbourhood, then added back and divided by `modulation`; writes `kept` (rgba32float)",
+             over the neighbourhood{surface}, then added back and divided by `modulation`; writes `kept` \
+             (rgba32float)",
             stage.sequence.len()
         ));
         colour = "`kept`";
@@ -561,6 +585,20 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                         .into(),
                     None,
                 ),
+                (Role::Input(Input::Feature(Feature::Normal)), Stages::Spread) => (
+                    "normal".into(),
+                    "xyz",
+                    "the surface normal, unit length (read as it is, without a normalisation scale)".into(),
+                    None,
+                ),
+                (Role::Total, Stages::Spread) => (
+                    "total".into(),
+                    "x",
+                    "texel (0, 0): the sum of the clamped colour's luminance over the frame, which the first \
+                     dispatch writes"
+                        .into(),
+                    None,
+                ),
                 (Role::Color, Stages::Guide) => ("color".into(), "xyzw", "the colour the form filters".into(), None),
                 (Role::Output, Stages::Guide) => ("guide".into(), "xyzw", written("the guide"), None),
                 (Role::Color, Stages::Form) => {
@@ -614,7 +652,13 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     (input.describe(), components, content(input), Some(scale_index - 1))
                 }
                 (
-                    Role::Flags | Role::Reference | Role::Image | Role::Terms | Role::PixelFlags | Role::Input(_),
+                    Role::Flags
+                    | Role::Reference
+                    | Role::Image
+                    | Role::Terms
+                    | Role::PixelFlags
+                    | Role::Input(_)
+                    | Role::Total,
                     _,
                 )
                 | (Role::Modulation, Stages::Guide) => {
@@ -748,7 +792,15 @@ fn translate(
             Ok((Code::Text(text), "main".into()))
         }
         Target::Hlsl => {
-            let options = back::hlsl::Options { shader_model: back::hlsl::ShaderModel::V5_1, ..Default::default() };
+            // No zero-initialisation of workgroup memory: naga writes it as
+            // `(float[64])0`, which glslang's HLSL front end cannot parse, and
+            // the one exported kernel that has workgroup memory (`keep=surface`'s
+            // total) writes every element before any invocation reads it.
+            let options = back::hlsl::Options {
+                shader_model: back::hlsl::ShaderModel::V5_1,
+                zero_initialize_workgroup_memory: false,
+                ..Default::default()
+            };
             let pipeline = back::hlsl::PipelineOptions::default();
             let mut text = String::new();
             let mut writer = back::hlsl::Writer::new(&mut text, &options, &pipeline);

@@ -106,10 +106,85 @@ pub struct Outliers {
     /// (`trim`): two bright samples side by side otherwise raise each other's
     /// limit and both pass (docs/BENCHMARKS.md, "A trimmed outlier rule").
     pub trim: bool,
-    /// Whether what the clamp removed is put back, spread over the
-    /// neighbourhood (`keep`): a clamp alone darkens renders whose light
-    /// arrives in rare bright samples (docs/BENCHMARKS.md, "Where the light goes").
-    pub keep: bool,
+    /// Whether and how what the clamp removed is put back, spread over the
+    /// neighbourhood (`keep`, `keep=surface`): a clamp alone darkens renders
+    /// whose light arrives in rare bright samples (docs/BENCHMARKS.md, "Where
+    /// the light goes").
+    pub keep: Option<Keep>,
+}
+
+/// How `keep` hands back what the outlier clamp removed. Both keep the
+/// image's total exactly: every source hands out all it has.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Keep {
+    /// `keep`: evenly, by [`KEEP_PASSES`] passes of the 3×3 B-spline (±31 pixels).
+    Even,
+    /// `keep=surface`: by [`SURFACE_KEEP_PASSES`] passes (±127 pixels) in
+    /// which each source's shares also follow the surface (the normals'
+    /// agreement, [`SURFACE_KEEP_NORMAL_SIGMA`]) and the light already there
+    /// (the clamped luminance plus [`SURFACE_KEEP_LIGHT_FLOOR`] times the
+    /// image's mean): a rare bright sample's light goes back where light of
+    /// its kind lands, not as a blotch on whatever is beside it
+    /// (docs/BENCHMARKS.md, "Handing the light back along the surface").
+    Surface,
+}
+
+impl Keep {
+    /// The passes of its spread; pass k has step 2^k.
+    pub fn passes(self) -> u32 {
+        match self {
+            Keep::Even => KEEP_PASSES,
+            Keep::Surface => SURFACE_KEEP_PASSES,
+        }
+    }
+
+    /// How far its spread reaches, in pixels.
+    pub fn reach(self) -> u32 {
+        (0..self.passes()).map(|level| FilterPipeline::step(level) * KEEP_STENCIL.half_width() as u32).sum()
+    }
+}
+
+/// `keep=surface`'s passes: out to ±127 pixels. Chosen with the next two
+/// constants on the seventeen built-in scenes only (docs/BENCHMARKS.md,
+/// "Handing the light back along the surface"): 6 passes gained less, 8 no more.
+pub const SURFACE_KEEP_PASSES: u32 = 7;
+
+/// σ of `keep=surface`'s normal term exp(−max(0, 1 − n_i·n_j) / σ).
+pub const SURFACE_KEEP_NORMAL_SIGMA: f64 = 0.2;
+
+/// F of `keep=surface`'s light term: a target's share is in proportion to
+/// its clamped luminance plus F times the clamped image's mean luminance, so
+/// that dark surfaces still take their part (F → ∞ ignores the light).
+pub const SURFACE_KEEP_LIGHT_FLOOR: f64 = 3.0;
+
+/// `keep=surface`'s normal term between two pixels' normals: of their
+/// directions, so that a normal stored at any length (a renderer's unit
+/// normals, filterjit's normalised feature, an engine's scaled texture) gives
+/// the same shares; a zero normal has no direction and agrees with none.
+pub fn surface_normal_term(a: [f64; 3], b: [f64; 3]) -> f64 {
+    let direction = |v: [f64; 3]| {
+        let length2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+        if length2 > 0.0 {
+            v.map(|c| c / length2.sqrt())
+        } else {
+            [0.0; 3]
+        }
+    };
+    let (a, b) = (direction(a), direction(b));
+    let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    (-(1.0 - dot).max(0.0) / SURFACE_KEEP_NORMAL_SIGMA).exp()
+}
+
+/// `keep=surface`'s light term of a target whose clamped luminance is `l`,
+/// where `floor` is [`SURFACE_KEEP_LIGHT_FLOOR`] times the clamped image's
+/// mean luminance: l + floor, or 1 everywhere when nothing survived the clamp
+/// (floor 0), so that the shares are still defined and even.
+pub fn surface_light_term(l: f64, floor: f64) -> f64 {
+    if floor > 0.0 {
+        l + floor
+    } else {
+        1.0
+    }
 }
 
 /// `keep` spreads what the clamp removed by this many passes of the 3×3
@@ -118,13 +193,8 @@ pub struct Outliers {
 /// rather than in a blotch (measured: 2 passes leave blotches, 4–6 agree).
 pub const KEEP_PASSES: u32 = 5;
 
-/// The stencil `keep` spreads with.
+/// The stencil both `keep`s spread with.
 pub const KEEP_STENCIL: Stencil = Stencil::Linear3;
-
-/// How far `keep`'s spread reaches, in pixels.
-pub fn keep_reach() -> u32 {
-    (0..KEEP_PASSES).map(|level| FilterPipeline::step(level) * KEEP_STENCIL.half_width() as u32).sum()
-}
 
 /// The share of a source pixel's value that its tap at offset `d` (steps)
 /// receives in one spread pass along one axis, for a source at `x` of `n`
@@ -155,6 +225,20 @@ impl Default for FilterPipeline {
 impl FilterPipeline {
     /// The thesis's filter: one window pass, no pre-pass.
     pub const WINDOW: FilterPipeline = FilterPipeline { outliers: None, demodulate: false, form: Form::Window };
+
+    /// The features the pipeline's own stages read (besides the colour and
+    /// the albedo `demodulate` divides by): the normal, for `keep=surface`.
+    pub fn features(&self) -> std::collections::BTreeSet<crate::lang::Feature> {
+        match self.outliers.and_then(|o| o.keep) {
+            Some(Keep::Surface) => [crate::lang::Feature::Normal].into(),
+            _ => Default::default(),
+        }
+    }
+
+    /// The kind of `keep` the pipeline has, if any.
+    pub fn keep(&self) -> Option<Keep> {
+        self.outliers.and_then(|o| o.keep)
+    }
 
     /// Whether a pre-pass changes the colour before the form runs.
     pub fn has_prepass(&self) -> bool {
@@ -231,20 +315,27 @@ impl FromStr for FilterPipeline {
                     if pipeline.outliers.is_some() || pipeline.demodulate {
                         return Err(error("`outliers` is the first stage, and appears once".into()));
                     }
-                    pipeline.outliers = Some(Outliers { k, trim: false, keep: false });
+                    pipeline.outliers = Some(Outliers { k, trim: false, keep: None });
                 }
                 ("trim", None) => match &mut pipeline.outliers {
-                    Some(outliers) if !outliers.trim && !outliers.keep && !pipeline.demodulate => outliers.trim = true,
+                    Some(outliers) if !outliers.trim && outliers.keep.is_none() && !pipeline.demodulate => {
+                        outliers.trim = true
+                    }
                     Some(_) => return Err(error("`trim` comes once, right after `outliers=K`".into())),
                     None => return Err(error("`trim` changes the rule of `outliers=K`: write it after outliers=K".into())),
                 },
-                ("keep", None) => match &mut pipeline.outliers {
-                    Some(outliers) if !outliers.keep && !pipeline.demodulate => outliers.keep = true,
+                ("keep", None | Some("surface")) => match &mut pipeline.outliers {
+                    Some(outliers) if outliers.keep.is_none() && !pipeline.demodulate => {
+                        outliers.keep = Some(if value.is_some() { Keep::Surface } else { Keep::Even })
+                    }
                     Some(_) => return Err(error("`keep` comes once, right after `outliers=K` (and `trim`)".into())),
                     None => {
                         return Err(error("`keep` puts back what `outliers=K` removes: write it after outliers=K".into()))
                     }
                 },
+                ("keep", Some(v)) => {
+                    return Err(error(format!("keep={v}: write `keep` (evenly) or `keep=surface`")))
+                }
                 ("outliers", None) => return Err(error("`outliers` needs its strength: outliers=K".into())),
                 ("demodulate", None) => {
                     if pipeline.demodulate {
@@ -271,7 +362,7 @@ impl FromStr for FilterPipeline {
                 }
                 (other, _) => {
                     return Err(error(format!(
-                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, demodulate, window, atrous=N, atrous3x3=N"
+                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, window, atrous=N, atrous3x3=N"
                     )))
                 }
             }
@@ -291,8 +382,10 @@ impl fmt::Display for FilterPipeline {
             if trim {
                 write!(f, "trim,")?;
             }
-            if keep {
-                write!(f, "keep,")?;
+            match keep {
+                None => {}
+                Some(Keep::Even) => write!(f, "keep,")?,
+                Some(Keep::Surface) => write!(f, "keep=surface,")?,
             }
         }
         if self.demodulate {
@@ -345,6 +438,7 @@ mod tests {
             "outliers=3,keep,window",
             "outliers=2.5,trim,keep,demodulate,atrous=4",
             "outliers=2,trim,window",
+            "outliers=2.5,trim,keep=surface,demodulate,atrous=4",
         ] {
             let p: FilterPipeline = text.parse().unwrap();
             assert_eq!(p.to_string(), text);
@@ -368,6 +462,8 @@ mod tests {
             ("trim,window", "after outliers=K"),
             ("outliers=2,keep,trim,window", "right after"),
             ("outliers=2,trim,trim,window", "once"),
+            ("outliers=2,keep=wide,window", "keep=surface"),
+            ("outliers=2,keep,keep=surface,window", "once"),
         ] {
             let e = text.parse::<FilterPipeline>().unwrap_err().to_string();
             assert!(e.contains(needle), "{text}: {e}");
@@ -388,7 +484,7 @@ mod tests {
 
     #[test]
     fn the_spread_hands_out_all_of_each_source() {
-        assert_eq!(keep_reach(), 31);
+        assert_eq!((Keep::Even.reach(), Keep::Surface.reach()), (31, 127));
         for n in [1i64, 2, 3, 40] {
             for step in [1i64, 2, 16] {
                 for x in 0..n {
@@ -403,5 +499,18 @@ mod tests {
         }
         // Inside the image it is the stencil itself.
         assert_eq!(spread_share(20, 1, 1, 40), 0.25);
+    }
+
+    #[test]
+    fn the_surface_terms_are_bounded_and_total() {
+        let up = [0.0, 0.0, 1.0];
+        assert_eq!(surface_normal_term(up, up), 1.0);
+        assert!((surface_normal_term(up, [1.0, 0.0, 0.0]) - (-5.0f64).exp()).abs() < 1e-15);
+        // Opposite or absent normals: bounded below, never zero.
+        assert!(surface_normal_term(up, [0.0, 0.0, -1.0]) > 0.0);
+        assert!(surface_normal_term([0.0; 3], up) > 0.0);
+        assert_eq!(surface_normal_term([0.0, 0.0, 2.5], up), 1.0, "a direction, whatever its length");
+        assert_eq!(surface_light_term(0.5, 0.0), 1.0);
+        assert_eq!(surface_light_term(0.5, 0.25), 0.75);
     }
 }

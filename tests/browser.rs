@@ -55,15 +55,15 @@ const DEVICE: &str = r#"
 
 /// `filterjit export` → `web/filterjit.js` in Chromium → the same frame as
 /// `filterjit filter` writes, through the default shipped filter's whole
-/// pipeline (pre-pass, keep's spread, the guide, four à-trous passes,
-/// remodulation).
+/// pipeline (pre-pass, `keep=surface`'s spread with its total, the guide,
+/// four à-trous passes, remodulation).
 #[test]
 fn the_web_module_runs_an_exported_filter_as_filter_does() {
     if chromium("the_web_module_runs_an_exported_filter_as_filter_does").is_none() {
         return;
     }
     let dir = temp_dir("browser", "module");
-    let name = "@evolvedAtrous64Trim";
+    let name = "@evolvedAtrous64Surface";
     let bin = env!("CARGO_BIN_EXE_filterjit");
     let shader = dir.join("denoise.wgsl");
     let o = Command::new(bin).args(["export", name, "--format", "rgba32float", "-o"]).arg(&shader).output().unwrap();

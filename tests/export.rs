@@ -142,6 +142,9 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         // after the whole pre-pass, and without one.
         (named("evolvedAtrous128Guide"), "outliers=2,keep,demodulate,atrous=4"),
         (named("evolvedAtrous64Trim"), "outliers=2.5,trim,keep,demodulate,atrous=4"),
+        // `keep=surface`: its total's one-workgroup dispatch, the normal the
+        // spread reads as a direction (the frame's are scaled by 2).
+        (named("evolvedAtrous64Surface"), "outliers=2.5,trim,keep=surface,demodulate,atrous=4"),
         (parse_expr("exp(-(distance2(guide) * 2 + distance2(normal) * 4))").unwrap(), "atrous3x3=3"),
         (parse_expr("exp(-(distance2(guide, color) + distance2(pixel) / 8))").unwrap(), "window"),
         // What the outlier rule measured, from the exported pre-pass's packed `local` texture.
@@ -259,15 +262,17 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
     let mut rng = Rng::seeded(11);
     exprs.extend((0..12).map(|k| alphabet.of_length(&mut rng, 5 + 10 * k)));
     // Every expression as a window; the shipped ones also as a whole pipeline
-    // (pre-pass and à-trous pass), and one with `keep`'s spread.
+    // (pre-pass and à-trous pass), and one with each `keep`'s spread.
     let atrous: filterjit::pipeline::FilterPipeline = "outliers=2,demodulate,atrous=5".parse().unwrap();
     let keep: filterjit::pipeline::FilterPipeline = "outliers=2,keep,demodulate,atrous3x3=4".parse().unwrap();
+    let surface: filterjit::pipeline::FilterPipeline = "outliers=2,keep=surface,demodulate,atrous=4".parse().unwrap();
     let named = corpus::named().len();
     let cases = exprs
         .iter()
         .map(|e| (e, filterjit::pipeline::FilterPipeline::WINDOW))
         .chain(exprs[..named].iter().map(|e| (e, atrous)))
-        .chain(exprs[..1].iter().map(|e| (e, keep)));
+        .chain(exprs[..1].iter().map(|e| (e, keep)))
+        .chain(exprs[..1].iter().map(|e| (e, surface)));
     for (k, (expr, pipeline)) in cases.enumerate() {
         for target in [Target::Glsl, Target::Hlsl, Target::Spirv, Target::Msl] {
             let exported =

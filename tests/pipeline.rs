@@ -55,6 +55,8 @@ fn the_pre_pass_alone_agrees_with_the_cpu() {
             "outliers=1.5,keep,demodulate,window",
             "outliers=2,trim,window",
             "outliers=1,trim,keep,demodulate,window",
+            "outliers=2,keep=surface,window",
+            "outliers=1,trim,keep=surface,demodulate,window",
         ] {
             let p = pipeline(text);
             let on_gpu = gpu_filter(&gpu, &expr, &scene, &p, 0);
@@ -146,6 +148,61 @@ fn keep_puts_back_what_the_clamp_removed_spread_around_it() {
 }
 
 #[test]
+fn keep_surface_hands_the_light_back_along_the_surface_and_toward_the_light() {
+    // A 24x16 image: a floor (normal up) on the left, a wall (normal across)
+    // on the right, each half dim, with a bright patch on the wall's far side.
+    // One firefly on the floor, beside the wall: `keep` hands its light to both
+    // sides alike, `keep=surface` mostly to the floor, and within the floor it
+    // still spreads (the firefly keeps a small part).
+    let (w, h) = (24usize, 16usize);
+    let floor = |x: usize| x < 12;
+    let mut scene = Scene::from_color("two planes", w, h, vec![[0.2, 0.2, 0.2]; w * h]);
+    let normals = (0..w * h).map(|p| if floor(p % w) { [0.0, 1.0, 0.0] } else { [1.0, 0.0, 0.0] }).collect();
+    scene.features.insert(filterjit::lang::Feature::Normal, normals);
+    for y in 0..h {
+        for x in 18..w {
+            scene.color[y * w + x] = [2.0, 2.0, 2.0];
+        }
+    }
+    let firefly = 8 * w + 11;
+    scene.color[firefly] = [600.0, 500.0, 700.0];
+    let total = |image: &[[f32; 3]], on: &dyn Fn(usize) -> bool| {
+        image
+            .iter()
+            .enumerate()
+            .filter(|(p, _)| on(*p))
+            .map(|(_, c)| c.map(f64::from))
+            .fold([0.0; 3], |s, c| [0, 1, 2].map(|q| s[q] + c[q]))
+    };
+    let all = |_: usize| true;
+    let on_floor = |p: usize| floor(p % w);
+    let raw = total(&scene.color, &all);
+    let even = cpu::prepass(&scene, &pipeline("outliers=2,keep,window")).unwrap().color;
+    let surface = cpu::prepass(&scene, &pipeline("outliers=2,keep=surface,window")).unwrap().color;
+    for (q, (kept, raw)) in total(&surface, &all).into_iter().zip(raw).enumerate() {
+        assert!((kept - raw).abs() <= 1e-5 * raw, "channel {q}: {kept} kept of {raw}");
+    }
+    // What the floor holds beyond its own dim light.
+    let returned = |image: &[[f32; 3]]| total(image, &on_floor)[0] - 0.2 * (w * h / 2) as f64;
+    assert!(returned(&surface) > 0.9 * 600.0, "the floor gets the floor's light back: {}", returned(&surface));
+    assert!(returned(&even) < 0.8 * 600.0, "the even spread gives the wall much of it: {}", returned(&even));
+    assert!(surface[firefly][0] < 0.1 * 600.0, "spread, not left in place: {:?}", surface[firefly]);
+    // Without normals the scene cannot keep along the surface, and says so.
+    let mut bare = scene.clone();
+    bare.features.clear();
+    let error = cpu::prepass(&bare, &pipeline("outliers=2,keep=surface,window")).unwrap_err().to_string();
+    assert!(error.contains("normal"), "{error}");
+    // The device keeps it the same, through a pipeline whose weight keeps every pixel.
+    let gpu = gpu();
+    let on_gpu = gpu_filter(&gpu, &parse_expr("1").unwrap(), &scene, &pipeline("outliers=2,keep=surface,window"), 0);
+    let (fraction, worst) = agree_fraction(&on_gpu, &surface.iter().map(|c| c.map(f64::from)).collect::<Vec<_>>());
+    assert_eq!(fraction, 1.0, "worst relative difference {worst:e}");
+    for (q, (kept, raw)) in total(&on_gpu, &all).into_iter().zip(raw).enumerate() {
+        assert!((kept - raw).abs() <= 1e-4 * raw, "device channel {q}: {kept} of {raw}");
+    }
+}
+
+#[test]
 fn demodulation_is_undone_and_stays_bounded_where_albedo_is_zero_or_above_one() {
     let scene = scene_with_albedo(14, 9, 8);
     let p = pipeline("demodulate,window");
@@ -189,6 +246,7 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "outliers=2,demodulate,atrous3x3=4",
         "outliers=2,keep,demodulate,atrous3x3=4",
         "outliers=2.5,trim,keep,demodulate,atrous=4",
+        "outliers=2.5,trim,keep=surface,demodulate,atrous=4",
         "atrous3x3=2",
     ] {
         let p = pipeline(text);
@@ -220,6 +278,7 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
         "outliers=2,atrous3x3=3",
         "outliers=2,keep,demodulate,atrous3x3=2",
         "outliers=2.5,trim,keep,demodulate,atrous=2",
+        "outliers=2.5,trim,keep=surface,demodulate,atrous=2",
     ] {
         let p = pipeline(text);
         let kernels: Vec<_> = exprs

@@ -44,6 +44,11 @@ fn pipeline_kernels_match_snapshots() {
         insta::assert_snapshot!("export__prepass", jit::prepass_wgsl(Some(jit::OutputFormat::Rgba32float)));
         insta::assert_snapshot!("pipeline__spread", jit::spread_wgsl(None));
         insta::assert_snapshot!("export__spread", jit::spread_wgsl(Some(jit::OutputFormat::Rgba32float)));
+        insta::assert_snapshot!("pipeline__spread_surface", jit::spread_surface_wgsl(None));
+        insta::assert_snapshot!(
+            "export__spread_surface",
+            jit::spread_surface_wgsl(Some(jit::OutputFormat::Rgba32float))
+        );
         for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying)] {
             for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
                 let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();

@@ -105,6 +105,8 @@ export class Filter {
     const roles = new Set(["color"]);
     if (this.manifest.prepass && (this.manifest.prepass.uniform_values.stages & 2) !== 0) roles.add("albedo");
     for (const b of this.manifest.bindings) if (b.scale_index !== undefined) roles.add(b.role);
+    // `keep=surface`'s spread reads the normal whether or not the weight does.
+    for (const b of this.manifest.spread?.bindings ?? []) if (b.role === "normal") roles.add("normal");
     return [...roles];
   }
 

@@ -61,14 +61,15 @@ impl std::str::FromStr for TileSampling {
 }
 
 /// How far from a pixel the whole pipeline reads, in pixels: the outlier
-/// pre-pass's neighbourhood (and `keep`'s spread of what it clamps), the
+/// pre-pass's neighbourhood (and `keep`'s spread of what it clamps; with
+/// `keep=surface` also its light floor, a mean over the whole image, which a
+/// tile takes over its crop: the one thing a tile only approximates), the
 /// first pass's `guide` (blurred once more; counted whether or not the weight
 /// reads it), then the window's radius or the sum of the à-trous passes'
 /// reaches (each pass filters the previous one's output).
 pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
     let prepass = match pipeline.outliers {
-        Some(outliers) if outliers.keep => OUTLIER_RADIUS + crate::pipeline::keep_reach(),
-        Some(_) => OUTLIER_RADIUS,
+        Some(outliers) => OUTLIER_RADIUS + outliers.keep.map_or(0, |keep| keep.reach()),
         None => 0,
     };
     let form = match pipeline.form {
@@ -139,7 +140,7 @@ pub fn cut(scenes: &[Scene], sampling: TileSampling, pipeline: &FilterPipeline, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pipeline::Outliers;
+    use crate::pipeline::{Keep, Outliers};
 
     #[test]
     fn sampling_parses_and_says_what_is_wrong() {
@@ -158,16 +159,20 @@ mod tests {
         assert_eq!(halo(&FilterPipeline::WINDOW, 3), 8);
         assert_eq!(halo(&FilterPipeline::WINDOW, 10), 16);
         let atrous = FilterPipeline {
-            outliers: Some(Outliers { k: 2.0, trim: false, keep: false }),
+            outliers: Some(Outliers { k: 2.0, trim: false, keep: None }),
             demodulate: true,
             form: Form::Atrous { passes: 5, stencil: Default::default() },
         };
         // 2 (pre-pass) + 1 (guide) + 2 · (1 + 2 + 4 + 8 + 16).
         assert_eq!(reach(&atrous, 3), 65);
         assert_eq!(halo(&atrous, 3), 72);
-        let keep = FilterPipeline { outliers: Some(Outliers { k: 2.0, trim: false, keep: true }), ..atrous };
-        // The spread of what the clamp removed reaches 31 more.
+        let keep =
+            FilterPipeline { outliers: Some(Outliers { k: 2.0, trim: false, keep: Some(Keep::Even) }), ..atrous };
+        // The spread of what the clamp removed reaches 31 more, 127 along the surface.
         assert_eq!(reach(&keep, 3), 96);
+        let surface =
+            FilterPipeline { outliers: Some(Outliers { k: 2.0, trim: false, keep: Some(Keep::Surface) }), ..atrous };
+        assert_eq!(reach(&surface, 3), 192);
     }
 
     #[test]

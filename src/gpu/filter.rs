@@ -8,7 +8,7 @@ use wgpu::util::DeviceExt;
 use super::{Gpu, GpuError, PipelineTiming};
 use crate::jit::{AtrousParams, Input, Params, Role, Shape, ValidatedKernel, WORKGROUP};
 use crate::lang::{Feature, ScalarVar};
-use crate::pipeline::FilterPipeline;
+use crate::pipeline::{FilterPipeline, Keep};
 use crate::scene::{Missing, MissingInput, Scene};
 
 /// Upper bound on weight evaluations in one dispatch. Large images and radii
@@ -121,7 +121,16 @@ impl SceneBuffers {
                 }
                 (_, false) => None,
             };
-            let prepared = gpu.prepass(pipeline, &color, albedo.as_deref(), width, height)?;
+            let normals = match (pipeline.keep(), scene.feature(Feature::Normal)) {
+                (Some(Keep::Surface), Some(normals)) => Some(rgba(normals)),
+                (Some(Keep::Surface), None) => {
+                    let missing =
+                        MissingInput { scene: scene.name.clone(), missing: Missing::Feature(Feature::Normal) };
+                    return Err(GpuError::MissingInput(missing));
+                }
+                _ => None,
+            };
+            let prepared = gpu.prepass(pipeline, &color, albedo.as_deref(), normals.as_deref(), width, height)?;
             prepass_dispatch = Some(prepared.dispatch);
             if pipeline.outliers.is_some() {
                 // What the outlier rule measured is an input like any other, already on the device.

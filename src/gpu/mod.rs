@@ -76,6 +76,7 @@ pub struct Gpu {
     tracer: OnceLock<Pipeline>,
     prepass: OnceLock<Pipeline>,
     spread: OnceLock<Pipeline>,
+    spread_surface: OnceLock<Pipeline>,
     reduce: OnceLock<Pipeline>,
     /// Whether kernels keep wgpu's run-time checks ([`Gpu::set_kernel_runtime_checks`]).
     kernel_checks: std::sync::atomic::AtomicBool,
@@ -133,6 +134,7 @@ impl Gpu {
             tracer: OnceLock::new(),
             prepass: OnceLock::new(),
             spread: OnceLock::new(),
+            spread_surface: OnceLock::new(),
             reduce: OnceLock::new(),
             kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,

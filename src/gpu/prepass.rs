@@ -1,6 +1,6 @@
 //! The pipeline's pre-pass on the device (`jit::prepass`, then with `keep`
-//! `jit::spread`): one pipeline each per device, run once per scene when its
-//! buffers are prepared.
+//! `jit::spread`, with `keep=surface` its surface kernel): one pipeline each
+//! per device, run once per scene when its buffers are prepared.
 
 use std::sync::OnceLock;
 
@@ -8,10 +8,10 @@ use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::{
-    BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, ValidatedModule, WORKGROUP,
+    BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, SpreadTarget, ValidatedModule, WORKGROUP,
 };
 use crate::lang::ScalarVar;
-use crate::pipeline::FilterPipeline;
+use crate::pipeline::{FilterPipeline, Keep};
 
 impl Gpu {
     fn prepass_pipeline(&self) -> Result<&Pipeline, GpuError> {
@@ -20,27 +20,41 @@ impl Gpu {
         self.built_in(&self.prepass, &MODULE, "<pre-pass>", validate, || crate::jit::prepass_wgsl(None))
     }
 
-    fn spread_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        let validate = || crate::jit::spread_module(None).map_err(|e| e.to_string());
-        self.built_in(&self.spread, &MODULE, "<spread>", validate, || crate::jit::spread_wgsl(None))
+    fn spread_pipeline(&self, keep: Keep) -> Result<&Pipeline, GpuError> {
+        static EVEN: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+        static SURFACE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+        match keep {
+            Keep::Even => {
+                let validate = || crate::jit::spread_module(None).map_err(|e| e.to_string());
+                self.built_in(&self.spread, &EVEN, "<spread>", validate, || crate::jit::spread_wgsl(None))
+            }
+            Keep::Surface => {
+                let validate = || crate::jit::spread_surface_module(None).map_err(|e| e.to_string());
+                let wgsl = || crate::jit::spread_surface_wgsl(None);
+                self.built_in(&self.spread_surface, &SURFACE, "<surface spread>", validate, wgsl)
+            }
+        }
     }
 
     /// Run `pipeline`'s pre-pass on `color` (RGBA per pixel; `albedo` the raw
     /// albedo when demodulating): the colour the form filters, the
     /// modulation (1 without demodulation), and what the outlier rule
-    /// measured (`ScalarVar::FROM_PREPASS`, in that order; 0 without it). All stay on the device.
+    /// measured (`ScalarVar::FROM_PREPASS`, in that order; 0 without it). All
+    /// stay on the device. `normals`: the scene's, which `keep=surface` reads.
     pub(super) fn prepass(
         &self,
         pipeline: &FilterPipeline,
         color: &wgpu::Buffer,
         albedo: Option<&[[f32; 4]]>,
+        normals: Option<&[[f32; 4]]>,
         width: u32,
         height: u32,
     ) -> Result<Prepared, GpuError> {
         let kernel = self.prepass_pipeline()?;
-        let keep = pipeline.outliers.is_some_and(|o| o.keep);
-        let spread = if keep { Some(self.spread_pipeline()?) } else { None };
+        let spread = match pipeline.keep() {
+            Some(keep) => Some((keep, self.spread_pipeline(keep)?)),
+            None => None,
+        };
         let _turn = self.gl_turn();
         let device = self.device();
         let params = PrepassParams::of(pipeline, width, height);
@@ -103,12 +117,29 @@ impl Gpu {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
         }
-        if let Some(spread) = spread {
+        if let Some((keep, spread)) = spread {
             // `keep`: the pre-pass wrote the clamped colour undivided; spread
             // raw − clamped, then (spread + clamped) / modulation is the colour.
-            let interface = BindingInterface::spread(None);
+            let interface = match keep {
+                Keep::Even => BindingInterface::spread(None),
+                Keep::Surface => BindingInterface::spread_surface(None),
+            };
             let mut buffers = [make("spread"), make("spread")];
-            let sequence = SpreadParams::sequence(width, height);
+            // One texel: the sum of the clamped luminance (`keep=surface`).
+            let total = device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("spread total"),
+                size: 16,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            });
+            let normals = normals.map(|n| {
+                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("normals"),
+                    contents: bytemuck::cast_slice(n),
+                    usage: wgpu::BufferUsages::STORAGE,
+                })
+            });
+            let sequence = SpreadParams::sequence(keep, width, height);
             for dispatch in &sequence {
                 let uniform =
                     self.params_buffer(interface.params(), "spread params", bytemuck::bytes_of(&dispatch.params));
@@ -116,7 +147,12 @@ impl Gpu {
                     SpreadSource::Noisy => color,
                     SpreadSource::Scratch(k) => &buffers[k],
                 };
-                let target = &buffers[dispatch.target];
+                let target = match dispatch.target {
+                    SpreadTarget::Scratch(k) => &buffers[k],
+                    SpreadTarget::Total => &total,
+                };
+                // The dispatch that writes the total reads none: any other buffer stands in.
+                let total_read = if dispatch.target == SpreadTarget::Total { &modulation } else { &total };
                 let bind_group = self.bind_in_slot_order(
                     spread,
                     interface
@@ -128,6 +164,10 @@ impl Gpu {
                             Role::Image => prepared.as_entire_binding(),
                             Role::Modulation => modulation.as_entire_binding(),
                             Role::Output => target.as_entire_binding(),
+                            Role::Total => total_read.as_entire_binding(),
+                            Role::Input(_) => {
+                                normals.as_ref().expect("keep=surface is given the normals").as_entire_binding()
+                            }
                             other => unreachable!("the spread has no {other:?} binding"),
                         })
                         .collect(),
@@ -138,7 +178,9 @@ impl Gpu {
                 pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
             }
             // The finishing dispatch wrote the colour the form filters.
-            let last = sequence.last().expect("a spread has dispatches").target;
+            let SpreadTarget::Scratch(last) = sequence.last().expect("a spread has dispatches").target else {
+                unreachable!("a spread ends in a scratch image")
+            };
             std::mem::swap(&mut prepared, &mut buffers[last]);
         }
         self.queue().submit([encoder.finish()]);

@@ -9,7 +9,7 @@
 use serde::Serialize;
 
 use super::kernel::{Input, KernelKind, KernelLayout, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP};
-use crate::lang::ScalarVar;
+use crate::lang::{Feature, ScalarVar};
 
 /// What a binding is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -42,6 +42,8 @@ pub enum Role {
     Terms,
     /// A fitness kernel's per-pixel domain-error bits, which the reduction reads.
     PixelFlags,
+    /// The surface spread's one-texel sum of the clamped luminance.
+    Total,
 }
 
 /// Texel format of a storage texture an exported shader writes.
@@ -411,6 +413,59 @@ impl BindingInterface {
             field("height", "u32", 4, "image height in pixels"),
             field("step", "u32", 8, "pixel step between taps: 2^pass"),
             field("stage", "u32", 12, "0: spread colour - image; 1: spread colour; 2: (colour + image) / modulation"),
+        ];
+        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+    }
+
+    /// The interface of `keep=surface`'s spread kernel
+    /// (`jit::spread_surface_wgsl`): as [`BindingInterface::spread`]'s, with
+    /// the surface normal (`Input::Feature(Normal)`, read as it is stored)
+    /// and `Total`, the sum its first dispatch writes, which later ones read.
+    pub fn spread_surface(textures: Option<OutputFormat>) -> BindingInterface {
+        let normal = Role::Input(Input::Feature(Feature::Normal));
+        let (kind, params, roles) = match textures {
+            None => {
+                let read = Resource::Storage { element: Element::Vec4F32, writable: false };
+                let written = Resource::Storage { element: Element::Vec4F32, writable: true };
+                let roles = [
+                    (Role::Color, read, "buf_color"),
+                    (Role::Image, read, "buf_image"),
+                    (Role::Modulation, read, "buf_modulation"),
+                    (normal, read, "buf_normal"),
+                    (Role::Total, read, "buf_total"),
+                    (Role::Output, written, "buf_out"),
+                ];
+                (KernelKind::Filter, own_params(), roles)
+            }
+            Some(format) => {
+                let sampled = Resource::SampledTexture;
+                let written = Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float));
+                let roles = [
+                    (Role::Color, sampled, "tex_color"),
+                    (Role::Image, sampled, "tex_image"),
+                    (Role::Modulation, sampled, "tex_modulation"),
+                    (normal, sampled, "tex_normal"),
+                    (Role::Total, sampled, "tex_total"),
+                    (Role::Output, written, "tex_out"),
+                ];
+                (KernelKind::Export(format), Resource::Uniform, roles)
+            }
+        };
+        let bindings = dense(
+            std::iter::once((Role::Params, params, "params".to_string()))
+                .chain(roles.map(|(role, resource, ident)| (role, resource, ident.to_string()))),
+        );
+        let uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("step", "u32", 8, "pixel step of the level whose shares this dispatch normalises: 2^level"),
+            field(
+                "stage",
+                "u32",
+                12,
+                "bit 0: sum the clamped luminance into total; bit 1: spread colour - image; bit 2: gather the \
+                 previous level from colour at step / 2; bit 3: write (value + image) / modulation",
+            ),
         ];
         BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
     }

@@ -26,7 +26,7 @@ impl PrepassParams {
     pub fn of(pipeline: &FilterPipeline, width: u32, height: u32) -> Self {
         let outliers = pipeline.outliers.map_or(0, |_| 1);
         let demodulate = if pipeline.demodulate { 2 } else { 0 };
-        let keep = if pipeline.outliers.is_some_and(|o| o.keep) { 4 } else { 0 };
+        let keep = if pipeline.outliers.is_some_and(|o| o.keep.is_some()) { 4 } else { 0 };
         let trim = if pipeline.outliers.is_some_and(|o| o.trim) { 8 } else { 0 };
         let stages = outliers | demodulate | keep | trim;
         PrepassParams { width, height, k: pipeline.outliers.map_or(0.0, |o| o.k), stages }

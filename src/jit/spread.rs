@@ -1,12 +1,14 @@
-//! `keep`'s spread kernel: what the outlier clamp removed, spread over the
+//! `keep`'s spread kernels: what the outlier clamp removed, spread over the
 //! neighbourhood and put back before demodulation. One module for every
-//! pipeline, rendered from `templates/spread.wgsl.tera` with the stencil
-//! `crate::pipeline` owns; `cpu::spread` is its reference.
+//! pipeline of each kind: `keep` from `templates/spread.wgsl.tera`,
+//! `keep=surface` from `templates/spread_surface.wgsl.tera`, with the stencil
+//! and constants `crate::pipeline` owns; `cpu::spread` and
+//! `cpu::spread_surface` are their references.
 
 use super::interface::{render_builtin, BindingInterface};
 use super::kernel::{wgsl_f32, OutputFormat};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
-use crate::pipeline;
+use crate::pipeline::{self, Keep};
 
 /// What one pass of the spread kernel does: bits of `params.stage`.
 pub struct SpreadStage;
@@ -19,13 +21,28 @@ impl SpreadStage {
     pub const FINISH: u32 = 2;
 }
 
+/// What one dispatch of the surface spread kernel does: bits of `params.stage`
+/// (`templates/spread_surface.wgsl.tera` says each in full).
+pub struct SurfaceStage;
+
+impl SurfaceStage {
+    /// The first workgroup sums the clamped colour's luminance into `total`.
+    pub const TOTAL: u32 = 1;
+    /// The value is raw colour − clamped colour.
+    pub const FIRST: u32 = 2;
+    /// The value is the previous level gathered at step / 2.
+    pub const GATHER: u32 = 4;
+    /// Writes (value + clamped) / modulation instead of the normalised shares.
+    pub const FINISH: u32 = 8;
+}
+
 /// The spread kernel's uniform (`struct Params` of its module; fields in [`BindingInterface::spread`]).
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
 pub struct SpreadParams {
     pub width: u32,
     pub height: u32,
-    /// Pixel step between taps: 2^pass.
+    /// Pixel step between taps: 2^pass (the surface spread's: the level it normalises).
     pub step: u32,
     /// [`SpreadStage`] bits.
     pub stage: u32,
@@ -40,35 +57,65 @@ pub enum SpreadSource {
     Scratch(usize),
 }
 
+/// What a spread dispatch writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpreadTarget {
+    /// Scratch image k (0 or 1).
+    Scratch(usize),
+    /// The surface spread's one-texel `total` (its first dispatch).
+    Total,
+}
+
 /// One dispatch of a spread: its uniform, the image it reads and the
-/// scratch image it writes. Two scratch images are ping-ponged; the last
+/// image it writes. Two scratch images are ping-ponged; the last
 /// dispatch's is the colour the form filters.
 #[derive(Clone, Copy, Debug)]
 pub struct SpreadDispatch {
     pub params: SpreadParams,
     pub source: SpreadSource,
-    pub target: usize,
+    pub target: SpreadTarget,
 }
 
 impl SpreadParams {
-    /// The dispatches of one spread, in order.
-    pub fn sequence(width: u32, height: u32) -> Vec<SpreadDispatch> {
-        let last = pipeline::KEEP_PASSES - 1;
-        (0..pipeline::KEEP_PASSES)
-            .map(|level| SpreadParams {
-                width,
-                height,
-                step: pipeline::FilterPipeline::step(level),
-                stage: if level == 0 { SpreadStage::FIRST } else { 0 }
-                    | if level == last { SpreadStage::FINISH } else { 0 },
+    /// The dispatches of one spread of kind `keep`, in order.
+    pub fn sequence(keep: Keep, width: u32, height: u32) -> Vec<SpreadDispatch> {
+        let params =
+            |level: u32, stage: u32| SpreadParams { width, height, step: pipeline::FilterPipeline::step(level), stage };
+        let scratch = |n: usize| SpreadDispatch {
+            params: params(0, 0),
+            source: if n == 0 { SpreadSource::Noisy } else { SpreadSource::Scratch((n - 1) % 2) },
+            target: SpreadTarget::Scratch(n % 2),
+        };
+        let passes = keep.passes();
+        match keep {
+            Keep::Even => (0..passes)
+                .map(|level| SpreadDispatch {
+                    params: params(
+                        level,
+                        if level == 0 { SpreadStage::FIRST } else { 0 }
+                            | if level == passes - 1 { SpreadStage::FINISH } else { 0 },
+                    ),
+                    ..scratch(level as usize)
+                })
+                .collect(),
+            // The total first; then level k's shares are normalised in the
+            // dispatch that gathers level k − 1, and the last one gathers
+            // level passes − 1 and finishes.
+            Keep::Surface => std::iter::once(SpreadDispatch {
+                params: params(0, SurfaceStage::TOTAL),
+                source: SpreadSource::Noisy,
+                target: SpreadTarget::Total,
             })
-            .enumerate()
-            .map(|(n, params)| SpreadDispatch {
-                params,
-                source: if n == 0 { SpreadSource::Noisy } else { SpreadSource::Scratch((n - 1) % 2) },
-                target: n % 2,
-            })
-            .collect()
+            .chain((0..=passes).map(|level| SpreadDispatch {
+                params: params(
+                    level,
+                    if level == 0 { SurfaceStage::FIRST } else { SurfaceStage::GATHER }
+                        | if level == passes { SurfaceStage::FINISH } else { 0 },
+                ),
+                ..scratch(level as usize)
+            }))
+            .collect(),
+        }
     }
 }
 
@@ -90,4 +137,48 @@ pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
 /// The spread kernel, validated by naga; its bindings are checked against its interface.
 pub fn spread_module(textures: Option<OutputFormat>) -> Result<ValidatedModule, ValidateError> {
     validate_with_interface(&spread_wgsl(textures), "<spread>", &BindingInterface::spread(textures))
+}
+
+/// The lanes of the surface spread's total: one workgroup's invocations.
+const TOTAL_LANES: u32 = super::WORKGROUP[0] * super::WORKGROUP[1];
+
+/// The surface spread kernel's WGSL (`keep=surface`), on storage buffers or
+/// exported on textures, as [`spread_wgsl`].
+pub fn spread_surface_wgsl(textures: Option<OutputFormat>) -> String {
+    let mut context = BindingInterface::spread_surface(textures).template_context();
+    let half = pipeline::KEEP_STENCIL.half_width();
+    context.insert("dispatches", &SpreadParams::sequence(Keep::Surface, 0, 0).len());
+    context.insert("textures", &textures.is_some());
+    // Each tap's offsets (dx, dy) and weight h(dx)·h(dy), row by row.
+    let taps: Vec<(i32, i32, String)> = (-half..=half)
+        .flat_map(|dy| (-half..=half).map(move |dx| (dx, dy)))
+        .map(|(dx, dy)| (dx, dy, wgsl_f32(pipeline::KEEP_STENCIL.weight(dx) * pipeline::KEEP_STENCIL.weight(dy))))
+        .collect();
+    context.insert("taps", &taps);
+    context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
+    context.insert("sigma", &wgsl_f32(pipeline::SURFACE_KEEP_NORMAL_SIGMA));
+    context.insert("floor_factor", &wgsl_f32(pipeline::SURFACE_KEEP_LIGHT_FLOOR));
+    context.insert("lanes", &TOTAL_LANES);
+    context.insert("total", &SurfaceStage::TOTAL);
+    context.insert("first", &SurfaceStage::FIRST);
+    context.insert("gather", &SurfaceStage::GATHER);
+    context.insert("finish", &SurfaceStage::FINISH);
+    render_builtin("spread_surface", include_str!("../../templates/spread_surface.wgsl.tera"), &context)
+}
+
+/// The surface spread kernel, validated by naga; its bindings are checked against its interface.
+pub fn spread_surface_module(textures: Option<OutputFormat>) -> Result<ValidatedModule, ValidateError> {
+    validate_with_interface(
+        &spread_surface_wgsl(textures),
+        "<surface spread>",
+        &BindingInterface::spread_surface(textures),
+    )
+}
+
+/// The kernel `keep` spreads with: its WGSL and validated module.
+pub fn spread_kernel(keep: Keep, textures: Option<OutputFormat>) -> (String, Result<ValidatedModule, ValidateError>) {
+    match keep {
+        Keep::Even => (spread_wgsl(textures), spread_module(textures)),
+        Keep::Surface => (spread_surface_wgsl(textures), spread_surface_module(textures)),
+    }
 }

@@ -203,6 +203,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         let mut request = Request { reference: true, ..Default::default() };
         for m in methods.iter().filter(|m| runnable(&m.expr).is_none()) {
             request.features.extend(m.expr.features());
+            request.features.extend(m.pipeline.features());
             request.variances.extend(m.expr.stored_variables());
             request.albedo |= m.pipeline.demodulate;
         }

@@ -101,6 +101,15 @@ impl Needs {
         }
     }
 
+    /// What `expr` reads in `pipeline`: its own needs, the albedo where the
+    /// pipeline demodulates, and what the pipeline's stages read themselves
+    /// (the normal, for `keep=surface`).
+    pub fn of_filter(expr: &Expr, pipeline: &crate::pipeline::FilterPipeline) -> Needs {
+        let mut needs = Needs::of(expr, pipeline.demodulate);
+        needs.features.extend(pipeline.features());
+        needs
+    }
+
     /// Everything these needs ask that `holds` lacks, in a fixed order.
     pub fn missing(&self, holds: Holds<'_>) -> Vec<Missing> {
         let mut out: Vec<Missing> = self.features.difference(holds.features).map(|f| Missing::Feature(*f)).collect();
