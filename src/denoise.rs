@@ -277,26 +277,36 @@ mod tests {
         let best = Choice::best_for(&all).unwrap();
         assert_eq!(best.name.as_deref(), Some(SHIPPED_BY_QUALITY[0]));
         assert!(best.missing(&all).is_empty());
-        assert_eq!(best.pipeline.to_string(), "outliers=2.5,trim,keep,demodulate,atrous=4");
+        assert_eq!(best.pipeline.to_string(), "outliers=2.5,trim,keep=surface,demodulate,atrous=4");
 
         // It reads no variance: a render without one (Cycles, Mitsuba's plain `aov`) gets it too.
         let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
         let chosen = Choice::best_for(&no_variance).unwrap();
         assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
-        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64Trim"));
+        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64Surface"));
         assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep.is_some()), "keeps the light: {}", chosen.pipeline);
 
         // Without depth the default still applies: it reads none.
         let no_depth = provided(&[Texture, Normal, WorldPosition], &[ScalarVar::ColorVariance]);
-        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous64Trim"));
+        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous64Surface"));
 
         // Without a position, the best that reads none; the message says what was passed over.
         let no_position = provided(&[Texture, Normal, Depth], &[ScalarVar::ColorVariance]);
         let chosen = Choice::best_for(&no_position).unwrap();
         assert!(!chosen.expr.features().contains(&WorldPosition), "{:?}", chosen.name);
         let because = chosen.chosen_because.unwrap();
-        assert!(because.contains("@evolvedAtrous64Trim needs worldPosition"), "{because}");
+        assert!(because.contains("@evolvedAtrous64Surface needs worldPosition"), "{because}");
         assert!(because.contains("@evolvedAtrous128Keep needs"), "{because}");
+
+        // `keep=surface` reads the normal even where the weight does not:
+        // its needs say so, and so does what it asks a render for.
+        let weight = crate::lang::parse_expr("exp(-distance2(color))").unwrap();
+        let surface = Choice { expr: weight.clone(), ..Choice::asked("@evolvedAtrous64Surface", None, None).unwrap() };
+        let even = Choice { expr: weight, ..Choice::asked("@evolvedAtrous64Trim", None, None).unwrap() };
+        assert!(surface.request().features.contains(&Normal) && !even.request().features.contains(&Normal));
+        let no_normal = provided(&[Texture, WorldPosition, Depth], &[]);
+        assert_eq!(surface.missing(&no_normal), ["normal"]);
+        assert!(even.missing(&no_normal).is_empty());
 
         // Demodulation needs the albedo even where the weight does not read it.
         let no_albedo = provided(&[Normal, WorldPosition, Depth], &[ScalarVar::ColorVariance]);

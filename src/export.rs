@@ -371,11 +371,7 @@ pub fn export_pipeline(
     let spread = match pipeline.keep() {
         None => None,
         Some(keep) => {
-            let interface = match keep {
-                Keep::Even => jit::BindingInterface::spread(Some(format)),
-                Keep::Surface => jit::BindingInterface::spread_surface(Some(format)),
-            };
-            let (wgsl, module) = jit::spread_kernel(keep, Some(format));
+            let (interface, wgsl, module) = jit::spread_kernel(keep, Some(format));
             let module = module.map_err(jit::CompileError::from)?;
             let (code, entry_point) = translate(&module, &wgsl, &interface, target)?;
             manifest.spread = Some(Stage {
@@ -588,7 +584,7 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                 (Role::Input(Input::Feature(Feature::Normal)), Stages::Spread) => (
                     "normal".into(),
                     "xyz",
-                    "the surface normal, unit length (read as it is, without a normalisation scale)".into(),
+                    "the surface normal; only its direction counts (any length, no normalisation scale)".into(),
                     None,
                 ),
                 (Role::Total, Stages::Spread) => (

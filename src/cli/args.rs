@@ -241,7 +241,8 @@ pub(crate) struct RenderArgs {
     #[arg(long)]
     pub(crate) radius: Option<u32>,
     /// The filter pipeline around the expression: stages separated by commas,
-    /// `outliers=K` (firefly pre-pass), `keep` (put back what it clamped, spread),
+    /// `outliers=K` (firefly pre-pass), `trim` (its rule without the brightest neighbour),
+    /// `keep` (put back what it clamped, spread evenly) or `keep=surface` (along the normals and toward the light),
     /// `demodulate` (filter colour/albedo), then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3) [evolve: the preset's (shipped: the best shipped filter's, quick, thesis: window); report, tune: the run's, else window].
     #[arg(long)]
     pub(crate) pipeline: Option<filterjit::pipeline::FilterPipeline>,

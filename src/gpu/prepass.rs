@@ -120,10 +120,7 @@ impl Gpu {
         if let Some((keep, spread)) = spread {
             // `keep`: the pre-pass wrote the clamped colour undivided; spread
             // raw − clamped, then (spread + clamped) / modulation is the colour.
-            let interface = match keep {
-                Keep::Even => BindingInterface::spread(None),
-                Keep::Surface => BindingInterface::spread_surface(None),
-            };
+            let interface = crate::jit::spread_interface(keep, None);
             let mut buffers = [make("spread"), make("spread")];
             // One texel: the sum of the clamped luminance (`keep=surface`).
             let total = device.create_buffer(&wgpu::BufferDescriptor {

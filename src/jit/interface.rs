@@ -377,95 +377,57 @@ impl BindingInterface {
     /// filterjit (`None`), or, exported, sampled textures in and an
     /// `rgba32float` storage texture out.
     pub fn spread(textures: Option<OutputFormat>) -> BindingInterface {
-        let (kind, params, roles) = match textures {
-            None => {
-                let read = Resource::Storage { element: Element::Vec4F32, writable: false };
-                let written = Resource::Storage { element: Element::Vec4F32, writable: true };
-                let roles = [
-                    (Role::Color, read, "buf_color"),
-                    (Role::Image, read, "buf_image"),
-                    (Role::Modulation, read, "buf_modulation"),
-                    (Role::Output, written, "buf_out"),
-                ];
-                (KernelKind::Filter, own_params(), roles)
-            }
-            // Exported: every image it writes is rgba32float whatever the
-            // output format, so that the total it keeps is not rounded to half
-            // precision between passes.
-            Some(format) => {
-                let sampled = Resource::SampledTexture;
-                let written = Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float));
-                let roles = [
-                    (Role::Color, sampled, "tex_color"),
-                    (Role::Image, sampled, "tex_image"),
-                    (Role::Modulation, sampled, "tex_modulation"),
-                    (Role::Output, written, "tex_out"),
-                ];
-                (KernelKind::Export(format), Resource::Uniform, roles)
-            }
-        };
-        let bindings = dense(
-            std::iter::once((Role::Params, params, "params".to_string()))
-                .chain(roles.map(|(role, resource, ident)| (role, resource, ident.to_string()))),
-        );
-        let uniform = vec![
-            field("width", "u32", 0, "image width in pixels"),
-            field("height", "u32", 4, "image height in pixels"),
-            field("step", "u32", 8, "pixel step between taps: 2^pass"),
-            field("stage", "u32", 12, "0: spread colour - image; 1: spread colour; 2: (colour + image) / modulation"),
-        ];
-        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+        Self::spread_with(textures, &[], "0: spread colour - image; 1: spread colour; 2: (colour + image) / modulation")
     }
 
     /// The interface of `keep=surface`'s spread kernel
-    /// (`jit::spread_surface_wgsl`): as [`BindingInterface::spread`]'s, with
-    /// the surface normal (`Input::Feature(Normal)`, read as it is stored)
-    /// and `Total`, the sum its first dispatch writes, which later ones read.
+    /// (`jit::spread_surface_wgsl`): [`BindingInterface::spread`]'s, with
+    /// the surface normal (`Input::Feature(Normal)`, of which only the
+    /// direction counts) and `Total`, the sum its first dispatch writes,
+    /// which later ones read.
     pub fn spread_surface(textures: Option<OutputFormat>) -> BindingInterface {
-        let normal = Role::Input(Input::Feature(Feature::Normal));
-        let (kind, params, roles) = match textures {
-            None => {
-                let read = Resource::Storage { element: Element::Vec4F32, writable: false };
-                let written = Resource::Storage { element: Element::Vec4F32, writable: true };
-                let roles = [
-                    (Role::Color, read, "buf_color"),
-                    (Role::Image, read, "buf_image"),
-                    (Role::Modulation, read, "buf_modulation"),
-                    (normal, read, "buf_normal"),
-                    (Role::Total, read, "buf_total"),
-                    (Role::Output, written, "buf_out"),
-                ];
-                (KernelKind::Filter, own_params(), roles)
-            }
-            Some(format) => {
-                let sampled = Resource::SampledTexture;
-                let written = Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float));
-                let roles = [
-                    (Role::Color, sampled, "tex_color"),
-                    (Role::Image, sampled, "tex_image"),
-                    (Role::Modulation, sampled, "tex_modulation"),
-                    (normal, sampled, "tex_normal"),
-                    (Role::Total, sampled, "tex_total"),
-                    (Role::Output, written, "tex_out"),
-                ];
-                (KernelKind::Export(format), Resource::Uniform, roles)
-            }
+        let extra = [(Role::Input(Input::Feature(Feature::Normal)), "normal"), (Role::Total, "total")];
+        let stage = "bit 0: sum the clamped luminance into total; bit 1: spread colour - image; bit 2: gather the \
+                     previous level from colour at step / 2; bit 3: write (value + image) / modulation";
+        Self::spread_with(textures, &extra, stage)
+    }
+
+    /// A spread's interface: colour, image and modulation read, then `extra`
+    /// read (named `buf_NAME` or `tex_NAME`), then the output written.
+    fn spread_with(textures: Option<OutputFormat>, extra: &[(Role, &str)], stage: &str) -> BindingInterface {
+        let (kind, params, read, written, prefix) = match textures {
+            None => (
+                KernelKind::Filter,
+                own_params(),
+                Resource::Storage { element: Element::Vec4F32, writable: false },
+                Resource::Storage { element: Element::Vec4F32, writable: true },
+                "buf",
+            ),
+            // Exported: every image it writes is rgba32float whatever the
+            // output format, so that the total it keeps is not rounded to half
+            // precision between passes.
+            Some(format) => (
+                KernelKind::Export(format),
+                Resource::Uniform,
+                Resource::SampledTexture,
+                Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float)),
+                "tex",
+            ),
         };
-        let bindings = dense(
-            std::iter::once((Role::Params, params, "params".to_string()))
-                .chain(roles.map(|(role, resource, ident)| (role, resource, ident.to_string()))),
-        );
+        let reads = [(Role::Color, "color"), (Role::Image, "image"), (Role::Modulation, "modulation")]
+            .into_iter()
+            .chain(extra.iter().copied())
+            .map(|(role, name)| (role, read, format!("{prefix}_{name}")));
+        let bindings = dense(std::iter::once((Role::Params, params, "params".to_string())).chain(reads).chain([(
+            Role::Output,
+            written,
+            format!("{prefix}_out"),
+        )]));
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
             field("height", "u32", 4, "image height in pixels"),
-            field("step", "u32", 8, "pixel step of the level whose shares this dispatch normalises: 2^level"),
-            field(
-                "stage",
-                "u32",
-                12,
-                "bit 0: sum the clamped luminance into total; bit 1: spread colour - image; bit 2: gather the \
-                 previous level from colour at step / 2; bit 3: write (value + image) / modulation",
-            ),
+            field("step", "u32", 8, "pixel step between taps: 2^pass (the surface spread's: the level it normalises)"),
+            field("stage", "u32", 12, stage),
         ];
         BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
     }

@@ -175,10 +175,22 @@ pub fn spread_surface_module(textures: Option<OutputFormat>) -> Result<Validated
     )
 }
 
-/// The kernel `keep` spreads with: its WGSL and validated module.
-pub fn spread_kernel(keep: Keep, textures: Option<OutputFormat>) -> (String, Result<ValidatedModule, ValidateError>) {
+/// The binding interface of the kernel `keep` spreads with.
+pub fn spread_interface(keep: Keep, textures: Option<OutputFormat>) -> BindingInterface {
     match keep {
+        Keep::Even => BindingInterface::spread(textures),
+        Keep::Surface => BindingInterface::spread_surface(textures),
+    }
+}
+
+/// The kernel `keep` spreads with: its interface, WGSL and validated module.
+pub fn spread_kernel(
+    keep: Keep,
+    textures: Option<OutputFormat>,
+) -> (BindingInterface, String, Result<ValidatedModule, ValidateError>) {
+    let (wgsl, module) = match keep {
         Keep::Even => (spread_wgsl(textures), spread_module(textures)),
         Keep::Surface => (spread_surface_wgsl(textures), spread_surface_module(textures)),
-    }
+    };
+    (spread_interface(keep, textures), wgsl, module)
 }
