@@ -377,7 +377,8 @@ impl BindingInterface {
     /// filterjit (`None`), or, exported, sampled textures in and an
     /// `rgba32float` storage texture out.
     pub fn spread(textures: Option<OutputFormat>) -> BindingInterface {
-        Self::spread_with(textures, &[], "0: spread colour - image; 1: spread colour; 2: (colour + image) / modulation")
+        let stage = "0: spread colour - image; 1: spread colour; 2: (colour + image) / modulation";
+        Self::spread_with(textures, &[], "pixel step between taps: 2^pass", stage)
     }
 
     /// The interface of `keep=surface`'s spread kernel
@@ -389,12 +390,18 @@ impl BindingInterface {
         let extra = [(Role::Input(Input::Feature(Feature::Normal)), "normal"), (Role::Total, "total")];
         let stage = "bit 0: sum the clamped luminance into total; bit 1: spread colour - image; bit 2: gather the \
                      previous level from colour at step / 2; bit 3: write (value + image) / modulation";
-        Self::spread_with(textures, &extra, stage)
+        let step = "pixel step of the level whose shares this dispatch normalises: 2^level";
+        Self::spread_with(textures, &extra, step, stage)
     }
 
     /// A spread's interface: colour, image and modulation read, then `extra`
     /// read (named `buf_NAME` or `tex_NAME`), then the output written.
-    fn spread_with(textures: Option<OutputFormat>, extra: &[(Role, &str)], stage: &str) -> BindingInterface {
+    fn spread_with(
+        textures: Option<OutputFormat>,
+        extra: &[(Role, &str)],
+        step: &str,
+        stage: &str,
+    ) -> BindingInterface {
         let (kind, params, read, written, prefix) = match textures {
             None => (
                 KernelKind::Filter,
@@ -426,7 +433,7 @@ impl BindingInterface {
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
             field("height", "u32", 4, "image height in pixels"),
-            field("step", "u32", 8, "pixel step between taps: 2^pass (the surface spread's: the level it normalises)"),
+            field("step", "u32", 8, step),
             field("stage", "u32", 12, stage),
         ];
         BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
