@@ -44,7 +44,7 @@ pub struct SpreadParams {
     pub height: u32,
     /// Pixel step between taps: 2^pass (the surface spread's: the level it normalises).
     pub step: u32,
-    /// [`SpreadStage`] bits.
+    /// [`SpreadStage`] bits (`keep`'s), or [`SurfaceStage`] bits (`keep=surface`'s).
     pub stage: u32,
 }
 
@@ -141,6 +141,8 @@ pub fn spread_module(textures: Option<OutputFormat>) -> Result<ValidatedModule, 
 
 /// The lanes of the surface spread's total: one workgroup's invocations.
 const TOTAL_LANES: u32 = super::WORKGROUP[0] * super::WORKGROUP[1];
+// The template adds the lanes' sums pairwise, halving: a power of two.
+const _: () = assert!(TOTAL_LANES.is_power_of_two());
 
 /// The surface spread kernel's WGSL (`keep=surface`), on storage buffers or
 /// exported on textures, as [`spread_wgsl`].
