@@ -258,11 +258,7 @@ pub fn prepass(scene: &Scene, pipeline: &FilterPipeline) -> Result<Prepared, Mis
         let spread = match keep {
             Keep::Even => spread(&removed, scene.width, scene.height),
             Keep::Surface => {
-                let missing = || MissingInput {
-                    scene: scene.name.clone(),
-                    missing: crate::scene::Missing::Feature(Feature::Normal),
-                };
-                let normals = scene.feature(Feature::Normal).ok_or_else(missing)?;
+                let normals = scene.required_feature(Feature::Normal)?;
                 spread_surface(&removed, &clamped32, normals, scene.width, scene.height)
             }
         };

@@ -121,13 +121,8 @@ impl SceneBuffers {
                 }
                 (_, false) => None,
             };
-            let normals = match (pipeline.keep(), scene.feature(Feature::Normal)) {
-                (Some(Keep::Surface), Some(normals)) => Some(rgba(normals)),
-                (Some(Keep::Surface), None) => {
-                    let missing =
-                        MissingInput { scene: scene.name.clone(), missing: Missing::Feature(Feature::Normal) };
-                    return Err(GpuError::MissingInput(missing));
-                }
+            let normals = match pipeline.keep() {
+                Some(Keep::Surface) => Some(rgba(scene.required_feature(Feature::Normal)?)),
                 _ => None,
             };
             let prepared = gpu.prepass(pipeline, &color, albedo.as_deref(), normals.as_deref(), width, height)?;

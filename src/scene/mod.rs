@@ -207,6 +207,11 @@ impl Scene {
         }
     }
 
+    /// [`Scene::feature`], or the data error naming this scene and the feature.
+    pub fn required_feature(&self, f: Feature) -> Result<&[[f32; 3]], MissingInput> {
+        self.feature(f).ok_or_else(|| MissingInput { scene: self.name.clone(), missing: Missing::Feature(f) })
+    }
+
     pub fn variance(&self, v: ScalarVar) -> Option<&[f32]> {
         self.variances.get(&v).map(Vec::as_slice)
     }
