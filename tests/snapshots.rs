@@ -39,6 +39,8 @@ fn pipeline_kernels_match_snapshots() {
     let shape = jit::Shape::of(&pipeline.pipeline.expect("shipped with its pipeline"));
     assert!(shape.atrous && shape.remodulate);
     let carrying = parse_expr("exp(-(distance2(color) / (0.02 + colorVariance) + level * distance2(normal)))").unwrap();
+    // Reads the guide image in the first pass only, the pass's colour after.
+    let guided = parse_expr("exp(-(distance2(guide) + distance2(normal)))").unwrap();
     settings().bind(|| {
         insta::assert_snapshot!("pipeline__prepass", jit::prepass_wgsl(None));
         insta::assert_snapshot!("export__prepass", jit::prepass_wgsl(Some(jit::OutputFormat::Rgba32float)));
@@ -49,7 +51,7 @@ fn pipeline_kernels_match_snapshots() {
             "export__spread_surface",
             jit::spread_surface_wgsl(Some(jit::OutputFormat::Rgba32float))
         );
-        for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying)] {
+        for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying), ("guided", &guided)] {
             for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
                 let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();
                 insta::assert_snapshot!(format!("pipeline__{name}.atrous.{label}"), kernel.wgsl());
@@ -117,6 +119,8 @@ fn exported_shaders_match_snapshots() {
         let exported =
             filterjit::export::export_pipeline(&guided, &pipeline, Target::Wgsl, jit::OutputFormat::Rgba16float)
                 .unwrap();
+        let Code::Text(pass) = exported.code else { panic!("WGSL is text") };
+        insta::assert_snapshot!("export__guided.atrous.wgsl", pass);
         let Some(Code::Text(text)) = exported.guide else { panic!("a WGSL guide stage") };
         insta::assert_snapshot!("export__guide.wgsl", text);
         insta::assert_snapshot!(

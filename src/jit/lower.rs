@@ -325,6 +325,28 @@ impl<'a> Loads<'a> {
         }
     }
 
+    /// Whether the kernel runs as à-trous passes, its pass in `params.level`.
+    fn has_passes(&self) -> bool {
+        match self {
+            Loads::Buffers(i) | Loads::Textures(i) => i.uniform.iter().any(|f| f.name == "level"),
+            Loads::Tiled => false,
+        }
+    }
+
+    /// The lines that bind feature `f` at `side` (`i` or `j`), given the line
+    /// that loads the pixel's colour. From the second à-trous pass on the guide
+    /// is the pass's own input (docs/SEMANTICS.md, "The guide"), so it is read
+    /// from the colour already loaded: on lavapipe a tap's loads are most of
+    /// its cost, and the guide is one of them.
+    fn bind(&self, side: char, f: Feature, value: String, color: &str) -> String {
+        let ident = feature_ident(side, f);
+        if f == Feature::Guide && self.has_passes() {
+            format!("var {ident} = {color}; if (params.level == 0u) {{ {ident} = {value}; }}")
+        } else {
+            format!("let {ident} = {value};")
+        }
+    }
+
     /// The first lines of the neighbour loop: where neighbour j is, and its colour `color_j`.
     fn neighbour_prelude(&self) -> Vec<String> {
         match self {
@@ -415,8 +437,8 @@ fn pair_sides(exprs: &[Expr]) -> (BTreeSet<Feature>, BTreeSet<Feature>) {
 
 fn centre_loads(exprs: &[Expr], loads: &Loads<'_>) -> Vec<String> {
     let (centre, _) = pair_sides(exprs);
-    let features =
-        centre.into_iter().map(|f| format!("let {} = {};", feature_ident('i', f), loads.feature(f, "i", ("x", "y"))));
+    let colour = loads.feature(Feature::Color, "i", ("x", "y"));
+    let features = centre.into_iter().map(|f| loads.bind('i', f, loads.feature(f, "i", ("x", "y")), &colour));
     let variables: BTreeSet<ScalarVar> = exprs.iter().flat_map(|e| e.variables()).collect();
     let vars = variables.into_iter().map(|v| format!("let {} = {};", var_ident(v), loads.variance(v)));
     features.chain(vars).collect()
@@ -428,7 +450,7 @@ fn neighbour_loads(exprs: &[Expr], loads: &Loads<'_>) -> Vec<String> {
         .into_iter()
         .map(|f| {
             let value = if f == Feature::Color { "color_j".to_string() } else { loads.feature(f, "j", ("xj", "yj")) };
-            format!("let {} = {};", feature_ident('j', f), value)
+            loads.bind('j', f, value, "color_j")
         })
         .collect()
 }
