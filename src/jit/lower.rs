@@ -333,8 +333,8 @@ impl<'a> Loads<'a> {
         }
     }
 
-    /// The lines that bind feature `f` at `side` (`i` or `j`), given the line
-    /// that loads the pixel's colour. From the second à-trous pass on the guide
+    /// The line that binds feature `f` at `side` (`i` or `j`) to `value`;
+    /// `color` is how that pixel's colour is read. From the second à-trous pass on the guide
     /// is the pass's own input (docs/SEMANTICS.md, "The guide"), so it is read
     /// from the colour already loaded: on lavapipe a tap's loads are most of
     /// its cost, and the guide is one of them.
