@@ -366,8 +366,8 @@ impl<'a> Loads<'a> {
     fn variance(&self, v: ScalarVar) -> String {
         let input = Input::Variance(v);
         match self {
-            Loads::Buffers(i) | Loads::Textures(i) if v == ScalarVar::Level => {
-                if i.uniform.iter().any(|f| f.name == "level") {
+            Loads::Buffers(_) | Loads::Textures(_) if v == ScalarVar::Level => {
+                if self.has_passes() {
                     "f32(params.level)".into()
                 } else {
                     "0.0".into()
