@@ -54,8 +54,8 @@ impl SceneBuffers {
             Role::Input(Input::Variance(ScalarVar::ColorVariance)) if level > 0 => {
                 scratch?.variances[read].as_entire_binding()
             }
-            // From the second pass on, the guide is the pass's input.
-            Role::Input(Input::Feature(Feature::Guide)) if level > 0 => scratch?.images[read].as_entire_binding(),
+            // The guide stays the frame's: from the second pass on the kernel
+            // compares the pass's colour instead (`jit::lower`, `Loads::bind`).
             Role::Input(input) => self.inputs.get(&input)?.as_entire_binding(),
             Role::Modulation => self.modulation.as_ref()?.as_entire_binding(),
             Role::VarianceOut => scratch?.variances[write].as_entire_binding(),
