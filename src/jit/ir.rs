@@ -15,7 +15,7 @@
 //! * hoisting: an instruction that reads nothing of the neighbour goes to the
 //!   centre side;
 //! * strength reduction: `pow(x, 2)` is a product (`distance2` squared
-//!   without its square root), `x / c` a multiplication by 1/c;
+//!   without its square root), `pow(x, 1)` is x, `x / c` a multiplication by 1/c;
 //! * skipping checks: `-x` and `abs(x)` of an in-range value need no saturation.
 
 use std::collections::{BTreeSet, HashMap};
@@ -261,6 +261,12 @@ impl Builder {
                 if strength && *op == BinaryOp::Pow && b.literal_value() == Some(2.0) {
                     return self.add(Op::Square(a));
                 }
+                // Every operand is already saturated (0 or at least FJ_TINY in
+                // size, at most FJ_BIG), and there `pow(x, 1)` is x up to the
+                // rounding of exp2(log2 x); an integral power never flags.
+                if strength && *op == BinaryOp::Pow && b.literal_value() == Some(1.0) {
+                    return a;
+                }
                 self.add(Op::Binary(*op, a, b))
             }
         }
@@ -350,5 +356,15 @@ mod tests {
         assert_eq!(neighbour[0], "let _e0 = fj_distance2sq(feat_i_normal, feat_j_normal);");
         assert_eq!(result, "_e3");
         assert_eq!(b.helpers(), ["fj_add", "fj_distance1", "fj_distance2sq", "fj_fin"].map(String::from).into());
+    }
+
+    #[test]
+    fn a_first_power_is_its_base() {
+        let b = body("pow(distance2(normal), 1) * distance1(color)", LowerOptions::ALL);
+        assert!(b.insts.iter().all(|i| !matches!(i.op, Op::Binary(BinaryOp::Pow, ..))), "{b:?}");
+        assert_eq!(b.insts.len(), 3, "{b:?}");
+        let plain = LowerOptions { strength_reduction: false, ..LowerOptions::ALL };
+        let b = body("pow(distance2(normal), 1) * distance1(color)", plain);
+        assert!(b.insts.iter().any(|i| matches!(i.op, Op::Binary(BinaryOp::Pow, ..))), "{b:?}");
     }
 }

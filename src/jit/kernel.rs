@@ -206,7 +206,7 @@ pub struct LowerOptions {
     /// outside the neighbour loop.
     pub hoist_centre_terms: bool,
     /// Square by multiplying: pow(x, 2) becomes x·x, and pow(distance2(f), 2)
-    /// the squared distance without its square root; division by a literal
+    /// the squared distance without its square root; pow(x, 1) is x; division by a literal
     /// becomes multiplication by its reciprocal (no zero guard needed).
     pub strength_reduction: bool,
     /// Leave out saturation an operand has already had: every operator's
