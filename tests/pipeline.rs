@@ -528,6 +528,50 @@ fn fitness_tiles_covering_a_scene_give_its_whole_image_error() {
     }
 }
 
+/// A few tiles score their cells as the whole image filters them, whether
+/// each cell has a crop of its own or, where the pipeline reaches far
+/// (`keep=surface`), the cells share one crop around them all.
+#[test]
+fn a_few_tiles_score_their_cells_as_the_whole_image_filters_them() {
+    use filterjit::fitness::{tiles, FitnessTiles, Scorer, Settings, TileSampling};
+    let gpu = gpu();
+    let expr = parse_expr("exp(-(distance2(color) / 0.3 + distance2(normal) / 0.3 + distance2(pixel) / 4))").unwrap();
+    let scene = scene_with_albedo(96, 96, 11);
+    let (sampling, seed, radius) = (TileSampling { count: 2, size: 16 }, 1, 2);
+    for (text, crops) in [("outliers=2,demodulate,atrous=2", 2), ("outliers=2,keep=surface,demodulate,atrous=2", 1)] {
+        let p = pipeline(text);
+        let cut = tiles::cut(std::slice::from_ref(&scene), sampling, &p, radius, seed);
+        assert_eq!(cut.len(), crops, "{text}: crops for two cells");
+        let settings = Settings {
+            devices: Some(1),
+            tiles: Some(FitnessTiles { sampling, seed }),
+            ..Settings::for_pipeline(radius, p, 1)
+        };
+        let mut scorer = Scorer::new(&gpu, vec![scene.clone()], &settings).unwrap();
+        let on_tiles = scorer.errors(std::slice::from_ref(&expr)).unwrap()[0].as_ref().unwrap()[0];
+        // The same cells' pixels, from the whole image filtered at once.
+        let whole = gpu_filter(&gpu, &expr, &scene, &p, radius);
+        let reference = scene.reference.as_ref().unwrap();
+        let (mut image, mut truth) = (Vec::new(), Vec::new());
+        for t in &cut {
+            let (x0, y0) = t.crop.name.rsplit_once('@').unwrap().1.split_once(',').unwrap();
+            let (x0, y0): (usize, usize) = (x0.parse().unwrap(), y0.parse().unwrap());
+            for r in t.counted.as_ref().unwrap() {
+                for y in y0 + r.y as usize..y0 + (r.y + r.height) as usize {
+                    for x in x0 + r.x as usize..x0 + (r.x + r.width) as usize {
+                        image.push(whole[y * scene.width + x]);
+                        truth.push(reference[y * scene.width + x]);
+                    }
+                }
+            }
+        }
+        assert_eq!(image.len(), 2 * 16 * 16, "{text}");
+        let expected = metrics::errors(&image, &truth, scene.spp).relmse;
+        let close = (on_tiles.relmse - expected).abs() <= 1e-5 * expected;
+        assert!(close, "{text}: {} on tiles, {expected} from the whole image", on_tiles.relmse);
+    }
+}
+
 /// `localMean`, `localStd` and `clampedShare` are what the outlier rule
 /// measured: a firefly's clamped share is most of it, a flat image measures
 /// its own luminance and no spread, and a pipeline without outliers has none

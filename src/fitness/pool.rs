@@ -8,6 +8,10 @@ use crate::scene::Scene;
 /// For each scored image (a tile), the scene it was cut from and how many pixels it counts.
 pub(super) type Pooling = Vec<(usize, f64)>;
 
+/// The pixels of a scored image whose errors count: all when `None`, else
+/// these disjoint rectangles (tiles' interiors).
+pub(super) type Counted = Option<Vec<Region>>;
+
 /// One error per scene from one per tile: a scene's relMSE and luminance
 /// are the pixel-weighted means over its tiles' counted pixels, its flags
 /// any tile's.
@@ -32,8 +36,8 @@ pub(super) fn pool_errors(row: &[FitnessError], pooling: &Pooling, scenes: usize
 }
 
 /// The noisy input's error against its reference, and its mean luminance,
-/// over `region` (all of it when `None`): what a candidate's are measured against.
-pub(super) fn noisy_error(scene: &Scene, region: Option<Region>) -> FitnessError {
+/// over `regions` (all of it when `None`): what a candidate's are measured against.
+pub(super) fn noisy_error(scene: &Scene, regions: Option<&[Region]>) -> FitnessError {
     let reference = scene.reference.as_ref().expect("fitness scenes have references");
     let measure = |color: &[[f32; 3]], reference: &[[f32; 3]]| FitnessError {
         relmse: metrics::errors(color, reference, scene.spp).relmse,
@@ -41,13 +45,14 @@ pub(super) fn noisy_error(scene: &Scene, region: Option<Region>) -> FitnessError
         flags: 0,
         finite: true,
     };
-    let Some(r) = region else { return measure(&scene.color, reference) };
+    let Some(regions) = regions else { return measure(&scene.color, reference) };
     // Only the two images the error reads, not a crop of every feature.
     let inside = |image: &[[f32; 3]]| -> Vec<[f32; 3]> {
-        let (x, width) = (r.x as usize, r.width as usize);
-        (r.y as usize..(r.y + r.height) as usize)
-            .flat_map(|row| image[row * scene.width + x..row * scene.width + x + width].iter().copied())
-            .collect()
+        let rows = |r: &Region| {
+            let (x, width) = (r.x as usize, r.width as usize);
+            (r.y as usize..(r.y + r.height) as usize).map(move |row| (row * scene.width + x, width))
+        };
+        regions.iter().flat_map(rows).flat_map(|(start, width)| image[start..start + width].iter().copied()).collect()
     };
     measure(&inside(&scene.color), &inside(reference))
 }
@@ -55,11 +60,11 @@ pub(super) fn noisy_error(scene: &Scene, region: Option<Region>) -> FitnessError
 /// The noisy input's error per scene, pooled as [`pool_errors`] pools a candidate's.
 pub(super) fn noisy_per_scene(
     scored: &[Scene],
-    counted: &[Option<Region>],
+    counted: &[Counted],
     pooling: Option<&Pooling>,
     scenes: usize,
 ) -> Vec<FitnessError> {
-    let row: Vec<FitnessError> = scored.iter().zip(counted).map(|(s, region)| noisy_error(s, *region)).collect();
+    let row: Vec<FitnessError> = scored.iter().zip(counted).map(|(s, r)| noisy_error(s, r.as_deref())).collect();
     match pooling {
         None => row,
         Some(pooling) => pool_errors(&row, pooling, scenes),
@@ -89,11 +94,14 @@ mod tests {
         reference[0] = [2.0; 3]; // outside the region below
         scene.reference = Some(reference);
         scene.spp = Some(4);
-        let region = Region { x: 2, y: 2, width: 2, height: 2 };
-        assert_eq!(noisy_error(&scene, Some(region)).relmse, 0.0);
+        let region = [Region { x: 2, y: 2, width: 2, height: 2 }];
+        assert_eq!(noisy_error(&scene, Some(&region)).relmse, 0.0);
         assert!(noisy_error(&scene, None).relmse > 0.0);
         scene.color[0] = [0.0; 3];
-        assert_eq!(noisy_error(&scene, Some(region)).luminance, 1.0);
+        assert_eq!(noisy_error(&scene, Some(&region)).luminance, 1.0);
         assert_eq!(noisy_error(&scene, None).luminance, 15.0 / 16.0);
+        // Two regions count as their pixels together: here 4 of 1 and 2 of 0.
+        let two = [region[0], Region { x: 0, y: 0, width: 2, height: 1 }];
+        assert_eq!(noisy_error(&scene, Some(&two)).luminance, 5.0 / 6.0);
     }
 }

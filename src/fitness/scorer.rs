@@ -8,13 +8,13 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 
 use crate::gp::{self, EvalTime, Evaluator, Fitness};
-use crate::gpu::{FitnessError, FitnessScene, Gpu, GpuError, Region};
+use crate::gpu::{FitnessError, FitnessScene, Gpu, GpuError};
 use crate::jit;
 use crate::lang::Expr;
 use crate::scene::Scene;
 
 use super::invalid::Invalid;
-use super::pool::{self, Pooling};
+use super::pool::{self, Counted, Pooling};
 use super::rule::Pool;
 use super::settings::Settings;
 use super::tiles;
@@ -64,13 +64,12 @@ impl<'g> Scorer<'g> {
             s.reference.as_ref().with_context(|| format!("scene `{}` has no reference image", s.name))?;
         }
         let (radius, pipeline) = (settings.radius, &settings.pipeline);
-        let (tiles, counted, pooling): (Option<Vec<Scene>>, Vec<Option<Region>>, Option<Pooling>) = match settings.tiles
-        {
+        let (tiles, counted, pooling): (Option<Vec<Scene>>, Vec<Counted>, Option<Pooling>) = match settings.tiles {
             None => (None, vec![None; scenes.len()], None),
             Some(draw) => {
                 let tiles = tiles::cut(&scenes, draw.sampling, pipeline, radius, draw.seed);
                 let pooling = tiles.iter().map(|t| (t.scene, t.pixels() as f64)).collect();
-                let counted = tiles.iter().map(|t| t.counted).collect();
+                let counted = tiles.iter().map(|t| t.counted.clone()).collect();
                 (Some(tiles.into_iter().map(|t| t.crop).collect()), counted, Some(pooling))
             }
         };
@@ -85,7 +84,7 @@ impl<'g> Scorer<'g> {
             for (s, region) in scored.iter().zip(&counted) {
                 let fs = FitnessScene::for_pipeline(device, s, pipeline)?;
                 on_device.push(match region {
-                    Some(region) => fs.counting(*region),
+                    Some(regions) => fs.counting(regions.clone()),
                     None => fs,
                 });
             }

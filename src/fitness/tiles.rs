@@ -92,19 +92,22 @@ pub struct Tile {
     /// Index of the training scene it was cut from.
     pub scene: usize,
     pub crop: Scene,
-    /// The pixels that count; `None`: all of them (a scene too small to tile).
-    pub counted: Option<Region>,
+    /// The pixels that count, disjoint interiors of the cells drawn (one, or
+    /// several sharing a crop); `None`: all of them (a scene too small to tile).
+    pub counted: Option<Vec<Region>>,
 }
 
 impl Tile {
     /// How many pixels count.
     pub fn pixels(&self) -> usize {
-        self.counted.map_or(self.crop.pixels(), |r| (r.width * r.height) as usize)
+        self.counted.as_ref().map_or(self.crop.pixels(), |r| r.iter().map(|r| r.pixels() as usize).sum())
     }
 }
 
 /// The tiles of every scene, drawn from `seed`. A scene without two whole
-/// cells is one tile: the whole scene, every pixel counted.
+/// cells is one tile: the whole scene, every pixel counted. Where a scene's
+/// tiles' crops, halos included, would hold as many pixels as one crop
+/// around them all, they are that one crop with every interior counted.
 pub fn cut(scenes: &[Scene], sampling: TileSampling, pipeline: &FilterPipeline, radius: u32, seed: u64) -> Vec<Tile> {
     let halo = halo(pipeline, radius) as usize;
     let size = sampling.size as usize;
@@ -126,11 +129,33 @@ pub fn cut(scenes: &[Scene], sampling: TileSampling, pipeline: &FilterPipeline, 
         }
         let mut chosen = cells[..wanted].to_vec();
         chosen.sort_unstable_by_key(|&(c, r)| (r, c));
-        for (c, r) in chosen {
-            let (x, y) = (c * size, r * size);
+        let cells: Vec<(usize, usize)> = chosen.into_iter().map(|(c, r)| (c * size, r * size)).collect();
+        let crop_of = |&(x, y): &(usize, usize)| {
             let (x0, y0) = (x.saturating_sub(halo), y.saturating_sub(halo));
-            let (x1, y1) = ((x + size + halo).min(scene.width), (y + size + halo).min(scene.height));
-            let counted = Region { x: (x - x0) as u32, y: (y - y0) as u32, width: size as u32, height: size as u32 };
+            (x0, y0, (x + size + halo).min(scene.width), (y + size + halo).min(scene.height))
+        };
+        let crops: Vec<(usize, usize, usize, usize)> = cells.iter().map(crop_of).collect();
+        let interior = |&(x, y): &(usize, usize), (x0, y0): (usize, usize)| Region {
+            x: (x - x0) as u32,
+            y: (y - y0) as u32,
+            width: size as u32,
+            height: size as u32,
+        };
+        // A wide reach (`keep=surface`'s spread) makes the crops overlap
+        // most of the scene: then one crop around them all, counting each
+        // interior, filters fewer pixels for the same errors.
+        let area = |&(x0, y0, x1, y1): &(usize, usize, usize, usize)| (x1 - x0) * (y1 - y0);
+        let around = crops
+            .iter()
+            .fold((scene.width, scene.height, 0, 0), |a, c| (a.0.min(c.0), a.1.min(c.1), a.2.max(c.2), a.3.max(c.3)));
+        if crops.iter().map(area).sum::<usize>() >= area(&around) {
+            let (x0, y0, x1, y1) = around;
+            let counted = cells.iter().map(|cell| interior(cell, (x0, y0))).collect();
+            tiles.push(Tile { scene: index, crop: scene.crop(x0, y0, x1 - x0, y1 - y0), counted: Some(counted) });
+            continue;
+        }
+        for (cell, &(x0, y0, x1, y1)) in cells.iter().zip(&crops) {
+            let counted = vec![interior(cell, (x0, y0))];
             tiles.push(Tile { scene: index, crop: scene.crop(x0, y0, x1 - x0, y1 - y0), counted: Some(counted) });
         }
     }
@@ -184,7 +209,9 @@ mod tests {
         assert_eq!(tiles.len(), 4);
         let mut origins = Vec::new();
         for t in &tiles {
-            let counted = t.counted.expect("a tiled scene's tiles count their interiors");
+            let [counted] = t.counted.as_deref().expect("a tiled scene's tiles count their interiors") else {
+                panic!("a small halo keeps one cell to a crop");
+            };
             let (x0, y0): (usize, usize) = t
                 .crop
                 .name
@@ -207,6 +234,50 @@ mod tests {
         assert!(tiles.iter().zip(&again).all(|(a, b)| a.crop.name == b.crop.name));
         let other = cut(std::slice::from_ref(&scene), sampling, &FilterPipeline::WINDOW, 3, 6);
         assert!(tiles.iter().zip(&other).any(|(a, b)| a.crop.name != b.crop.name), "another seed, other tiles");
+    }
+
+    /// The cells' top-left corners in the scene, whichever crops count them.
+    fn cells(tiles: &[Tile]) -> Vec<(u32, u32)> {
+        let mut cells: Vec<(u32, u32)> = tiles
+            .iter()
+            .flat_map(|t| {
+                let (x0, y0) = t.crop.name.split_once('@').unwrap().1.split_once(',').unwrap();
+                let (x0, y0): (u32, u32) = (x0.parse().unwrap(), y0.parse().unwrap());
+                t.counted.as_ref().unwrap().iter().map(move |r| (x0 + r.x, y0 + r.y))
+            })
+            .collect();
+        cells.sort_unstable();
+        cells
+    }
+
+    #[test]
+    fn tiles_whose_crops_would_cover_one_crop_around_them_all_share_it() {
+        let color: Vec<[f32; 3]> = (0..96 * 80).map(|i| [i as f32, 0.0, 0.0]).collect();
+        let scene = Scene::from_color("s", 96, 80, color);
+        let sampling = TileSampling { count: 4, size: 16 };
+        let window = cut(std::slice::from_ref(&scene), sampling, &FilterPipeline::WINDOW, 3, 5);
+        // `keep=surface` reaches 192 pixels: every crop would be most of the scene.
+        let surface = FilterPipeline {
+            outliers: Some(Outliers { k: 2.0, trim: false, keep: Some(Keep::Surface) }),
+            demodulate: true,
+            form: Form::Atrous { passes: 4, stencil: Default::default() },
+        };
+        let shared = cut(std::slice::from_ref(&scene), sampling, &surface, 3, 5);
+        assert_eq!(shared.len(), 1);
+        assert_eq!((shared[0].crop.width, shared[0].crop.height), (96, 80));
+        assert_eq!(shared[0].pixels(), 4 * 16 * 16);
+        // The same cells are drawn and counted, whatever the halo.
+        assert_eq!(cells(&shared).len(), 4);
+        assert_eq!(cells(&shared), cells(&window));
+        for (x, y) in cells(&shared) {
+            let r = shared[0].counted.as_ref().unwrap().iter().find(|r| (r.x, r.y) == (x, y)).unwrap();
+            assert_eq!(shared[0].crop.color[(r.y * 96 + r.x) as usize][0], (y * 96 + x) as f32);
+        }
+        // Two far-apart cells with a small halo keep crops of their own.
+        let wide = Scene::from_color("w", 256, 16, vec![[1.0; 3]; 256 * 16]);
+        let two = cut(std::slice::from_ref(&wide), TileSampling { count: 2, size: 16 }, &FilterPipeline::WINDOW, 1, 3);
+        let apart = cells(&two);
+        assert!(two.len() == 2 || apart[1].0 - apart[0].0 <= 2 * 16, "{apart:?}");
     }
 
     #[test]

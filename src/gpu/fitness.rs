@@ -26,9 +26,9 @@ pub struct FitnessScene {
     height: u32,
     /// Per-pixel terms and flags, and how many members they have room for.
     terms: Option<(wgpu::Buffer, wgpu::Buffer, u32)>,
-    /// The pixels whose errors count (all when `None`): a fitness tile's
-    /// interior, whose halo only feeds the filter.
-    counted: Option<Region>,
+    /// The pixels whose errors count (all when `None`): the interiors of
+    /// fitness tiles, disjoint, whose halo only feeds the filter.
+    counted: Option<Vec<Region>>,
 }
 
 /// A rectangle of pixels whose sides lie on workgroup boundaries, so that it
@@ -42,6 +42,11 @@ pub struct Region {
 }
 
 impl Region {
+    /// How many pixels it holds.
+    pub fn pixels(&self) -> u32 {
+        self.width * self.height
+    }
+
     /// Whether every side lies on a workgroup boundary.
     pub fn is_aligned(&self) -> bool {
         [self.x, self.width].iter().all(|v| v % WORKGROUP[0] == 0)
@@ -97,11 +102,18 @@ impl FitnessScene {
         })
     }
 
-    /// Count only `region`'s errors (its sides on workgroup boundaries, inside the scene).
-    pub fn counting(mut self, region: Region) -> Self {
-        assert!(region.is_aligned(), "a counted region lies on workgroup boundaries: {region:?}");
-        assert!(region.x + region.width <= self.width && region.y + region.height <= self.height, "{region:?} inside");
-        self.counted = Some(region);
+    /// Count only the errors in `regions` (disjoint, their sides on workgroup
+    /// boundaries, inside the scene).
+    pub fn counting(mut self, regions: Vec<Region>) -> Self {
+        for region in &regions {
+            assert!(region.is_aligned(), "a counted region lies on workgroup boundaries: {region:?}");
+            assert!(
+                region.x + region.width <= self.width && region.y + region.height <= self.height,
+                "{region:?} inside"
+            );
+        }
+        assert!(!regions.is_empty(), "a scene counts some pixels");
+        self.counted = Some(regions);
         self
     }
 
@@ -252,8 +264,11 @@ impl Gpu {
                 let rows = rows_per_dispatch(fs.width, pipeline.pass_radius(radius));
                 // One pass computes only the rows whose errors count; a cascade
                 // needs every pixel of each pass but the last.
-                let (first, end) = match fs.counted {
-                    Some(region) if passes == 1 => (region.y, region.y + region.height),
+                let (first, end) = match &fs.counted {
+                    Some(regions) if passes == 1 => (
+                        regions.iter().map(|r| r.y).min().unwrap_or(0),
+                        regions.iter().map(|r| r.y + r.height).max().unwrap_or(fs.height),
+                    ),
                     _ => (0, fs.height),
                 };
                 (0..passes)
@@ -368,11 +383,14 @@ impl Gpu {
                 let add = |(e, l, bits): (f64, f64, u32), w: usize| {
                     (e + sums[w][0] as f64, l + sums[w][1] as f64, bits | flags[w])
                 };
-                let (sum, luminance, bits) = match fs.counted {
+                let (sum, luminance, bits) = match &fs.counted {
                     None => (start..start + fs.groups() as usize).fold((0.0, 0.0, 0), add),
-                    Some(region) => region.partials(fs.width).map(|w| start + w).fold((0.0, 0.0, 0), add),
+                    Some(regions) => {
+                        regions.iter().flat_map(|r| r.partials(fs.width)).map(|w| start + w).fold((0.0, 0.0, 0), add)
+                    }
                 };
-                let pixels = fs.counted.map_or(fs.width * fs.height, |r| r.width * r.height) as f64;
+                let pixels =
+                    fs.counted.as_ref().map_or(fs.width * fs.height, |r| r.iter().map(Region::pixels).sum()) as f64;
                 row.push(SceneError {
                     relmse: sum / pixels,
                     luminance: luminance / pixels,
