@@ -212,13 +212,8 @@ mod tests {
             let [counted] = t.counted.as_deref().expect("a tiled scene's tiles count their interiors") else {
                 panic!("a small halo keeps one cell to a crop");
             };
-            let (x0, y0): (usize, usize) = t
-                .crop
-                .name
-                .trim_start_matches("s@")
-                .split_once(',')
-                .map(|(a, b)| (a.parse().unwrap(), b.parse().unwrap()))
-                .unwrap();
+            let (x0, y0) = origin(t);
+            let (x0, y0) = (x0 as usize, y0 as usize);
             let (x, y) = (x0 + counted.x as usize, y0 + counted.y as usize);
             assert!(x % 16 == 0 && y % 16 == 0 && counted.width == 16, "{counted:?}");
             // The crop holds the scene's own pixels, and a halo of 8 wherever the scene has them.
@@ -236,13 +231,18 @@ mod tests {
         assert!(tiles.iter().zip(&other).any(|(a, b)| a.crop.name != b.crop.name), "another seed, other tiles");
     }
 
+    /// Where a tile's crop lies in its scene, from the crop's name (`NAME@X,Y`).
+    fn origin(t: &Tile) -> (u32, u32) {
+        let (x0, y0) = t.crop.name.rsplit_once('@').unwrap().1.split_once(',').unwrap();
+        (x0.parse().unwrap(), y0.parse().unwrap())
+    }
+
     /// The cells' top-left corners in the scene, whichever crops count them.
     fn cells(tiles: &[Tile]) -> Vec<(u32, u32)> {
         let mut cells: Vec<(u32, u32)> = tiles
             .iter()
             .flat_map(|t| {
-                let (x0, y0) = t.crop.name.split_once('@').unwrap().1.split_once(',').unwrap();
-                let (x0, y0): (u32, u32) = (x0.parse().unwrap(), y0.parse().unwrap());
+                let (x0, y0) = origin(t);
                 t.counted.as_ref().unwrap().iter().map(move |r| (x0 + r.x, y0 + r.y))
             })
             .collect();
