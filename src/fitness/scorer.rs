@@ -69,8 +69,8 @@ impl<'g> Scorer<'g> {
             Some(draw) => {
                 let tiles = tiles::cut(&scenes, draw.sampling, pipeline, radius, draw.seed);
                 let pooling = tiles.iter().map(|t| (t.scene, t.pixels() as f64)).collect();
-                let counted = tiles.iter().map(|t| t.counted.clone()).collect();
-                (Some(tiles.into_iter().map(|t| t.crop).collect()), counted, Some(pooling))
+                let (crops, counted) = tiles.into_iter().map(|t| (t.crop, t.counted)).unzip();
+                (Some(crops), counted, Some(pooling))
             }
         };
         let scored = tiles.as_deref().unwrap_or(&scenes);
