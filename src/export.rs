@@ -446,12 +446,13 @@ impl Stage {
 /// The spread's dispatches (`jit::SpreadParams::sequence`) with the images
 /// each binds: the noisy colour or a scratch image (`spread0`, `spread1`)
 /// in, a scratch image out, except the last, which writes `kept`, the colour
-/// the form filters. `keep=surface`'s also bind the `normal` input and
-/// `total`, which its first dispatch writes (binding `modulation` in its
-/// place, unread, while it does).
+/// the form filters. `keep=surface`'s also bind the `normal` input,
+/// `surface` and `total`, which its first and second dispatches write
+/// (binding `modulation` in their place, unread, until they are written).
 fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
     let sequence = jit::SpreadParams::sequence(keep, 0, 0);
     let last = sequence.len() - 1;
+    let written_by = |image| sequence.iter().position(|d| d.target == image);
     sequence
         .iter()
         .enumerate()
@@ -464,6 +465,7 @@ fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
                 _ if n == last => "kept".to_string(),
                 jit::SpreadTarget::Scratch(k) => format!("spread{k}"),
                 jit::SpreadTarget::Total => "total".to_string(),
+                jit::SpreadTarget::Surface => "surface".to_string(),
             };
             let mut images: BTreeMap<String, String> = [
                 ("color", source),
@@ -474,9 +476,12 @@ fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
             .map(|(role, image)| (role.to_string(), image))
             .into();
             if keep == Keep::Surface {
-                let total = if *target == jit::SpreadTarget::Total { "modulation" } else { "total" };
+                let read = |image, name: &str| {
+                    if written_by(image).is_some_and(|w| w < n) { name } else { "modulation" }.to_string()
+                };
                 images.insert("normal".into(), "normal".into());
-                images.insert("total".into(), total.into());
+                images.insert("surface".into(), read(jit::SpreadTarget::Surface, "surface"));
+                images.insert("total".into(), read(jit::SpreadTarget::Total, "total"));
             }
             StageDispatch {
                 uniform_values: [("step".to_string(), params.step as f64), ("stage".to_string(), params.stage as f64)]
@@ -512,8 +517,9 @@ fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
     if let Some(stage) = &manifest.spread {
         let surface = match pipeline.keep() {
             Some(Keep::Surface) => {
-                " along the surface (the first dispatch sums the clamped luminance into `total`, which the others \
-                 read; `normal` is the normal input)"
+                " along the surface (the first dispatch writes each pixel's normal direction and clamped luminance \
+                 into `surface`, the second their sum into `total`, which the others read; `normal` is the normal \
+                 input)"
             }
             _ => "",
         };
@@ -590,8 +596,15 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                 (Role::Total, Stages::Spread) => (
                     "total".into(),
                     "x",
-                    "texel (0, 0): the sum of the clamped colour's luminance over the frame, which the first \
+                    "texel (0, 0): the sum of the clamped colour's luminance over the frame, which the second \
                      dispatch writes"
+                        .into(),
+                    None,
+                ),
+                (Role::Surface, Stages::Spread) => (
+                    "surface".into(),
+                    "xyzw",
+                    "each pixel's normal direction (xyz) and clamped luminance (w), which the first dispatch writes"
                         .into(),
                     None,
                 ),
@@ -654,7 +667,8 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     | Role::Terms
                     | Role::PixelFlags
                     | Role::Input(_)
-                    | Role::Total,
+                    | Role::Total
+                    | Role::Surface,
                     _,
                 )
                 | (Role::Modulation, Stages::Guide) => {

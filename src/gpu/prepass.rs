@@ -129,6 +129,8 @@ impl Gpu {
                 usage: wgpu::BufferUsages::STORAGE,
                 mapped_at_creation: false,
             });
+            // Each pixel's direction and clamped luminance (`keep=surface`).
+            let surface = make("spread surface");
             let normals = normals.map(|n| {
                 device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("normals"),
@@ -147,9 +149,13 @@ impl Gpu {
                 let target = match dispatch.target {
                     SpreadTarget::Scratch(k) => &buffers[k],
                     SpreadTarget::Total => &total,
+                    SpreadTarget::Surface => &surface,
                 };
-                // The dispatch that writes the total reads none: any other buffer stands in.
-                let total_read = if dispatch.target == SpreadTarget::Total { &modulation } else { &total };
+                // The dispatches that write the surface or the total read
+                // what they write nowhere: any other buffer stands in.
+                let stand_in = |written, buffer| if dispatch.target == written { &modulation } else { buffer };
+                let (total_read, surface_read) =
+                    (stand_in(SpreadTarget::Total, &total), stand_in(SpreadTarget::Surface, &surface));
                 let bind_group = self.bind_in_slot_order(
                     spread,
                     interface
@@ -162,6 +168,7 @@ impl Gpu {
                             Role::Modulation => modulation.as_entire_binding(),
                             Role::Output => target.as_entire_binding(),
                             Role::Total => total_read.as_entire_binding(),
+                            Role::Surface => surface_read.as_entire_binding(),
                             Role::Input(_) => {
                                 normals.as_ref().expect("keep=surface is given the normals").as_entire_binding()
                             }

@@ -44,6 +44,9 @@ pub enum Role {
     PixelFlags,
     /// The surface spread's one-texel sum of the clamped luminance.
     Total,
+    /// The surface spread's per-pixel (normal's direction, clamped luminance),
+    /// which its first dispatch writes and every later one's taps read.
+    Surface,
 }
 
 /// Texel format of a storage texture an exported shader writes.
@@ -384,12 +387,18 @@ impl BindingInterface {
     /// The interface of `keep=surface`'s spread kernel
     /// (`jit::spread_surface_wgsl`): [`BindingInterface::spread`]'s, with
     /// the surface normal (`Input::Feature(Normal)`, of which only the
-    /// direction counts) and `Total`, the sum its first dispatch writes,
-    /// which later ones read.
+    /// direction counts), `Surface`, each pixel's direction and clamped
+    /// luminance, which its first dispatch writes, and `Total`, their sum,
+    /// which its second writes; later ones read both.
     pub fn spread_surface(textures: Option<OutputFormat>) -> BindingInterface {
-        let extra = [(Role::Input(Input::Feature(Feature::Normal)), "normal"), (Role::Total, "total")];
+        let extra = [
+            (Role::Input(Input::Feature(Feature::Normal)), "normal"),
+            (Role::Surface, "surface"),
+            (Role::Total, "total"),
+        ];
         let stage = "bit 0: sum the clamped luminance into total; bit 1: spread colour - image; bit 2: gather the \
-                     previous level from colour at step / 2; bit 3: write (value + image) / modulation";
+                     previous level from colour at step / 2; bit 3: write (value + image) / modulation; bit 4: write \
+                     the normal's direction and the clamped luminance into surface";
         let step = "pixel step of the level whose shares this dispatch normalises: 2^level";
         Self::spread_with(textures, &extra, step, stage)
     }

@@ -34,6 +34,10 @@ impl SurfaceStage {
     pub const GATHER: u32 = 4;
     /// Writes (value + clamped) / modulation instead of the normalised shares.
     pub const FINISH: u32 = 8;
+    /// Writes each pixel's normal direction and clamped luminance into
+    /// `surface`, which the taps of every later dispatch read: one load a tap
+    /// instead of two, and no normalisation.
+    pub const SURFACE: u32 = 16;
 }
 
 /// The spread kernel's uniform (`struct Params` of its module; fields in [`BindingInterface::spread`]).
@@ -62,7 +66,9 @@ pub enum SpreadSource {
 pub enum SpreadTarget {
     /// Scratch image k (0 or 1).
     Scratch(usize),
-    /// The surface spread's one-texel `total` (its first dispatch).
+    /// The surface spread's per-pixel direction and luminance (its first dispatch).
+    Surface,
+    /// The surface spread's one-texel `total` (its second dispatch).
     Total,
 }
 
@@ -98,23 +104,28 @@ impl SpreadParams {
                     ..scratch(level as usize)
                 })
                 .collect(),
-            // The total first; then level k's shares are normalised in the
-            // dispatch that gathers level k − 1, and the last one gathers
-            // level passes − 1 and finishes.
-            Keep::Surface => std::iter::once(SpreadDispatch {
-                params: params(0, SurfaceStage::TOTAL),
-                source: SpreadSource::Noisy,
-                target: SpreadTarget::Total,
-            })
-            .chain((0..=passes).map(|level| SpreadDispatch {
-                params: params(
-                    level,
-                    if level == 0 { SurfaceStage::FIRST } else { SurfaceStage::GATHER }
-                        | if level == passes { SurfaceStage::FINISH } else { 0 },
-                ),
-                ..scratch(level as usize)
-            }))
-            .collect(),
+            // Each pixel's direction and luminance, and their total, first;
+            // then level k's shares are normalised in the dispatch that
+            // gathers level k − 1, and the last one gathers level passes − 1
+            // and finishes.
+            Keep::Surface => {
+                [(SurfaceStage::SURFACE, SpreadTarget::Surface), (SurfaceStage::TOTAL, SpreadTarget::Total)]
+                    .map(|(stage, target)| SpreadDispatch {
+                        params: params(0, stage),
+                        source: SpreadSource::Noisy,
+                        target,
+                    })
+                    .into_iter()
+                    .chain((0..=passes).map(|level| SpreadDispatch {
+                        params: params(
+                            level,
+                            if level == 0 { SurfaceStage::FIRST } else { SurfaceStage::GATHER }
+                                | if level == passes { SurfaceStage::FINISH } else { 0 },
+                        ),
+                        ..scratch(level as usize)
+                    }))
+                    .collect()
+            }
         }
     }
 }
@@ -161,6 +172,7 @@ pub fn spread_surface_wgsl(textures: Option<OutputFormat>) -> String {
     context.insert("sigma", &wgsl_f32(pipeline::SURFACE_KEEP_NORMAL_SIGMA));
     context.insert("floor_factor", &wgsl_f32(pipeline::SURFACE_KEEP_LIGHT_FLOOR));
     context.insert("lanes", &TOTAL_LANES);
+    context.insert("surface", &SurfaceStage::SURFACE);
     context.insert("total", &SurfaceStage::TOTAL);
     context.insert("first", &SurfaceStage::FIRST);
     context.insert("gather", &SurfaceStage::GATHER);
