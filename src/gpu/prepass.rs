@@ -130,7 +130,7 @@ impl Gpu {
                 mapped_at_creation: false,
             });
             // Each pixel's direction and clamped luminance (`keep=surface`).
-            let surface = make("spread surface");
+            let surface = (keep == Keep::Surface).then(|| make("spread surface"));
             let normals = normals.map(|n| {
                 device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("normals"),
@@ -149,13 +149,12 @@ impl Gpu {
                 let target = match dispatch.target {
                     SpreadTarget::Scratch(k) => &buffers[k],
                     SpreadTarget::Total => &total,
-                    SpreadTarget::Surface => &surface,
+                    SpreadTarget::Surface => surface.as_ref().expect("keep=surface has a surface image"),
                 };
                 // The dispatches that write the surface or the total read
                 // what they write nowhere: any other buffer stands in.
                 let stand_in = |written, buffer| if dispatch.target == written { &modulation } else { buffer };
-                let (total_read, surface_read) =
-                    (stand_in(SpreadTarget::Total, &total), stand_in(SpreadTarget::Surface, &surface));
+                let total_read = stand_in(SpreadTarget::Total, &total);
                 let bind_group = self.bind_in_slot_order(
                     spread,
                     interface
@@ -168,7 +167,11 @@ impl Gpu {
                             Role::Modulation => modulation.as_entire_binding(),
                             Role::Output => target.as_entire_binding(),
                             Role::Total => total_read.as_entire_binding(),
-                            Role::Surface => surface_read.as_entire_binding(),
+                            Role::Surface => stand_in(
+                                SpreadTarget::Surface,
+                                surface.as_ref().expect("keep=surface has a surface image"),
+                            )
+                            .as_entire_binding(),
                             Role::Input(_) => {
                                 normals.as_ref().expect("keep=surface is given the normals").as_entire_binding()
                             }
