@@ -202,8 +202,7 @@ mod tests {
 
     #[test]
     fn tiles_are_distinct_cells_with_their_halo_and_the_same_for_the_same_seed() {
-        let color: Vec<[f32; 3]> = (0..96 * 80).map(|i| [i as f32, 0.0, 0.0]).collect();
-        let scene = Scene::from_color("s", 96, 80, color);
+        let scene = numbered_scene();
         let sampling = TileSampling { count: 4, size: 16 };
         let tiles = cut(std::slice::from_ref(&scene), sampling, &FilterPipeline::WINDOW, 3, 5);
         assert_eq!(tiles.len(), 4);
@@ -231,6 +230,12 @@ mod tests {
         assert!(tiles.iter().zip(&other).any(|(a, b)| a.crop.name != b.crop.name), "another seed, other tiles");
     }
 
+    /// A 96x80 scene whose pixel i has red i: a crop's pixels say where they came from.
+    fn numbered_scene() -> Scene {
+        let color: Vec<[f32; 3]> = (0..96 * 80).map(|i| [i as f32, 0.0, 0.0]).collect();
+        Scene::from_color("s", 96, 80, color)
+    }
+
     /// Where a tile's crop lies in its scene, from the crop's name (`NAME@X,Y`).
     fn origin(t: &Tile) -> (u32, u32) {
         let (x0, y0) = t.crop.name.rsplit_once('@').unwrap().1.split_once(',').unwrap();
@@ -252,8 +257,7 @@ mod tests {
 
     #[test]
     fn tiles_whose_crops_would_cover_one_crop_around_them_all_share_it() {
-        let color: Vec<[f32; 3]> = (0..96 * 80).map(|i| [i as f32, 0.0, 0.0]).collect();
-        let scene = Scene::from_color("s", 96, 80, color);
+        let scene = numbered_scene();
         let sampling = TileSampling { count: 4, size: 16 };
         let window = cut(std::slice::from_ref(&scene), sampling, &FilterPipeline::WINDOW, 3, 5);
         // `keep=surface` reaches 192 pixels: every crop would be most of the scene.
