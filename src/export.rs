@@ -452,7 +452,6 @@ impl Stage {
 fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
     let sequence = jit::SpreadParams::sequence(keep, 0, 0);
     let last = sequence.len() - 1;
-    let written_by = |image| sequence.iter().position(|d| d.target == image);
     sequence
         .iter()
         .enumerate()
@@ -477,7 +476,7 @@ fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
             .into();
             if keep == Keep::Surface {
                 let read = |image, name: &str| {
-                    if written_by(image).is_some_and(|w| w < n) { name } else { "modulation" }.to_string()
+                    if jit::written_before(&sequence, n, image) { name } else { "modulation" }.to_string()
                 };
                 images.insert("normal".into(), "normal".into());
                 images.insert("surface".into(), read(jit::SpreadTarget::Surface, "surface"));

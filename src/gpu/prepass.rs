@@ -8,7 +8,8 @@ use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::{
-    BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, SpreadTarget, ValidatedModule, WORKGROUP,
+    written_before, BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, SpreadTarget,
+    ValidatedModule, WORKGROUP,
 };
 use crate::lang::ScalarVar;
 use crate::pipeline::{FilterPipeline, Keep};
@@ -139,7 +140,7 @@ impl Gpu {
                 })
             });
             let sequence = SpreadParams::sequence(keep, width, height);
-            for dispatch in &sequence {
+            for (n, dispatch) in sequence.iter().enumerate() {
                 let uniform =
                     self.params_buffer(interface.params(), "spread params", bytemuck::bytes_of(&dispatch.params));
                 let source = match dispatch.source {
@@ -151,10 +152,8 @@ impl Gpu {
                     SpreadTarget::Total => &total,
                     SpreadTarget::Surface => surface.as_ref().expect("keep=surface has a surface image"),
                 };
-                // The dispatches that write the surface or the total read
-                // what they write nowhere: any other buffer stands in.
-                let stand_in = |written, buffer| if dispatch.target == written { &modulation } else { buffer };
-                let total_read = stand_in(SpreadTarget::Total, &total);
+                // An image not yet written is not read: any other buffer stands in.
+                let read = |image, buffer| if written_before(&sequence, n, image) { buffer } else { &modulation };
                 let bind_group = self.bind_in_slot_order(
                     spread,
                     interface
@@ -166,12 +165,11 @@ impl Gpu {
                             Role::Image => prepared.as_entire_binding(),
                             Role::Modulation => modulation.as_entire_binding(),
                             Role::Output => target.as_entire_binding(),
-                            Role::Total => total_read.as_entire_binding(),
-                            Role::Surface => stand_in(
-                                SpreadTarget::Surface,
-                                surface.as_ref().expect("keep=surface has a surface image"),
-                            )
-                            .as_entire_binding(),
+                            Role::Total => read(SpreadTarget::Total, &total).as_entire_binding(),
+                            Role::Surface => {
+                                read(SpreadTarget::Surface, surface.as_ref().expect("keep=surface has a surface image"))
+                                    .as_entire_binding()
+                            }
                             Role::Input(_) => {
                                 normals.as_ref().expect("keep=surface is given the normals").as_entire_binding()
                             }

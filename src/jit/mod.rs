@@ -23,7 +23,7 @@ pub use prepass::{prepass_module, prepass_wgsl, PrepassParams};
 pub use reduce::{reduce_module, reduce_wgsl, ReduceParams};
 pub use spread::{
     spread_interface, spread_kernel, spread_module, spread_surface_module, spread_surface_wgsl, spread_wgsl,
-    SpreadDispatch, SpreadParams, SpreadSource, SpreadStage, SpreadTarget, SurfaceStage,
+    written_before, SpreadDispatch, SpreadParams, SpreadSource, SpreadStage, SpreadTarget, SurfaceStage,
 };
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 

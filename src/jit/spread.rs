@@ -82,6 +82,13 @@ pub struct SpreadDispatch {
     pub target: SpreadTarget,
 }
 
+/// Whether the `n`th dispatch of `sequence` finds `image` written by one
+/// before it. Where not (the dispatch that writes it, and the total in the
+/// one before that), a host binds a stand-in image there, which it never reads.
+pub fn written_before(sequence: &[SpreadDispatch], n: usize, image: SpreadTarget) -> bool {
+    sequence[..n].iter().any(|d| d.target == image)
+}
+
 impl SpreadParams {
     /// The dispatches of one spread of kind `keep`, in order.
     pub fn sequence(keep: Keep, width: u32, height: u32) -> Vec<SpreadDispatch> {
