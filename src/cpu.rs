@@ -440,7 +440,94 @@ pub fn filter_pipeline(
             *c = [c[0] * m[0] as f64, c[1] * m[1] as f64, c[2] * m[2] as f64];
         }
     }
+    if let Some(fit) = pipeline.planefit {
+        // The form's output is stored as f32 before the fit reads it, as on the device.
+        let image: Vec<[f32; 3]> = out.color.iter().map(|c| c.map(|v| v as f32)).collect();
+        let normals = scene.required_feature(Feature::Normal)?;
+        out.color = planefit(&image, normals, prepared.modulation.as_deref(), scene.width, scene.height, fit);
+    }
     Ok(out)
+}
+
+/// `planefit=R` on the form's output `image` (docs/SEMANTICS.md, "The
+/// pipeline"): each pixel's demodulated colour (divided by `modulation`
+/// where the pipeline demodulates) moved toward the value at the pixel of a
+/// plane fitted by weighted least squares over its (2R+1)² neighbourhood
+/// (`pipeline::PlaneFit::weight`), as far as the plane's slope lets it
+/// (`pipeline::PLANEFIT_SLOPE_TAU`), then multiplied back. The reference of
+/// `templates/planefit.wgsl.tera`, formula for formula.
+pub fn planefit(
+    image: &[[f32; 3]],
+    normals: &[[f32; 3]],
+    modulation: Option<&[[f32; 3]]>,
+    width: usize,
+    height: usize,
+    fit: pipeline::PlaneFit,
+) -> Vec<[f64; 3]> {
+    use pipeline::{LUMINANCE, PLANEFIT_RIDGE, PLANEFIT_SLOPE_CAP, PLANEFIT_SLOPE_TAU, PLANEFIT_TINY};
+    let (w, h, r) = (width as i64, height as i64, fit.radius as i64);
+    let f64s = |c: [f32; 3]| c.map(|v| v as f64);
+    let modulation_at = |i: usize| modulation.map_or([1.0; 3], |m| f64s(m[i]));
+    let demodulated: Vec<[f64; 3]> = (0..image.len())
+        .map(|i| {
+            let (c, m) = (f64s(image[i]), modulation_at(i));
+            [c[0] / m[0], c[1] / m[1], c[2] / m[2]]
+        })
+        .collect();
+    let luminance: Vec<f64> = demodulated.iter().map(|&c| pipeline::luminance(c)).collect();
+    let signed = |c: [f64; 3]| LUMINANCE[0] * c[0] + LUMINANCE[1] * c[1] + LUMINANCE[2] * c[2];
+    (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let i = (y * w + x) as usize;
+            let mut moments = [Neumaier::default(); 6]; // s, su, sv, suu, svv, suv
+            let mut sums = [[Neumaier::default(); 3]; 3]; // b0, bu, bv per channel
+            for dy in -r..=r {
+                for dx in -r..=r {
+                    let (xj, yj) = (x + dx, y + dy);
+                    if xj < 0 || yj < 0 || xj >= w || yj >= h {
+                        continue;
+                    }
+                    let j = (yj * w + xj) as usize;
+                    let normal_pair = (f64s(normals[i]), f64s(normals[j]));
+                    let weight = fit.weight(dx as i32, dy as i32, normal_pair, (luminance[i], luminance[j]));
+                    let (u, v) = (dx as f64 / r as f64, dy as f64 / r as f64);
+                    for (m, term) in moments.iter_mut().zip([1.0, u, v, u * u, v * v, u * v]) {
+                        m.add(weight * term);
+                    }
+                    for (sum, factor) in sums.iter_mut().zip([1.0, u, v]) {
+                        for (s, l) in sum.iter_mut().zip(demodulated[j]) {
+                            s.add(weight * factor * l);
+                        }
+                    }
+                }
+            }
+            let [s, su, sv, suu, svv, suv] = moments.map(|m| m.total());
+            let [b0, bu, bv] = sums.map(|sum| sum.map(|t| t.total()));
+            let (mu, mv) = (su / s, sv / s);
+            let mean = b0.map(|b| b / s);
+            let cuu = suu / s - mu * mu + PLANEFIT_RIDGE / s;
+            let cvv = svv / s - mv * mv + PLANEFIT_RIDGE / s;
+            let cuv = suv / s - mu * mv;
+            // Each slope moment holds at least λ / s, so the determinant is at least its square.
+            let det = (cuu * cvv - cuv * cuv).max(PLANEFIT_RIDGE * PLANEFIT_RIDGE / (s * s));
+            let mut slope_u = [0.0; 3];
+            let mut slope_v = [0.0; 3];
+            let mut a = [0.0; 3];
+            for k in 0..3 {
+                let cul = bu[k] / s - mu * mean[k];
+                let cvl = bv[k] / s - mv * mean[k];
+                slope_u[k] = (cvv * cul - cuv * cvl) / det;
+                slope_v[k] = (cuu * cvl - cuv * cul) / det;
+                a[k] = mean[k] - slope_u[k] * mu - slope_v[k] * mv;
+            }
+            let slope = signed(slope_u).hypot(signed(slope_v));
+            let steep = (slope / signed(a).abs().max(PLANEFIT_TINY)).min(PLANEFIT_SLOPE_CAP) / PLANEFIT_SLOPE_TAU;
+            let trust = 1.0 / (1.0 + steep * steep);
+            let (l, m) = (demodulated[i], modulation_at(i));
+            [0, 1, 2].map(|k| (l[k] + trust * (a[k] - l[k])) * m[k])
+        })
+        .collect()
 }
 
 /// Neumaier's compensated sum: the reference keeps its sums exact to about

@@ -25,6 +25,7 @@ use crate::scene::{Holds, Needs, Request};
 /// taken; `bilateral` reads colour alone, so there always is one
 /// (docs/BENCHMARKS.md, "Fitness that charges the light").
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
+    "evolvedAtrous64Plane",
     "evolvedAtrous64Surface",
     "evolvedAtrous64Trim",
     "evolvedAtrous128Trim",
@@ -48,8 +49,11 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
 /// ([`SPARSE_MEDIAN_OVER_MEAN`]): at a few samples a pixel most pixels
 /// caught no light, and the filter must gather from farther to estimate it
 /// (docs/BENCHMARKS.md, "A wider reach where the light is sparse").
-pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] =
-    &[("evolvedAtrous64Surface", "evolvedAtrous64SurfaceSparse"), ("evolvedAtrous64Trim", "evolvedAtrous64TrimSparse")];
+pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] = &[
+    ("evolvedAtrous64Plane", "evolvedAtrous64PlaneSparse"),
+    ("evolvedAtrous64Surface", "evolvedAtrous64SurfaceSparse"),
+    ("evolvedAtrous64Trim", "evolvedAtrous64TrimSparse"),
+];
 
 /// The noisy input's median pixel luminance over its mean below which its
 /// light counts as sparse ([`crate::metrics::Tails::median_over_mean`]).
@@ -277,25 +281,25 @@ mod tests {
         let best = Choice::best_for(&all).unwrap();
         assert_eq!(best.name.as_deref(), Some(SHIPPED_BY_QUALITY[0]));
         assert!(best.missing(&all).is_empty());
-        assert_eq!(best.pipeline.to_string(), "outliers=2.5,trim,keep=surface,demodulate,atrous=4");
+        assert_eq!(best.pipeline.to_string(), "outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3");
 
         // It reads no variance: a render without one (Cycles, Mitsuba's plain `aov`) gets it too.
         let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
         let chosen = Choice::best_for(&no_variance).unwrap();
         assert!(!chosen.expr.stored_variables().contains(&ScalarVar::ColorVariance));
-        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64Surface"));
+        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64Plane"));
         assert!(chosen.pipeline.outliers.is_some_and(|o| o.keep.is_some()), "keeps the light: {}", chosen.pipeline);
 
         // Without depth the default still applies: it reads none.
         let no_depth = provided(&[Texture, Normal, WorldPosition], &[ScalarVar::ColorVariance]);
-        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous64Surface"));
+        assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous64Plane"));
 
         // Without a position, the best that reads none; the message says what was passed over.
         let no_position = provided(&[Texture, Normal, Depth], &[ScalarVar::ColorVariance]);
         let chosen = Choice::best_for(&no_position).unwrap();
         assert!(!chosen.expr.features().contains(&WorldPosition), "{:?}", chosen.name);
         let because = chosen.chosen_because.unwrap();
-        assert!(because.contains("@evolvedAtrous64Surface needs worldPosition"), "{because}");
+        assert!(because.contains("@evolvedAtrous64Plane needs worldPosition"), "{because}");
         assert!(because.contains("@evolvedAtrous128Keep needs"), "{because}");
 
         // `keep=surface` reads the normal even where the weight does not:

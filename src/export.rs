@@ -80,6 +80,8 @@ pub struct Exported {
     pub spread: Option<Code>,
     /// The first pass's guide (weights that read `guide`).
     pub guide: Option<Code>,
+    /// `planefit`, after the form.
+    pub planefit: Option<Code>,
     pub manifest: Manifest,
 }
 
@@ -128,6 +130,11 @@ pub struct Manifest {
     /// first pass binds as its `guide`; later passes bind their own input.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub guide: Option<Stage>,
+    /// `planefit`'s shader, dispatched once after the form's last pass, where
+    /// the pipeline has it: it reads `filtered` (the last pass's output) and
+    /// writes `fitted`, the filtered frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub planefit: Option<Stage>,
     /// The image the form's first pass filters: `color` (the noisy colour),
     /// `prepared` (the pre-pass's) or `kept` (the spread's).
     pub filters: String,
@@ -166,8 +173,9 @@ pub struct StageDispatch {
 
 /// The version of the manifest's layout, raised whenever a host would have
 /// to read it differently (2: `keep`'s `spread` stage and `filters`; 3: the
-/// `guide` stage, and the form's `guide` binding, which changes by pass).
-pub const MANIFEST_VERSION: u32 = 3;
+/// `guide` stage, and the form's `guide` binding, which changes by pass; 4:
+/// the `planefit` stage after the form).
+pub const MANIFEST_VERSION: u32 = 4;
 
 /// Sampled textures per shader stage every WebGPU device allows.
 pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;
@@ -402,6 +410,35 @@ pub fn export_pipeline(
             Some(code)
         }
     };
+    let planefit = match pipeline.planefit {
+        None => None,
+        Some(fit) => {
+            let interface = jit::BindingInterface::planefit(Some(format));
+            let module = jit::planefit_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (code, entry_point) = translate(&module, &jit::planefit_wgsl(Some(format)), &interface, target)?;
+            let params = jit::PlaneFitParams::of(pipeline, fit, 0, 0);
+            // Without demodulation the modulation is not read: the form's output stands in.
+            let modulation = if pipeline.demodulate { "modulation" } else { "filtered" };
+            manifest.planefit = Some(Stage {
+                uniform_values: [("radius", params.radius), ("demodulate", params.demodulate)]
+                    .map(|(field, value)| (field.to_string(), value as f64))
+                    .into(),
+                sequence: vec![StageDispatch {
+                    uniform_values: BTreeMap::new(),
+                    images: [
+                        ("color", "filtered"),
+                        ("normal", "normal"),
+                        ("modulation", modulation),
+                        ("fitted", "fitted"),
+                    ]
+                    .map(|(role, image)| (role.to_string(), image.to_string()))
+                    .into(),
+                }],
+                ..Stage::of(&interface, entry_point, &manifest.dispatch, target, format, Stages::PlaneFit)
+            });
+            Some(code)
+        }
+    };
     manifest.order = order(&manifest, pipeline);
     let with_header = |code: Code| match code {
         Code::Text(text) if target != Target::Wgsl => Code::Text(header(&manifest, &text)),
@@ -412,6 +449,7 @@ pub fn export_pipeline(
         prepass: prepass.map(with_header),
         spread: spread.map(with_header),
         guide: guide.map(with_header),
+        planefit: planefit.map(with_header),
         manifest,
     })
 }
@@ -498,6 +536,7 @@ enum Stages {
     Prepass,
     Spread,
     Guide,
+    PlaneFit,
 }
 
 /// The steps a host takes per frame, in words.
@@ -554,6 +593,16 @@ fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
             manifest.passes - 1
         ));
     }
+    if let Some(stage) = &manifest.planefit {
+        steps.push(format!(
+            "planefit (`planefit`, one dispatch, radius = {}, demodulate = {}): colour = `filtered`, the form's \
+             last `output`; normal = the normal input (only its direction counts){}; writes `fitted`: the \
+             filtered frame",
+            stage.uniform_values["radius"],
+            stage.uniform_values["demodulate"],
+            if pipeline.demodulate { ", modulation = `modulation`" } else { "" }
+        ));
+    }
     steps
 }
 
@@ -608,6 +657,22 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     None,
                 ),
                 (Role::Color, Stages::Guide) => ("color".into(), "xyzw", "the colour the form filters".into(), None),
+                (Role::Color, Stages::PlaneFit) => {
+                    ("color".into(), "xyz", "`filtered`: the form's last pass's output".into(), None)
+                }
+                (Role::Input(Input::Feature(Feature::Normal)), Stages::PlaneFit) => (
+                    "normal".into(),
+                    "xyz",
+                    "the surface normal; only its direction counts (any length, no normalisation scale)".into(),
+                    None,
+                ),
+                (Role::Modulation, Stages::PlaneFit) => (
+                    "modulation".into(),
+                    "xyz",
+                    "the pre-pass's `modulation`, divided out before the fit and multiplied back after".into(),
+                    None,
+                ),
+                (Role::Output, Stages::PlaneFit) => ("fitted".into(), "xyzw", written("the filtered frame"), None),
                 (Role::Output, Stages::Guide) => ("guide".into(), "xyzw", written("the guide"), None),
                 (Role::Color, Stages::Form) => {
                     ("color".into(), "xyzw", "noisy colour, linear RGB; alpha is copied to the output".into(), None)
@@ -731,6 +796,7 @@ fn manifest(
         prepass: None,
         spread: None,
         guide: None,
+        planefit: None,
         filters: "color".into(),
         order: Vec::new(),
     }

@@ -207,12 +207,68 @@ pub fn spread_share(x: i64, d: i64, step: i64, n: i64) -> f64 {
     KEEP_STENCIL.weight(d as i32) / inside
 }
 
+/// `planefit=R`'s largest radius.
+pub const MAX_PLANEFIT_RADIUS: u32 = 8;
+
+/// σ of `planefit`'s luminance term exp(−ln²((Y_j + F) / (Y_i + F)) / 2σ²):
+/// a neighbour twice as bright counts 0.38, ten times 0.
+pub const PLANEFIT_LUMINANCE_SIGMA: f64 = 0.5;
+
+/// F of `planefit`'s luminance term, in the demodulated colour's units: it
+/// keeps the ratio finite where a pixel is black.
+pub const PLANEFIT_LUMINANCE_FLOOR: f64 = 1e-3;
+
+/// λ added to the fit's slope moments (ridge): where the taps that count sit
+/// on one line, the slopes stay finite and the fit tends to the weighted mean.
+pub const PLANEFIT_RIDGE: f64 = 1e-3;
+
+/// τ of `planefit`'s trust in the plane, 1 / (1 + (s / τ)²), where s is the
+/// fitted luminance's change over the radius relative to its value: a
+/// steep plane is more often a curve (a contact shadow, a corner's falloff)
+/// that a plane would flatten, and there the pixel keeps the form's value.
+pub const PLANEFIT_SLOPE_TAU: f64 = 0.2;
+
+/// The largest relative slope s counted (the trust is then about 4·10⁻¹⁴):
+/// keeps s² finite in f32.
+pub const PLANEFIT_SLOPE_CAP: f64 = 1e6;
+
+/// Below this a length or level counts as zero.
+pub const PLANEFIT_TINY: f64 = 1e-30;
+
+/// `planefit=R`: after the form, each pixel's demodulated colour is replaced
+/// by the value at the pixel of a plane a + b·u + c·v (u, v: screen offsets
+/// over R) fitted by weighted least squares over its (2R+1)² neighbourhood
+/// (docs/SEMANTICS.md, "The pipeline"). An average over a surface leaves
+/// blotches where the form's last pass left them, and flattens gradients where
+/// it reaches farther; a plane removes the blotches and keeps the gradient
+/// (docs/BENCHMARKS.md, "A plane fitted after the form").
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct PlaneFit {
+    pub radius: u32,
+}
+
+impl PlaneFit {
+    /// The weight of neighbour j of pixel i, offset (dx, dy): a Gaussian of σ
+    /// R over the offset, the normals' agreement (`keep=surface`'s term) and
+    /// the luminances' ratio.
+    pub fn weight(self, dx: i32, dy: i32, normals: ([f64; 3], [f64; 3]), luminances: (f64, f64)) -> f64 {
+        let r = self.radius as f64;
+        let spatial = (-((dx * dx + dy * dy) as f64) / (2.0 * r * r)).exp();
+        let (yi, yj) = luminances;
+        let ratio = ((yj.max(0.0) + PLANEFIT_LUMINANCE_FLOOR) / (yi.max(0.0) + PLANEFIT_LUMINANCE_FLOOR)).ln();
+        let light = (-ratio * ratio / (2.0 * PLANEFIT_LUMINANCE_SIGMA * PLANEFIT_LUMINANCE_SIGMA)).exp();
+        spatial * surface_normal_term(normals.0, normals.1) * light
+    }
+}
+
 /// The whole pipeline of a filter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FilterPipeline {
     pub outliers: Option<Outliers>,
     pub demodulate: bool,
     pub form: Form,
+    /// `planefit=R` after the form, if any.
+    pub planefit: Option<PlaneFit>,
 }
 
 impl Default for FilterPipeline {
@@ -224,14 +280,17 @@ impl Default for FilterPipeline {
 
 impl FilterPipeline {
     /// The thesis's filter: one window pass, no pre-pass.
-    pub const WINDOW: FilterPipeline = FilterPipeline { outliers: None, demodulate: false, form: Form::Window };
+    pub const WINDOW: FilterPipeline =
+        FilterPipeline { outliers: None, demodulate: false, form: Form::Window, planefit: None };
 
     /// The features the pipeline's own stages read (besides the colour and
-    /// the albedo `demodulate` divides by): the normal, for `keep=surface`.
+    /// the albedo `demodulate` divides by): the normal, for `keep=surface`
+    /// and `planefit`.
     pub fn features(&self) -> std::collections::BTreeSet<crate::lang::Feature> {
-        match self.outliers.and_then(|o| o.keep) {
-            Some(Keep::Surface) => [crate::lang::Feature::Normal].into(),
-            _ => Default::default(),
+        if self.keep() == Some(Keep::Surface) || self.planefit.is_some() {
+            [crate::lang::Feature::Normal].into()
+        } else {
+            Default::default()
         }
     }
 
@@ -301,12 +360,27 @@ impl FromStr for FilterPipeline {
                 Some((n, v)) => (n.trim(), Some(v.trim())),
                 None => (stage, None),
             };
-            if form_seen {
+            if form_seen && name != "planefit" {
                 return Err(error(format!(
-                    "`{stage}` comes after the form; the form (window or atrous) is the last stage"
+                    "`{stage}` comes after the form; only `planefit=R` follows the form (window or atrous)"
                 )));
             }
             match (name, value) {
+                ("planefit", Some(v)) => {
+                    let radius: u32 =
+                        v.parse().map_err(|_| error(format!("planefit={v}: the radius must be a whole number")))?;
+                    if !(1..=MAX_PLANEFIT_RADIUS).contains(&radius) {
+                        return Err(error(format!("planefit={v}: the radius must be from 1 to {MAX_PLANEFIT_RADIUS}")));
+                    }
+                    if !form_seen {
+                        return Err(error("`planefit=R` comes after the form (window or atrous)".into()));
+                    }
+                    if pipeline.planefit.is_some() {
+                        return Err(error("`planefit` appears once".into()));
+                    }
+                    pipeline.planefit = Some(PlaneFit { radius });
+                }
+                ("planefit", None) => return Err(error("`planefit` needs its radius: planefit=R".into())),
                 ("outliers", Some(v)) => {
                     let k: f32 = v.parse().map_err(|_| error(format!("outliers={v}: k must be a number")))?;
                     if !(k.is_finite() && k >= 0.0) {
@@ -362,7 +436,7 @@ impl FromStr for FilterPipeline {
                 }
                 (other, _) => {
                     return Err(error(format!(
-                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, window, atrous=N, atrous3x3=N"
+                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, window, atrous=N, atrous3x3=N, planefit=R"
                     )))
                 }
             }
@@ -392,9 +466,13 @@ impl fmt::Display for FilterPipeline {
             write!(f, "demodulate,")?;
         }
         match self.form {
-            Form::Window => write!(f, "window"),
-            Form::Atrous { passes, stencil } => write!(f, "{}={passes}", stencil.stage_name()),
+            Form::Window => write!(f, "window")?,
+            Form::Atrous { passes, stencil } => write!(f, "{}={passes}", stencil.stage_name())?,
         }
+        if let Some(PlaneFit { radius }) = self.planefit {
+            write!(f, ",planefit={radius}")?;
+        }
+        Ok(())
     }
 }
 
@@ -439,6 +517,8 @@ mod tests {
             "outliers=2.5,trim,keep,demodulate,atrous=4",
             "outliers=2,trim,window",
             "outliers=2.5,trim,keep=surface,demodulate,atrous=4",
+            "outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3",
+            "window,planefit=1",
         ] {
             let p: FilterPipeline = text.parse().unwrap();
             assert_eq!(p.to_string(), text);
@@ -453,7 +533,7 @@ mod tests {
             ("atrous3x3", "atrous3x3=N"),
             ("outliers=-1,window", "at least 0"),
             ("demodulate", "no form"),
-            ("window,demodulate", "last stage"),
+            ("window,demodulate", "follows the form"),
             ("blur,window", "unknown stage `blur`"),
             ("demodulate,outliers=2,window", "first stage"),
             ("keep,window", "after outliers=K"),
@@ -464,6 +544,11 @@ mod tests {
             ("outliers=2,trim,trim,window", "once"),
             ("outliers=2,keep=wide,window", "keep=surface"),
             ("outliers=2,keep,keep=surface,window", "once"),
+            ("planefit=3,atrous=4", "after the form"),
+            ("atrous=4,planefit", "planefit=R"),
+            ("atrous=4,planefit=0", "from 1 to"),
+            ("atrous=4,planefit=3,planefit=3", "once"),
+            ("atrous=4,planefit=3,demodulate", "only `planefit=R`"),
         ] {
             let e = text.parse::<FilterPipeline>().unwrap_err().to_string();
             assert!(e.contains(needle), "{text}: {e}");

@@ -56,14 +56,14 @@ const DEVICE: &str = r#"
 /// `filterjit export` → `web/filterjit.js` in Chromium → the same frame as
 /// `filterjit filter` writes, through the default shipped filter's whole
 /// pipeline (pre-pass, `keep=surface`'s spread with its total, the guide,
-/// four à-trous passes, remodulation).
+/// four à-trous passes, remodulation, `planefit`).
 #[test]
 fn the_web_module_runs_an_exported_filter_as_filter_does() {
     if chromium("the_web_module_runs_an_exported_filter_as_filter_does").is_none() {
         return;
     }
     let dir = temp_dir("browser", "module");
-    let name = "@evolvedAtrous64Surface";
+    let name = "@evolvedAtrous64Plane";
     let bin = env!("CARGO_BIN_EXE_filterjit");
     let shader = dir.join("denoise.wgsl");
     let o = Command::new(bin).args(["export", name, "--format", "rgba32float", "-o"]).arg(&shader).output().unwrap();
@@ -75,6 +75,7 @@ fn the_web_module_runs_an_exported_filter_as_filter_does() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("denoise.wgsl.json")).unwrap()).unwrap();
     assert!(manifest["spread"].is_object(), "the default filter keeps what its clamp removes");
     assert!(manifest["guide"].is_object(), "the default filter compares the guide");
+    assert!(manifest["planefit"].is_object(), "the default filter fits planes after the form");
 
     // The render's inputs as an engine holds them: what `filter` reads, at
     // twice its normalised value with scale 0.5 (exact in binary floating point).
@@ -180,6 +181,7 @@ fn every_shipped_export_compiles_through_tint_within_default_limits() {
                         "prepass": exported.prepass.as_ref().map(text),
                         "spread": exported.spread.as_ref().map(text),
                         "guide": exported.guide.as_ref().map(text),
+                        "planefit": exported.planefit.as_ref().map(text),
                     },
                 }));
             }

@@ -421,17 +421,20 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
     };
     let kept = block("evolvedAtrous3x3Keep");
     assert!(kept.contains("reads     color, normal, worldPosition, colorVariance, albedo"), "{kept}");
-    assert!(kept.contains("default   8. choice"), "{kept}");
+    assert!(kept.contains("default   9. choice"), "{kept}");
     assert!(kept.contains("measured  relMSE") && kept.contains("x OIDN"), "its error on the public renders: {kept}");
+    let plane = block("evolvedAtrous64Plane");
+    assert!(!plane.contains("colorVariance") && plane.contains("default   1. choice"), "{plane}");
+    assert!(plane.contains("pipeline outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3"), "{plane}");
     let surface = block("evolvedAtrous64Surface");
-    assert!(!surface.contains("colorVariance") && surface.contains("default   1. choice"), "{surface}");
+    assert!(!surface.contains("colorVariance") && surface.contains("default   2. choice"), "{surface}");
     assert!(surface.contains("pipeline outliers=2.5,trim,keep=surface,"), "{surface}");
     assert!(surface.contains("weight    @evolvedAtrous64Trim's"), "{surface}");
     let trimmed = block("evolvedAtrous64Trim");
-    assert!(!trimmed.contains("colorVariance") && trimmed.contains("default   2. choice"), "{trimmed}");
+    assert!(!trimmed.contains("colorVariance") && trimmed.contains("default   3. choice"), "{trimmed}");
     assert!(trimmed.contains("pipeline outliers=2.5,trim,keep,"), "{trimmed}");
     let free = block("evolvedAtrous128Keep");
-    assert!(!free.contains("colorVariance") && free.contains("default   7. choice"), "{free}");
+    assert!(!free.contains("colorVariance") && free.contains("default   8. choice"), "{free}");
     // Written `evolvedAtrous128Keep = @evolvedAtrous128` in the shipped file: the weight is named, not repeated.
     assert!(free.contains("weight    @evolvedAtrous128's") && !free.contains("exp("), "{free}");
     assert!(trimmed.contains("    exp(-("), "an entry of its own shows its expression: {trimmed}");
@@ -487,6 +490,6 @@ fn filter_without_expr_picks_a_variance_free_filter_where_the_render_has_no_vari
     let o = filterjit(&["filter", dir.to_str().unwrap(), "-o", out.to_str().unwrap()]);
     let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
     assert!(o.status.success(), "{stderr}");
-    assert!(stderr.contains("filter    @evolvedAtrous64Surface"), "{stderr}");
+    assert!(stderr.contains("filter    @evolvedAtrous64Plane"), "{stderr}");
     assert!(relmse(&stdout, "filtered") < relmse(&stdout, "noisy"), "{stdout}");
 }

@@ -44,6 +44,11 @@ fn frame_of(scene: &Scene, manifest: &serde_json::Value) -> host::Frame {
         inputs.insert(role.to_string(), texels);
         scales.insert(role.to_string(), 0.5);
     }
+    // Stages after the form read the normal whether or not the weight does (only its direction counts).
+    if manifest["planefit"].is_object() && !inputs.contains_key("normal") {
+        let normal = scene.feature(Feature::Normal).unwrap().iter().map(|v| [v[0], v[1], v[2], 0.0]).collect();
+        inputs.insert("normal".to_string(), normal);
+    }
     host::Frame {
         width: scene.width as u32,
         height: scene.height as u32,
@@ -60,7 +65,7 @@ fn compare(expr: &Expr, scene: &Scene, radius: u32, format: OutputFormat) -> f64
     let manifest = serde_json::to_value(&exported.manifest).unwrap();
     let gpu = gpu(); // first: it quiets Mesa's device-select layer for the whole process
     let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
-    let shaders = host::Shaders { form: wgsl.clone(), prepass: None, spread: None, guide: None };
+    let shaders = host::Shaders { form: wgsl.clone(), prepass: None, spread: None, guide: None, planefit: None };
     let ours = host::filter(&device, &queue, &shaders, &manifest, &frame_of(scene, &manifest), radius)
         .unwrap_or_else(|e| panic!("the exported shader of `{expr}` fails in plain wgpu: {e}"));
 
@@ -145,6 +150,9 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         // `keep=surface`: its total's one-workgroup dispatch, the normal the
         // spread reads as a direction (the frame's are scaled by 2).
         (named("evolvedAtrous64Surface"), "outliers=2.5,trim,keep=surface,demodulate,atrous=4"),
+        // `planefit` after the form: with the modulation divided out and multiplied back, and without.
+        (named("evolvedAtrous64Surface"), "outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3"),
+        (named("bilateral"), "atrous=2,planefit=2"),
         (parse_expr("exp(-(distance2(guide) * 2 + distance2(normal) * 4))").unwrap(), "atrous3x3=3"),
         (parse_expr("exp(-(distance2(guide, color) + distance2(pixel) / 8))").unwrap(), "window"),
         // What the outlier rule measured, from the exported pre-pass's packed `local` texture.
@@ -165,7 +173,7 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         };
         assert_eq!(
             exported.prepass.is_some(),
-            !["atrous=2", "atrous3x3=3", "window"].contains(&text),
+            !["atrous=2", "atrous3x3=3", "window", "atrous=2,planefit=2"].contains(&text),
             "{text}: a pre-pass exactly where the pipeline has one"
         );
         let measures = ["localMean", "localStd", "clampedShare"];
@@ -186,7 +194,9 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
             prepass: exported.prepass.as_ref().map(text_of),
             spread: exported.spread.as_ref().map(text_of),
             guide: exported.guide.as_ref().map(text_of),
+            planefit: exported.planefit.as_ref().map(text_of),
         };
+        assert_eq!(exported.planefit.is_some(), text.contains("planefit"), "{text}: planefit exactly where it fits");
         let mut frame = frame_of(&scene, &manifest);
         frame
             .inputs
@@ -206,7 +216,7 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         assert!(error < 1e-4, "the exported `{text}` pipeline differs from filter by {error:e}");
         let passes = manifest["passes"].as_u64().unwrap();
         assert_eq!(passes, pipeline.passes() as u64);
-        let form = text.rsplit(',').next().unwrap();
+        let form = text.split(',').rfind(|stage| !stage.starts_with("planefit")).unwrap();
         assert_eq!(passes, form.split_once('=').map_or(1, |(_, k)| k.parse().unwrap()), "{text}");
     }
 }
@@ -262,10 +272,11 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
     let mut rng = Rng::seeded(11);
     exprs.extend((0..12).map(|k| alphabet.of_length(&mut rng, 5 + 10 * k)));
     // Every expression as a window; the shipped ones also as a whole pipeline
-    // (pre-pass and à-trous pass), and one with each `keep`'s spread.
+    // (pre-pass and à-trous pass), and one with each `keep`'s spread (and `planefit`).
     let atrous: filterjit::pipeline::FilterPipeline = "outliers=2,demodulate,atrous=5".parse().unwrap();
     let keep: filterjit::pipeline::FilterPipeline = "outliers=2,keep,demodulate,atrous3x3=4".parse().unwrap();
-    let surface: filterjit::pipeline::FilterPipeline = "outliers=2,keep=surface,demodulate,atrous=4".parse().unwrap();
+    let surface: filterjit::pipeline::FilterPipeline =
+        "outliers=2,keep=surface,demodulate,atrous=4,planefit=3".parse().unwrap();
     let named = corpus::named().len();
     let cases = exprs
         .iter()
@@ -279,7 +290,8 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
                 filterjit::export::export_pipeline(expr, &pipeline, target, OutputFormat::Rgba16float).unwrap();
             let shaders = std::iter::once(("", &exported.code))
                 .chain(exported.prepass.as_ref().map(|p| ("prepass", p)))
-                .chain(exported.spread.as_ref().map(|p| ("spread", p)));
+                .chain(exported.spread.as_ref().map(|p| ("spread", p)))
+                .chain(exported.planefit.as_ref().map(|p| ("planefit", p)));
             for (stage, code) in shaders {
                 let file = dir.join(format!("e{k}{stage}.{}", target.extension()));
                 std::fs::write(&file, code.to_bytes()).unwrap();

@@ -247,6 +247,9 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "outliers=2,keep,demodulate,atrous3x3=4",
         "outliers=2.5,trim,keep,demodulate,atrous=4",
         "outliers=2.5,trim,keep=surface,demodulate,atrous=4",
+        "outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3",
+        "atrous=2,planefit=2",
+        "outliers=2,demodulate,window,planefit=1",
         "atrous3x3=2",
     ] {
         let p = pipeline(text);
@@ -279,6 +282,8 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
         "outliers=2,keep,demodulate,atrous3x3=2",
         "outliers=2.5,trim,keep,demodulate,atrous=2",
         "outliers=2.5,trim,keep=surface,demodulate,atrous=2",
+        "outliers=2.5,trim,keep=surface,demodulate,atrous=2,planefit=3",
+        "atrous=2,planefit=1",
     ] {
         let p = pipeline(text);
         let kernels: Vec<_> = exprs
@@ -687,4 +692,76 @@ fn the_fitness_rule_charges_the_light_a_filter_moves() {
     let mut baseline = Scorer::new(&gpu, scenes, &against_itself).unwrap();
     let own = baseline.errors(std::slice::from_ref(&expr)).unwrap().pop().unwrap();
     assert_eq!(baseline.fitness(&own).unwrap(), 1.0);
+}
+
+/// `planefit` (docs/SEMANTICS.md, "The pipeline"): a plane is kept as it is,
+/// a blotch on a flat surface is flattened, a step in the light (a shadow's
+/// edge, ten times brighter on one side) stays a step, and so does a step in
+/// the normal; where the plane is steep the pixel keeps its value.
+#[test]
+fn planefit_keeps_planes_and_edges_and_flattens_blotches() {
+    use filterjit::pipeline::PlaneFit;
+    let (w, h) = (24usize, 20usize);
+    let fit = PlaneFit { radius: 3 };
+    let up = vec![[0.0f32, 0.0, 1.0]; w * h];
+    let at = |x: usize, y: usize| y * w + x;
+    let run = |image: &[[f32; 3]], normals: &[[f32; 3]]| cpu::planefit(image, normals, None, w, h, fit);
+
+    // A gentle ramp (1 % a pixel) is a plane: kept where the window is whole, and near it at the border.
+    let ramp: Vec<[f32; 3]> = (0..w * h).map(|i| [1.0 + 0.01 * (i % w) as f32; 3]).collect();
+    let out = run(&ramp, &up);
+    for y in 0..h {
+        for x in 0..w {
+            let (got, want) = (out[at(x, y)][0], ramp[at(x, y)][0] as f64);
+            let inside = (3..w - 3).contains(&x) && (3..h - 3).contains(&y);
+            let tolerance = if inside { 1e-6 } else { 2e-3 };
+            assert!((got - want).abs() < tolerance * want, "({x}, {y}): {got} for {want}");
+        }
+    }
+
+    // A blotch (+20 % over 3x3 pixels) on a flat wall loses most of its excess.
+    let mut blotch = vec![[1.0f32; 3]; w * h];
+    for y in 9..12 {
+        for x in 10..13 {
+            blotch[at(x, y)] = [1.2; 3];
+        }
+    }
+    let out = run(&blotch, &up);
+    assert!(out[at(11, 10)][0] < 1.1, "the blotch's centre: {}", out[at(11, 10)][0]);
+
+    // A step in the light from 1 to 10 at x = 12: both sides keep their level.
+    let step: Vec<[f32; 3]> = (0..w * h).map(|i| if i % w < 12 { [1.0; 3] } else { [10.0; 3] }).collect();
+    let out = run(&step, &up);
+    for y in 0..h {
+        assert!((out[at(11, y)][0] - 1.0).abs() < 0.02, "dark side: {}", out[at(11, y)][0]);
+        assert!((out[at(12, y)][0] - 10.0).abs() < 0.2, "bright side: {}", out[at(12, y)][0]);
+    }
+
+    // A fold (the normal turns at x = 12), the same light on both sides but a
+    // blotch on one: the other side does not take it.
+    let fold: Vec<[f32; 3]> = (0..w * h).map(|i| if i % w < 12 { [0.0, 0.0, 1.0] } else { [1.0, 0.0, 0.0] }).collect();
+    let mut lit = vec![[1.0f32; 3]; w * h];
+    for y in 0..h {
+        lit[at(10, y)] = [1.3; 3];
+        lit[at(11, y)] = [1.3; 3];
+    }
+    let out = run(&lit, &fold);
+    for y in 3..h - 3 {
+        assert!((out[at(12, y)][0] - 1.0).abs() < 0.01, "across the fold: {}", out[at(12, y)][0]);
+    }
+
+    // A steep ramp (a contact shadow's falloff): the fit is not trusted, the pixel keeps its value.
+    let steep: Vec<[f32; 3]> = (0..w * h).map(|i| [(0.02 + ((i % w) as f32 / 8.0).powi(3)) * 4.0; 3]).collect();
+    let out = run(&steep, &up);
+    let (x, y) = (6, 10);
+    let (got, was) = (out[at(x, y)][0], steep[at(x, y)][0] as f64);
+    assert!((got - was).abs() < 0.02 * was, "steep: {got} for {was}");
+
+    // The modulation is divided out and multiplied back: with the ramp as its
+    // albedo, a flat light times the ramp comes back unchanged.
+    let albedo: Vec<[f32; 3]> = ramp.iter().map(|c| c.map(|v| v / 3.0)).collect();
+    let out = cpu::planefit(&albedo, &up, Some(&albedo), w, h, fit);
+    for (o, a) in out.iter().zip(&albedo) {
+        assert!((o[0] - a[0] as f64).abs() < 1e-6, "{} for {}", o[0], a[0]);
+    }
 }

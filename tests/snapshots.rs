@@ -51,6 +51,9 @@ fn pipeline_kernels_match_snapshots() {
             "export__spread_surface",
             jit::spread_surface_wgsl(Some(jit::OutputFormat::Rgba32float))
         );
+        insta::assert_snapshot!("pipeline__planefit", jit::planefit_wgsl(None));
+        insta::assert_snapshot!("pipeline__planefit_terms", jit::planefit_terms_wgsl());
+        insta::assert_snapshot!("export__planefit", jit::planefit_wgsl(Some(jit::OutputFormat::Rgba32float)));
         for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying), ("guided", &guided)] {
             for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
                 let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();

@@ -11,13 +11,13 @@
 // pipeline has one), the spread's dispatches (where it keeps what the outlier
 // clamp removed), the guide's (where the weight reads `guide`), then the
 // form's shader `passes` times, its colour and carried variance ping-ponged
-// between textures.
+// between textures, then planefit's (where the pipeline has `planefit`).
 
 /** The manifest layout this module reads (filterjit's `export::MANIFEST_VERSION`). */
-export const MANIFEST_VERSION = 3;
+export const MANIFEST_VERSION = 4;
 
 /** The shaders a manifest may have besides the form's, in the order they run. */
-const STAGES = ["prepass", "spread", "guide"];
+const STAGES = ["prepass", "spread", "guide", "planefit"];
 
 const WRITTEN = GPUTextureUsage.STORAGE_BINDING | GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_SRC;
 
@@ -51,7 +51,7 @@ export async function loadFilter(device, manifestUrl) {
 
 /**
  * Build the filter's pipelines from its manifest and shader texts
- * (`{ form, prepass, spread, guide }`, the last three where the manifest has them).
+ * (`{ form, prepass, spread, guide, planefit }`, the last four where the manifest has them).
  * Compilation messages are collected in `filter.messages`.
  */
 export async function createFilter(device, manifest, shaders) {
@@ -105,8 +105,10 @@ export class Filter {
     const roles = new Set(["color"]);
     if (this.manifest.prepass && (this.manifest.prepass.uniform_values.stages & 2) !== 0) roles.add("albedo");
     for (const b of this.manifest.bindings) if (b.scale_index !== undefined) roles.add(b.role);
-    // `keep=surface`'s spread reads the normal whether or not the weight does.
-    for (const b of this.manifest.spread?.bindings ?? []) if (b.role === "normal") roles.add("normal");
+    // `keep=surface`'s spread and `planefit` read the normal whether or not the weight does.
+    for (const b of [...(this.manifest.spread?.bindings ?? []), ...(this.manifest.planefit?.bindings ?? [])]) {
+      if (b.role === "normal") roles.add("normal");
+    }
     return [...roles];
   }
 
@@ -155,17 +157,20 @@ export class Filter {
       for (const b of storage(prepass)) target(b.role, b.format);
       dispatch("prepass", prepass.uniform_values, {});
     }
-    // The spread, then the guide, dispatch by dispatch: each names the image every role binds (the
-    // spread's ping-pong between two textures, each dispatch writing the one it does not read); its
-    // uniform takes the stage's values, then its own.
-    for (const name of ["spread", "guide"]) {
+    // A stage dispatch by dispatch: each names the image every role binds (the spread's ping-pong
+    // between two textures, each dispatch writing the one it does not read); its uniform takes the
+    // stage's values, then its own. Whether the manifest has it.
+    const sequence = (name) => {
       const stage = this.manifest[name];
-      if (!stage) continue;
+      if (!stage) return false;
       for (const step of stage.sequence) {
         for (const b of storage(stage)) target(step.images[b.role] ?? b.role, b.format);
         dispatch(name, { ...stage.uniform_values, ...step.uniform_values }, step.images);
       }
-    }
+      return true;
+    };
+    sequence("spread");
+    sequence("guide");
     let colour = this.manifest.filters;
     let variance = "colorVariance";
     const passes = this.manifest.passes;
@@ -181,6 +186,9 @@ export class Filter {
       colour = out;
       variance = varianceOut;
     }
+    // `planefit` after the form: `filtered` is the last pass's output; it writes the frame.
+    images.set("filtered", images.get(colour));
+    if (sequence("planefit")) colour = "fitted";
     if (own) this.device.queue.submit([encoder.finish()]);
     return this.texture(colour, this.manifest.output_format, width, height);
   }

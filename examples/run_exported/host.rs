@@ -7,7 +7,8 @@
 //! the pipeline has one), the spread shader's `sequence` (where it keeps what
 //! the clamp removed), the guide shader (where the weight reads `guide`),
 //! then the form's shader `passes` times (à-trous: pass
-//! k with step 2^k, colour and carried variance ping-ponged between textures).
+//! k with step 2^k, colour and carried variance ping-ponged between textures),
+//! then the planefit shader (where the pipeline has `planefit`).
 
 use std::collections::HashMap;
 
@@ -33,6 +34,7 @@ pub struct Shaders {
     pub prepass: Option<String>,
     pub spread: Option<String>,
     pub guide: Option<String>,
+    pub planefit: Option<String>,
 }
 
 /// A device on the adapter wgpu prefers (`WGPU_BACKEND` narrows the choice).
@@ -257,6 +259,48 @@ fn record(
     Ok(())
 }
 
+/// Record the dispatches of the manifest's stage `name` (where it has one) as
+/// its `sequence` says: each names the image every role binds, and its
+/// uniform takes the stage's values, then its own. `filtered` is the image
+/// the name `filtered` stands for (the form's last output). Whether it ran.
+#[allow(clippy::too_many_arguments)]
+fn sequence(
+    images: &mut Images<'_>,
+    encoder: &mut wgpu::CommandEncoder,
+    manifest: &Value,
+    name: &str,
+    shader: &Option<String>,
+    workgroup: [u32; 2],
+    frame: &Frame,
+    filtered: Option<&str>,
+) -> Result<bool, String> {
+    let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { return Ok(false) };
+    let wgsl = shader.as_deref().ok_or(format!("the manifest has a {name} stage, and no {name} shader was given"))?;
+    for step in array(stage, "sequence")? {
+        let mut dispatch = Dispatch { values: HashMap::new(), images: HashMap::new() };
+        for values in [field(stage, "uniform_values")?, field(step, "uniform_values")?] {
+            for (name, value) in values.as_object().ok_or("uniform_values")? {
+                dispatch.values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
+            }
+        }
+        for (role, image) in field(step, "images")?.as_object().ok_or("images")? {
+            let image = image.as_str().ok_or("an image name")?;
+            let image = match (image, filtered) {
+                ("filtered", Some(last)) => last,
+                _ => image,
+            };
+            dispatch.images.insert(role.as_str(), image.to_string());
+        }
+        // What it writes is a fresh texture (`target` replaces by name).
+        for b in array(stage, "bindings")?.iter().filter(|b| b["kind"] == "storage_texture") {
+            let role = b["role"].as_str().ok_or("binding role")?;
+            images.target(dispatch.images.get(role).map(String::as_str).unwrap_or(role), texel_format(b)?);
+        }
+        record(images, encoder, wgsl, stage, workgroup, frame, &dispatch)?;
+    }
+    Ok(true)
+}
+
 /// Filter `frame` with the exported `shaders` described by `manifest`;
 /// returns the filtered frame's texels as f32 RGBA.
 pub fn filter(
@@ -268,8 +312,8 @@ pub fn filter(
     radius: u32,
 ) -> Result<Vec<[f32; 4]>, String> {
     // The layout this host reads (filterjit's export::MANIFEST_VERSION).
-    if manifest.get("version").and_then(Value::as_u64) != Some(3) {
-        return Err(format!("manifest version {:?}: this host reads version 3", manifest.get("version")));
+    if manifest.get("version").and_then(Value::as_u64) != Some(4) {
+        return Err(format!("manifest version {:?}: this host reads version 4", manifest.get("version")));
     }
     let (width, height) = (frame.width, frame.height);
     let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
@@ -311,26 +355,7 @@ pub fn filter(
     // The spread, then the guide, dispatch by dispatch: each names the image
     // every role binds; its uniform takes the stage's values, then its own.
     for (name, shader) in [("spread", &shaders.spread), ("guide", &shaders.guide)] {
-        let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { continue };
-        let wgsl =
-            shader.as_deref().ok_or(format!("the manifest has a {name} stage, and no {name} shader was given"))?;
-        for step in array(stage, "sequence")? {
-            let mut dispatch = Dispatch { values: HashMap::new(), images: HashMap::new() };
-            for values in [field(stage, "uniform_values")?, field(step, "uniform_values")?] {
-                for (name, value) in values.as_object().ok_or("uniform_values")? {
-                    dispatch.values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
-                }
-            }
-            for (role, image) in field(step, "images")?.as_object().ok_or("images")? {
-                dispatch.images.insert(role.as_str(), image.as_str().ok_or("an image name")?.to_string());
-            }
-            // What it writes is a fresh texture (`target` replaces by name).
-            for b in array(stage, "bindings")?.iter().filter(|b| b["kind"] == "storage_texture") {
-                let role = b["role"].as_str().ok_or("binding role")?;
-                images.target(dispatch.images.get(role).map(String::as_str).unwrap_or(role), texel_format(b)?);
-            }
-            record(&images, &mut encoder, wgsl, stage, workgroup, frame, &dispatch)?;
-        }
+        sequence(&mut images, &mut encoder, manifest, name, shader, workgroup, frame, None)?;
     }
     // The form's first pass filters what the manifest names.
     let mut colour = field(manifest, "filters")?.as_str().ok_or("`filters` is not a name")?.to_string();
@@ -365,6 +390,10 @@ pub fn filter(
         // Pass k+1 reads what pass k wrote and writes fresh textures (`target` replaces by name).
         colour = out;
         variance = variance_out;
+    }
+    // `planefit` after the form: its `filtered` is the last pass's output; it writes the frame.
+    if sequence(&mut images, &mut encoder, manifest, "planefit", &shaders.planefit, workgroup, frame, Some(&colour))? {
+        colour = "fitted".to_string();
     }
 
     // Copy the last image out (rows padded to 256 bytes).

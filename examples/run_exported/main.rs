@@ -78,14 +78,19 @@ fn main() -> Result<(), String> {
     };
 
     let (device, queue) = host::open_device()?;
-    // The pre-pass's, the spread's and the guide's shaders, where the pipeline has them, are files beside the form's.
+    // The pre-pass's, the spread's, the guide's and planefit's shaders, where the pipeline has them, are files beside the form's.
     let stage = |name: &str| -> Result<Option<String>, String> {
         let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { return Ok(None) };
         let file = std::path::Path::new(shader).with_file_name(stage["file"].as_str().ok_or("a stage's file")?);
         Ok(Some(std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?))
     };
-    let shaders =
-        host::Shaders { form: wgsl, prepass: stage("prepass")?, spread: stage("spread")?, guide: stage("guide")? };
+    let shaders = host::Shaders {
+        form: wgsl,
+        prepass: stage("prepass")?,
+        spread: stage("spread")?,
+        guide: stage("guide")?,
+        planefit: stage("planefit")?,
+    };
     let filtered = host::filter(&device, &queue, &shaders, &manifest, &frame, radius)?;
     let rgb: Vec<[f32; 3]> = filtered.iter().map(|c| [c[0], c[1], c[2]]).collect();
     filterjit::preview::write_png(&PathBuf::from(out), scene.width, scene.height, &rgb).map_err(|e| e.to_string())?;

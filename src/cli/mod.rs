@@ -73,6 +73,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                 ("prepass", &exported.prepass, exported.manifest.prepass.as_mut()),
                 ("spread", &exported.spread, exported.manifest.spread.as_mut()),
                 ("guide", &exported.guide, exported.manifest.guide.as_mut()),
+                ("planefit", &exported.planefit, exported.manifest.planefit.as_mut()),
             ];
             for (name, code, stage) in stages {
                 if let (Some(code), Some(stage)) = (code, stage) {
@@ -100,6 +101,12 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             if let Some(stage) = &exported.manifest.guide {
                 println!(
                     "wrote {} (the guide: one dispatch before the form)",
+                    output.with_file_name(&stage.file).display()
+                );
+            }
+            if let Some(stage) = &exported.manifest.planefit {
+                println!(
+                    "wrote {} (planefit: one dispatch after the form)",
                     output.with_file_name(&stage.file).display()
                 );
             }
@@ -363,6 +370,10 @@ pub(crate) fn filter(
             let side = 2 * stencil.half_width() + 1;
             format!("{passes} a-trous passes of {side}x{side}")
         }
+    };
+    let form = match pipeline.planefit {
+        Some(fit) => format!("{form}, a plane fitted over {0}x{0}", 2 * fit.radius + 1),
+        None => form,
     };
     println!("pipeline  {pipeline}");
     println!(

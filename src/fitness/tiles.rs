@@ -66,7 +66,7 @@ impl std::str::FromStr for TileSampling {
 /// tile takes over its crop: the one thing a tile only approximates), the
 /// first pass's `guide` (blurred once more; counted whether or not the weight
 /// reads it), then the window's radius or the sum of the à-trous passes'
-/// reaches (each pass filters the previous one's output).
+/// reaches (each pass filters the previous one's output), then `planefit`'s radius.
 pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
     let prepass = match pipeline.outliers {
         Some(outliers) => OUTLIER_RADIUS + outliers.keep.map_or(0, |keep| keep.reach()),
@@ -78,7 +78,8 @@ pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
             (0..passes).map(|level| pipeline.pass_radius(radius) * FilterPipeline::step(level)).sum()
         }
     };
-    prepass + crate::pipeline::GUIDE_STENCIL.half_width() as u32 + form
+    let fit = pipeline.planefit.map_or(0, |fit| fit.radius);
+    prepass + crate::pipeline::GUIDE_STENCIL.half_width() as u32 + form + fit
 }
 
 /// The halo cut around a tile: the pipeline's reach, rounded up to whole
@@ -187,6 +188,7 @@ mod tests {
             outliers: Some(Outliers { k: 2.0, trim: false, keep: None }),
             demodulate: true,
             form: Form::Atrous { passes: 5, stencil: Default::default() },
+            planefit: None,
         };
         // 2 (pre-pass) + 1 (guide) + 2 · (1 + 2 + 4 + 8 + 16).
         assert_eq!(reach(&atrous, 3), 65);
@@ -198,6 +200,8 @@ mod tests {
         let surface =
             FilterPipeline { outliers: Some(Outliers { k: 2.0, trim: false, keep: Some(Keep::Surface) }), ..atrous };
         assert_eq!(reach(&surface, 3), 192);
+        let fitted = FilterPipeline { planefit: Some(crate::pipeline::PlaneFit { radius: 3 }), ..surface };
+        assert_eq!(reach(&fitted, 3), 195);
     }
 
     #[test]
@@ -265,6 +269,7 @@ mod tests {
             outliers: Some(Outliers { k: 2.0, trim: false, keep: Some(Keep::Surface) }),
             demodulate: true,
             form: Form::Atrous { passes: 4, stencil: Default::default() },
+            planefit: None,
         };
         let shared = cut(std::slice::from_ref(&scene), sampling, &surface, 3, 5);
         assert_eq!(shared.len(), 1);

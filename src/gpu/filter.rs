@@ -110,6 +110,10 @@ impl SceneBuffers {
             usage: wgpu::BufferUsages::STORAGE,
         });
         let (width, height) = (scene.width as u32, scene.height as u32);
+        if pipeline.planefit.is_some() {
+            // `planefit` reads the normals after the form: a scene without them fails here, before any work.
+            scene.required_feature(Feature::Normal)?;
+        }
         let mut inputs = HashMap::new();
         let mut prepass_dispatch = None;
         let (color, modulation) = if pipeline.has_prepass() {
@@ -276,9 +280,16 @@ impl Gpu {
         buffers.check_inputs(kernel, scene)?;
         let (pipeline, timing) = self.pipeline(kernel)?;
         self.prepare_guide_for(kernel)?;
+        let planefit = buffers.pipeline.planefit;
+        if planefit.is_some() {
+            self.planefit_pipeline()?;
+        }
         let _turn = self.gl_turn();
         for (_, input) in kernel.source().interface.inputs() {
             buffers.ensure(self, scene, input)?;
+        }
+        if planefit.is_some() {
+            buffers.ensure(self, scene, Input::Feature(Feature::Normal))?;
         }
         let atrous = kernel.source().shape.atrous;
         let passes = if atrous { buffers.pipeline.passes() } else { 1 };
@@ -344,6 +355,18 @@ impl Gpu {
                 row += rows;
             }
         }
+        // `planefit` after the form: one dispatch over the last pass's whole image.
+        let out = match planefit {
+            Some(fit) => {
+                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+                let fitted = self.planefit(&mut encoder, buffers, fit, &out)?;
+                self.queue().submit([encoder.finish()]);
+                self.wait("fitting planes")?;
+                dispatches += 1;
+                fitted
+            }
+            None => out,
+        };
         let dispatch = start.elapsed();
 
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });

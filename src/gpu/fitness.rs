@@ -10,7 +10,8 @@ use wgpu::util::DeviceExt;
 use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::own_params;
-use crate::jit::{KernelKind, Params, ReduceParams, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
+use crate::jit::{Input, KernelKind, Params, ReduceParams, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
+use crate::lang::Feature;
 use crate::pipeline::FilterPipeline;
 use crate::scene::Scene;
 
@@ -84,6 +85,10 @@ impl FitnessScene {
 
     /// A scene prepared for `pipeline`: its pre-pass runs here, once.
     pub fn for_pipeline(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
+        // The fit reads the form's last image, which only an à-trous fitness kernel writes.
+        if pipeline.planefit.is_some() && !pipeline.is_atrous() {
+            return Err(GpuError::PlaneFitAfterWindow { pipeline: *pipeline });
+        }
         let reference =
             scene.reference.as_ref().ok_or_else(|| GpuError::MissingReference { scene: scene.name.clone() })?;
         let rgba: Vec<[f32; 4]> = reference.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
@@ -215,6 +220,9 @@ impl Gpu {
             self.prepare_guide_for(k)?;
         }
         let reduce = self.reduce_pipeline()?;
+        if scenes.iter().any(|fs| fs.buffers.pipeline.planefit.is_some()) {
+            self.planefit_terms_pipeline()?;
+        }
         let reduce_interface = crate::jit::BindingInterface::reduce();
         let _turn = self.gl_turn();
         let members: Vec<u32> = kernels.iter().map(|k| k.source().exprs.len() as u32).collect();
@@ -224,6 +232,9 @@ impl Gpu {
                 fs.buffers.check_inputs(k, scene)?;
                 for (_, input) in k.source().interface.inputs() {
                     fs.buffers.ensure(self, scene, input)?;
+                }
+                if fs.buffers.pipeline.planefit.is_some() {
+                    fs.buffers.ensure(self, scene, Input::Feature(Feature::Normal))?;
                 }
             }
         }
@@ -316,6 +327,14 @@ impl Gpu {
                         Pass::Full => (fs.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1])),
                     };
                     dispatch(&mut encoder, &pipeline.pipeline, &bind_group, groups);
+                    pending += 1;
+                }
+                // `planefit`: the fit of the last pass's image replaces its terms.
+                if let (Some(fit), Pass::Full) = (fs.buffers.pipeline.planefit, run) {
+                    assert_eq!(members[k], 1, "an à-trous fitness kernel scores one member");
+                    let last = fs.buffers.pipeline.passes() - 1;
+                    let image = fs.buffers.pass_resource(Role::Image, last).expect("an à-trous form's images");
+                    self.planefit_terms(&mut encoder, &fs.buffers, fit, image, &fs.reference, terms)?;
                     pending += 1;
                 }
                 // The member's terms are complete once every band (and pass) has run.

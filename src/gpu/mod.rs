@@ -5,6 +5,7 @@ pub mod adapter;
 mod filter;
 mod fitness;
 mod guide;
+mod planefit;
 mod prepass;
 mod raw;
 mod trace;
@@ -52,6 +53,8 @@ pub enum GpuError {
     MissingReference { scene: String },
     #[error("the kernel for `{expression}` has shape {shape:?}, but the scene was prepared for pipeline `{pipeline}`")]
     Shape { expression: String, shape: crate::jit::Shape, pipeline: crate::pipeline::FilterPipeline },
+    #[error("scoring `planefit` needs an à-trous form before it; pipeline `{pipeline}` has a window")]
+    PlaneFitAfterWindow { pipeline: crate::pipeline::FilterPipeline },
     #[error("the kernel for `{expression}` stages tiles for radius {tiled}; it cannot filter with radius {radius}")]
     TileRadius { expression: String, tiled: u32, radius: u32 },
 }
@@ -77,6 +80,8 @@ pub struct Gpu {
     prepass: OnceLock<Pipeline>,
     spread: OnceLock<Pipeline>,
     spread_surface: OnceLock<Pipeline>,
+    planefit: OnceLock<Pipeline>,
+    planefit_terms: OnceLock<Pipeline>,
     reduce: OnceLock<Pipeline>,
     /// Whether kernels keep wgpu's run-time checks ([`Gpu::set_kernel_runtime_checks`]).
     kernel_checks: std::sync::atomic::AtomicBool,
@@ -135,6 +140,8 @@ impl Gpu {
             prepass: OnceLock::new(),
             spread: OnceLock::new(),
             spread_surface: OnceLock::new(),
+            planefit: OnceLock::new(),
+            planefit_terms: OnceLock::new(),
             reduce: OnceLock::new(),
             kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,

@@ -448,6 +448,67 @@ impl BindingInterface {
         BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
     }
 
+    /// The interface of `planefit`'s kernel (`jit::planefit`): the uniform
+    /// `PlaneFitParams`, the form's output (`Color`), the surface normal, the
+    /// modulation it divides by and multiplies back, and its output. In
+    /// storage buffers for filterjit (`None`), or, exported, sampled textures
+    /// in and a storage texture of the output format out.
+    pub fn planefit(textures: Option<OutputFormat>) -> BindingInterface {
+        Self::planefit_with(textures, false)
+    }
+
+    /// The interface of `planefit`'s fitness kernel: [`BindingInterface::planefit`]'s
+    /// on storage buffers, with the reference read and the relMSE terms and
+    /// luminance (`Vec2F32`, as a fitness kernel's) written.
+    pub fn planefit_terms() -> BindingInterface {
+        Self::planefit_with(None, true)
+    }
+
+    fn planefit_with(textures: Option<OutputFormat>, terms: bool) -> BindingInterface {
+        let (kind, params, read, written, prefix) = match textures {
+            None => (
+                KernelKind::Filter,
+                own_params(),
+                Resource::Storage { element: Element::Vec4F32, writable: false },
+                Resource::Storage { element: Element::Vec4F32, writable: true },
+                "buf",
+            ),
+            Some(format) => (
+                KernelKind::Export(format),
+                Resource::Uniform,
+                Resource::SampledTexture,
+                Resource::StorageTexture(TexelFormat::Color(format)),
+                "tex",
+            ),
+        };
+        let reads = [
+            (Role::Color, "color"),
+            (Role::Input(Input::Feature(Feature::Normal)), "normal"),
+            (Role::Modulation, "modulation"),
+        ]
+        .into_iter()
+        .chain(terms.then_some((Role::Reference, "reference")))
+        .map(|(role, name)| (role, read, format!("{prefix}_{name}")));
+        let written = if terms { Resource::Storage { element: Element::Vec2F32, writable: true } } else { written };
+        let bindings = dense(std::iter::once((Role::Params, params, "params".to_string())).chain(reads).chain([(
+            Role::Output,
+            written,
+            format!("{prefix}_out"),
+        )]));
+        let uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("radius", "u32", 8, "R of planefit=R: the fit's (2R+1)^2 neighbourhood"),
+            field(
+                "demodulate",
+                "u32",
+                12,
+                "1: divide by modulation before the fit and multiply after; 0: modulation is not read",
+            ),
+        ];
+        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+    }
+
     /// The interface of the fitness reduction (`jit::reduce`): the uniform
     /// `ReduceParams`, a member's per-pixel terms and flags, and the
     /// per-workgroup partial sums and flags it writes (`Output`, `Flags`).

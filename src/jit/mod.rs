@@ -7,6 +7,7 @@ pub mod interface;
 pub mod ir;
 pub mod kernel;
 pub mod lower;
+pub mod planefit;
 pub mod prepass;
 pub mod reduce;
 pub mod spread;
@@ -19,6 +20,7 @@ pub use kernel::{
     WORKGROUP_STORAGE_BUDGET,
 };
 pub use lower::{lower, lower_fused, lower_kind, lower_shaped, lower_with, KernelSource, LowerError};
+pub use planefit::{planefit_module, planefit_terms_module, planefit_terms_wgsl, planefit_wgsl, PlaneFitParams};
 pub use prepass::{prepass_module, prepass_wgsl, PrepassParams};
 pub use reduce::{reduce_module, reduce_wgsl, ReduceParams};
 pub use spread::{

@@ -1,0 +1,115 @@
+//! `planefit` on the device (`jit::planefit`): one pipeline per device, one
+//! dispatch after the form's last pass; `cpu::planefit` is its reference.
+
+use std::sync::OnceLock;
+
+use super::filter::SceneBuffers;
+use super::{Gpu, GpuError, Pipeline};
+use crate::jit::{BindingInterface, Input, PlaneFitParams, Role, ValidatedModule, WORKGROUP};
+use crate::lang::Feature;
+use crate::pipeline::PlaneFit;
+
+impl Gpu {
+    /// The kernel's pipeline. Callers make it before their GL turn, since
+    /// creating a pipeline takes the turn itself and turns never nest.
+    pub(super) fn planefit_pipeline(&self) -> Result<&Pipeline, GpuError> {
+        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+        let validate = || crate::jit::planefit_module(None).map_err(|e| e.to_string());
+        self.built_in(&self.planefit, &MODULE, "<planefit>", validate, || crate::jit::planefit_wgsl(None))
+    }
+
+    /// The fitness kernel's pipeline (made before the GL turn, as above).
+    pub(super) fn planefit_terms_pipeline(&self) -> Result<&Pipeline, GpuError> {
+        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
+        let validate = || crate::jit::planefit_terms_module().map_err(|e| e.to_string());
+        self.built_in(&self.planefit_terms, &MODULE, "<planefit terms>", validate, crate::jit::planefit_terms_wgsl)
+    }
+
+    /// Record into `encoder` the fitness kernel: `fit` of the form's last
+    /// image before remodulation (`image`), its relMSE terms against
+    /// `reference` and luminance written over `terms` (member 0's).
+    pub(super) fn planefit_terms(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        buffers: &SceneBuffers,
+        fit: PlaneFit,
+        image: wgpu::BindingResource<'_>,
+        reference: &wgpu::Buffer,
+        terms: &wgpu::Buffer,
+    ) -> Result<(), GpuError> {
+        let kernel = self.planefit_terms_pipeline()?;
+        let interface = BindingInterface::planefit_terms();
+        let params = PlaneFitParams::of(&buffers.pipeline, fit, buffers.width, buffers.height);
+        let uniform = self.params_buffer(interface.params(), "planefit params", bytemuck::bytes_of(&params));
+        let normal = buffers.inputs.get(&Input::Feature(Feature::Normal)).expect("the normals are uploaded first");
+        let mut image = Some(image);
+        let bind_group = self.bind_in_slot_order(
+            kernel,
+            interface
+                .bindings
+                .iter()
+                .map(|b| match b.role {
+                    Role::Params => uniform.as_entire_binding(),
+                    Role::Color => image.take().expect("one colour binding"),
+                    Role::Input(_) => normal.as_entire_binding(),
+                    // Without demodulation it is not read: the reference stands in.
+                    Role::Modulation => buffers.modulation.as_ref().unwrap_or(reference).as_entire_binding(),
+                    Role::Reference => reference.as_entire_binding(),
+                    Role::Output => terms.as_entire_binding(),
+                    other => unreachable!("planefit's fitness kernel has no {other:?} binding"),
+                })
+                .collect(),
+        );
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&kernel.pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), buffers.height.div_ceil(WORKGROUP[1]), 1);
+        Ok(())
+    }
+
+    /// Record `fit` of the form's output `image` into `encoder`, returning the
+    /// buffer it writes. The scene's normals are on the device already
+    /// (`SceneBuffers::ensure`); callers hold the GL turn.
+    pub(super) fn planefit(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        buffers: &SceneBuffers,
+        fit: PlaneFit,
+        image: &wgpu::Buffer,
+    ) -> Result<wgpu::Buffer, GpuError> {
+        let kernel = self.planefit_pipeline()?;
+        let interface = BindingInterface::planefit(None);
+        let (width, height) = (buffers.width, buffers.height);
+        let params = PlaneFitParams::of(&buffers.pipeline, fit, width, height);
+        let uniform = self.params_buffer(interface.params(), "planefit params", bytemuck::bytes_of(&params));
+        let fitted = self.device().create_buffer(&wgpu::BufferDescriptor {
+            label: Some("planefit"),
+            size: (width * height) as u64 * 16,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        let normal = buffers.inputs.get(&Input::Feature(Feature::Normal)).expect("the normals are uploaded first");
+        let bind_group = self.bind_in_slot_order(
+            kernel,
+            interface
+                .bindings
+                .iter()
+                .map(|b| match b.role {
+                    Role::Params => uniform.as_entire_binding(),
+                    Role::Color => image.as_entire_binding(),
+                    Role::Input(_) => normal.as_entire_binding(),
+                    // Without demodulation it is not read: the image stands in.
+                    Role::Modulation => buffers.modulation.as_ref().unwrap_or(image).as_entire_binding(),
+                    Role::Output => fitted.as_entire_binding(),
+                    other => unreachable!("planefit has no {other:?} binding"),
+                })
+                .collect(),
+        );
+        let mut pass = encoder.begin_compute_pass(&Default::default());
+        pass.set_pipeline(&kernel.pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
+        drop(pass);
+        Ok(fitted)
+    }
+}
