@@ -332,7 +332,7 @@ pub(crate) struct EvolveArgs {
     pub(crate) test_scenes: Vec<String>,
     #[command(flatten)]
     pub(crate) render: RenderArgs,
-    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous64Surface; quick, thesis: @bilateral; realtime: @svgfAtrous].
+    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous64Plane; quick, thesis: @bilateral; realtime: @svgfAtrous].
     #[arg(long)]
     pub(crate) seed_expr: Option<String>,
     /// Number of islands [every preset: 4].
