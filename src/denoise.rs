@@ -43,8 +43,8 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
 ];
 
 /// Shipped filters with a variant for renders whose light is sparse, and
-/// that variant: the same inputs and pipeline, the weight's pixel term
-/// widened from pass to pass. A chosen filter (never one asked for) gives way
+/// that variant: the same inputs, the weight's pixel term widened from pass
+/// to pass (and for `@evolvedAtrous64Plane`, one à-trous pass more). A chosen filter (never one asked for) gives way
 /// to its variant where the noisy input's median pixel is black or nearly
 /// ([`SPARSE_MEDIAN_OVER_MEAN`]): at a few samples a pixel most pixels
 /// caught no light, and the filter must gather from farther to estimate it
@@ -126,7 +126,8 @@ impl Choice {
 
     /// This choice for a render whose noisy colour is `color`: a chosen
     /// filter with a sparse-light variant ([`SPARSE_LIGHT_VARIANTS`]) gives
-    /// way to it where the render's light is sparse; anything else, and any
+    /// way to it where the render's light is sparse, in the variant's own
+    /// pipeline unless the caller gave another; anything else, and any
     /// filter asked for, stays. The variant reads what its filter reads, so
     /// the render loaded for the first serves the second.
     pub fn for_light<A: Copy + Into<f64>>(self, color: &[[A; 3]]) -> Result<Choice> {
@@ -137,9 +138,11 @@ impl Choice {
             return Ok(self);
         }
         let asked = Choice::asked(&format!("@{variant}"), None, None)?;
+        let stored = Choice::asked(&format!("@{name}"), None, None)?.pipeline;
         Ok(Choice {
             name: asked.name,
             expr: asked.expr,
+            pipeline: if self.pipeline == stored { asked.pipeline } else { self.pipeline },
             chosen_because: Some(format!(
                 "{because}; its variant for sparse light, as the render's median pixel is {:.3} of its mean luminance (under {SPARSE_MEDIAN_OVER_MEAN})",
                 tails.median_over_mean
@@ -281,7 +284,7 @@ mod tests {
         let best = Choice::best_for(&all).unwrap();
         assert_eq!(best.name.as_deref(), Some(SHIPPED_BY_QUALITY[0]));
         assert!(best.missing(&all).is_empty());
-        assert_eq!(best.pipeline.to_string(), "outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3");
+        assert_eq!(best.pipeline.to_string(), "outliers=2.5,trim,keep=surface,demodulate,atrous=3,planefit=3");
 
         // It reads no variance: a render without one (Cycles, Mitsuba's plain `aov`) gets it too.
         let no_variance = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
@@ -344,7 +347,8 @@ mod tests {
 
         let swapped = chosen.clone().for_light(&sparse).unwrap();
         assert_eq!(swapped.name.as_deref(), Some(variant));
-        assert_eq!(swapped.pipeline, chosen.pipeline);
+        assert_eq!(swapped.pipeline, Choice::asked(&format!("@{variant}"), None, None).unwrap().pipeline);
+        assert_ne!(swapped.pipeline, chosen.pipeline, "the sparse variant reaches one pass farther");
         let because = swapped.chosen_because.as_deref().unwrap();
         assert!(because.contains("sparse light") && because.contains("0.000 of its mean"), "{because}");
         let kept = chosen.clone().for_light(&even).unwrap();
@@ -366,7 +370,6 @@ mod tests {
                 Choice::asked(&format!("@{base}"), None, None).unwrap(),
                 Choice::asked(&format!("@{variant}"), None, None).unwrap(),
             );
-            assert_eq!(a.pipeline, b.pipeline, "@{variant}");
             let inputs = |c: &Choice| {
                 let r = c.request();
                 (r.features, r.variances, r.albedo)

@@ -425,7 +425,7 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
     assert!(kept.contains("measured  relMSE") && kept.contains("x OIDN"), "its error on the public renders: {kept}");
     let plane = block("evolvedAtrous64Plane");
     assert!(!plane.contains("colorVariance") && plane.contains("default   1. choice"), "{plane}");
-    assert!(plane.contains("pipeline outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3"), "{plane}");
+    assert!(plane.contains("pipeline outliers=2.5,trim,keep=surface,demodulate,atrous=3,planefit=3"), "{plane}");
     let surface = block("evolvedAtrous64Surface");
     assert!(!surface.contains("colorVariance") && surface.contains("default   2. choice"), "{surface}");
     assert!(surface.contains("pipeline outliers=2.5,trim,keep=surface,"), "{surface}");
