@@ -39,31 +39,9 @@ impl Gpu {
     ) -> Result<(), GpuError> {
         let kernel = self.planefit_terms_pipeline()?;
         let interface = BindingInterface::planefit_terms();
-        let params = PlaneFitParams::of(&buffers.pipeline, fit, buffers.width, buffers.height);
-        let uniform = self.params_buffer(interface.params(), "planefit params", bytemuck::bytes_of(&params));
-        let normal = buffers.inputs.get(&Input::Feature(Feature::Normal)).expect("the normals are uploaded first");
-        let mut image = Some(image);
-        let bind_group = self.bind_in_slot_order(
-            kernel,
-            interface
-                .bindings
-                .iter()
-                .map(|b| match b.role {
-                    Role::Params => uniform.as_entire_binding(),
-                    Role::Color => image.take().expect("one colour binding"),
-                    Role::Input(_) => normal.as_entire_binding(),
-                    // Without demodulation it is not read: the reference stands in.
-                    Role::Modulation => buffers.modulation.as_ref().unwrap_or(reference).as_entire_binding(),
-                    Role::Reference => reference.as_entire_binding(),
-                    Role::Output => terms.as_entire_binding(),
-                    other => unreachable!("planefit's fitness kernel has no {other:?} binding"),
-                })
-                .collect(),
-        );
-        let mut pass = encoder.begin_compute_pass(&Default::default());
-        pass.set_pipeline(&kernel.pipeline);
-        pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), buffers.height.div_ceil(WORKGROUP[1]), 1);
+        // Without demodulation the modulation is not read: the reference stands in.
+        let images = Images { image, modulation: buffers.modulation.as_ref().unwrap_or(reference), output: terms };
+        self.record_planefit(encoder, kernel, &interface, buffers, fit, images, Some(reference));
         Ok(())
     }
 
@@ -79,16 +57,37 @@ impl Gpu {
     ) -> Result<wgpu::Buffer, GpuError> {
         let kernel = self.planefit_pipeline()?;
         let interface = BindingInterface::planefit(None);
-        let (width, height) = (buffers.width, buffers.height);
-        let params = PlaneFitParams::of(&buffers.pipeline, fit, width, height);
-        let uniform = self.params_buffer(interface.params(), "planefit params", bytemuck::bytes_of(&params));
         let fitted = self.device().create_buffer(&wgpu::BufferDescriptor {
             label: Some("planefit"),
-            size: (width * height) as u64 * 16,
+            size: (buffers.width * buffers.height) as u64 * 16,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
+        // Without demodulation the modulation is not read: the image stands in.
+        let modulation = buffers.modulation.as_ref().unwrap_or(image);
+        let images = Images { image: image.as_entire_binding(), modulation, output: &fitted };
+        self.record_planefit(encoder, kernel, &interface, buffers, fit, images, None);
+        Ok(fitted)
+    }
+
+    /// One dispatch of a `planefit` kernel over the whole image, its
+    /// bindings filled by role from `images`, the scene's normals and, for
+    /// the fitness kernel, `reference`.
+    #[allow(clippy::too_many_arguments)]
+    fn record_planefit(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: &Pipeline,
+        interface: &BindingInterface,
+        buffers: &SceneBuffers,
+        fit: PlaneFit,
+        images: Images<'_>,
+        reference: Option<&wgpu::Buffer>,
+    ) {
+        let params = PlaneFitParams::of(&buffers.pipeline, fit, buffers.width, buffers.height);
+        let uniform = self.params_buffer(interface.params(), "planefit params", bytemuck::bytes_of(&params));
         let normal = buffers.inputs.get(&Input::Feature(Feature::Normal)).expect("the normals are uploaded first");
+        let mut image = Some(images.image);
         let bind_group = self.bind_in_slot_order(
             kernel,
             interface
@@ -96,11 +95,13 @@ impl Gpu {
                 .iter()
                 .map(|b| match b.role {
                     Role::Params => uniform.as_entire_binding(),
-                    Role::Color => image.as_entire_binding(),
+                    Role::Color => image.take().expect("one colour binding"),
                     Role::Input(_) => normal.as_entire_binding(),
-                    // Without demodulation it is not read: the image stands in.
-                    Role::Modulation => buffers.modulation.as_ref().unwrap_or(image).as_entire_binding(),
-                    Role::Output => fitted.as_entire_binding(),
+                    Role::Modulation => images.modulation.as_entire_binding(),
+                    Role::Reference => {
+                        reference.expect("the fitness kernel is given the reference").as_entire_binding()
+                    }
+                    Role::Output => images.output.as_entire_binding(),
                     other => unreachable!("planefit has no {other:?} binding"),
                 })
                 .collect(),
@@ -108,8 +109,13 @@ impl Gpu {
         let mut pass = encoder.begin_compute_pass(&Default::default());
         pass.set_pipeline(&kernel.pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
-        pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
-        drop(pass);
-        Ok(fitted)
+        pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), buffers.height.div_ceil(WORKGROUP[1]), 1);
     }
+}
+
+/// What a `planefit` dispatch reads and writes besides its normals.
+struct Images<'a> {
+    image: wgpu::BindingResource<'a>,
+    modulation: &'a wgpu::Buffer,
+    output: &'a wgpu::Buffer,
 }

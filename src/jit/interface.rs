@@ -411,41 +411,19 @@ impl BindingInterface {
         step: &str,
         stage: &str,
     ) -> BindingInterface {
-        let (kind, params, read, written, prefix) = match textures {
-            None => (
-                KernelKind::Filter,
-                own_params(),
-                Resource::Storage { element: Element::Vec4F32, writable: false },
-                Resource::Storage { element: Element::Vec4F32, writable: true },
-                "buf",
-            ),
-            // Exported: every image it writes is rgba32float whatever the
-            // output format, so that the total it keeps is not rounded to half
-            // precision between passes.
-            Some(format) => (
-                KernelKind::Export(format),
-                Resource::Uniform,
-                Resource::SampledTexture,
-                Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float)),
-                "tex",
-            ),
+        let reads: Vec<(Role, &str)> =
+            [(Role::Color, "color"), (Role::Image, "image"), (Role::Modulation, "modulation")]
+                .into_iter()
+                .chain(extra.iter().copied())
+                .collect();
+        // Exported, every image it writes is rgba32float whatever the output
+        // format, so that the total it keeps is not rounded to half precision
+        // between passes.
+        let written = match textures {
+            None => Resource::Storage { element: Element::Vec4F32, writable: true },
+            Some(_) => Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float)),
         };
-        let reads = [(Role::Color, "color"), (Role::Image, "image"), (Role::Modulation, "modulation")]
-            .into_iter()
-            .chain(extra.iter().copied())
-            .map(|(role, name)| (role, read, format!("{prefix}_{name}")));
-        let bindings = dense(std::iter::once((Role::Params, params, "params".to_string())).chain(reads).chain([(
-            Role::Output,
-            written,
-            format!("{prefix}_out"),
-        )]));
-        let uniform = vec![
-            field("width", "u32", 0, "image width in pixels"),
-            field("height", "u32", 4, "image height in pixels"),
-            field("step", "u32", 8, step),
-            field("stage", "u32", 12, stage),
-        ];
-        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+        Self::image_stage(textures, &reads, written, [("step", step), ("stage", stage)])
     }
 
     /// The interface of `planefit`'s kernel (`jit::planefit`): the uniform
@@ -454,42 +432,54 @@ impl BindingInterface {
     /// storage buffers for filterjit (`None`), or, exported, sampled textures
     /// in and a storage texture of the output format out.
     pub fn planefit(textures: Option<OutputFormat>) -> BindingInterface {
-        Self::planefit_with(textures, false)
+        let written = match textures {
+            None => Resource::Storage { element: Element::Vec4F32, writable: true },
+            Some(format) => Resource::StorageTexture(TexelFormat::Color(format)),
+        };
+        Self::image_stage(textures, &Self::PLANEFIT_READS, written, Self::PLANEFIT_UNIFORM)
     }
 
     /// The interface of `planefit`'s fitness kernel: [`BindingInterface::planefit`]'s
     /// on storage buffers, with the reference read and the relMSE terms and
     /// luminance (`Vec2F32`, as a fitness kernel's) written.
     pub fn planefit_terms() -> BindingInterface {
-        Self::planefit_with(None, true)
+        let reads: Vec<(Role, &str)> =
+            Self::PLANEFIT_READS.into_iter().chain([(Role::Reference, "reference")]).collect();
+        let written = Resource::Storage { element: Element::Vec2F32, writable: true };
+        Self::image_stage(None, &reads, written, Self::PLANEFIT_UNIFORM)
     }
 
-    fn planefit_with(textures: Option<OutputFormat>, terms: bool) -> BindingInterface {
-        let (kind, params, read, written, prefix) = match textures {
+    const PLANEFIT_READS: [(Role, &'static str); 3] = [
+        (Role::Color, "color"),
+        (Role::Input(Input::Feature(Feature::Normal)), "normal"),
+        (Role::Modulation, "modulation"),
+    ];
+
+    const PLANEFIT_UNIFORM: [(&'static str, &'static str); 2] = [
+        ("radius", "R of planefit=R: the fit's (2R+1)^2 neighbourhood"),
+        ("demodulate", "1: divide by modulation before the fit and multiply after; 0: modulation is not read"),
+    ];
+
+    /// A built-in image stage's interface (the spreads, `planefit`): the
+    /// uniform (width, height, then two u32 `fields`), `reads` (named
+    /// `buf_NAME`, or exported `tex_NAME` as sampled textures), then the
+    /// output `written`.
+    fn image_stage(
+        textures: Option<OutputFormat>,
+        reads: &[(Role, &str)],
+        written: Resource,
+        fields: [(&str, &str); 2],
+    ) -> BindingInterface {
+        let (kind, params, read, prefix) = match textures {
             None => (
                 KernelKind::Filter,
                 own_params(),
                 Resource::Storage { element: Element::Vec4F32, writable: false },
-                Resource::Storage { element: Element::Vec4F32, writable: true },
                 "buf",
             ),
-            Some(format) => (
-                KernelKind::Export(format),
-                Resource::Uniform,
-                Resource::SampledTexture,
-                Resource::StorageTexture(TexelFormat::Color(format)),
-                "tex",
-            ),
+            Some(format) => (KernelKind::Export(format), Resource::Uniform, Resource::SampledTexture, "tex"),
         };
-        let reads = [
-            (Role::Color, "color"),
-            (Role::Input(Input::Feature(Feature::Normal)), "normal"),
-            (Role::Modulation, "modulation"),
-        ]
-        .into_iter()
-        .chain(terms.then_some((Role::Reference, "reference")))
-        .map(|(role, name)| (role, read, format!("{prefix}_{name}")));
-        let written = if terms { Resource::Storage { element: Element::Vec2F32, writable: true } } else { written };
+        let reads = reads.iter().map(|&(role, name)| (role, read, format!("{prefix}_{name}")));
         let bindings = dense(std::iter::once((Role::Params, params, "params".to_string())).chain(reads).chain([(
             Role::Output,
             written,
@@ -498,13 +488,8 @@ impl BindingInterface {
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
             field("height", "u32", 4, "image height in pixels"),
-            field("radius", "u32", 8, "R of planefit=R: the fit's (2R+1)^2 neighbourhood"),
-            field(
-                "demodulate",
-                "u32",
-                12,
-                "1: divide by modulation before the fit and multiply after; 0: modulation is not read",
-            ),
+            field(fields[0].0, "u32", 8, fields[0].1),
+            field(fields[1].0, "u32", 12, fields[1].1),
         ];
         BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
     }
