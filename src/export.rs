@@ -635,7 +635,7 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                         .into(),
                     None,
                 ),
-                (Role::Input(Input::Feature(Feature::Normal)), Stages::Spread) => (
+                (Role::Input(Input::Feature(Feature::Normal)), Stages::Spread | Stages::PlaneFit) => (
                     "normal".into(),
                     "xyz",
                     "the surface normal; only its direction counts (any length, no normalisation scale)".into(),
@@ -660,12 +660,6 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                 (Role::Color, Stages::PlaneFit) => {
                     ("color".into(), "xyz", "`filtered`: the form's last pass's output".into(), None)
                 }
-                (Role::Input(Input::Feature(Feature::Normal)), Stages::PlaneFit) => (
-                    "normal".into(),
-                    "xyz",
-                    "the surface normal; only its direction counts (any length, no normalisation scale)".into(),
-                    None,
-                ),
                 (Role::Modulation, Stages::PlaneFit) => (
                     "modulation".into(),
                     "xyz",
