@@ -87,25 +87,15 @@ impl Gpu {
         let params = PlaneFitParams::of(&buffers.pipeline, fit, buffers.width, buffers.height);
         let uniform = self.params_buffer(interface.params(), "planefit params", bytemuck::bytes_of(&params));
         let normal = buffers.inputs.get(&Input::Feature(Feature::Normal)).expect("the normals are uploaded first");
-        let mut image = Some(images.image);
-        let bind_group = self.bind_in_slot_order(
-            kernel,
-            interface
-                .bindings
-                .iter()
-                .map(|b| match b.role {
-                    Role::Params => uniform.as_entire_binding(),
-                    Role::Color => image.take().expect("one colour binding"),
-                    Role::Input(_) => normal.as_entire_binding(),
-                    Role::Modulation => images.modulation.as_entire_binding(),
-                    Role::Reference => {
-                        reference.expect("the fitness kernel is given the reference").as_entire_binding()
-                    }
-                    Role::Output => images.output.as_entire_binding(),
-                    other => unreachable!("planefit has no {other:?} binding"),
-                })
-                .collect(),
-        );
+        let bind_group = self.bind_group(kernel, interface, |role| match role {
+            Role::Params => uniform.as_entire_binding(),
+            Role::Color => images.image.clone(),
+            Role::Input(_) => normal.as_entire_binding(),
+            Role::Modulation => images.modulation.as_entire_binding(),
+            Role::Reference => reference.expect("the fitness kernel is given the reference").as_entire_binding(),
+            Role::Output => images.output.as_entire_binding(),
+            other => unreachable!("planefit has no {other:?} binding"),
+        });
         let mut pass = encoder.begin_compute_pass(&Default::default());
         pass.set_pipeline(&kernel.pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
