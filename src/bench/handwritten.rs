@@ -42,6 +42,7 @@ pub(super) fn measure(
         interface: jit::BindingInterface::of(KernelKind::Filter, &layout, jit::Shape::WINDOW),
         layout,
         tile_radius: None,
+        first_pass_override: false,
         exprs: vec![bilateral.clone()],
         wgsl: HANDWRITTEN_BILATERAL.to_string(),
     })?;

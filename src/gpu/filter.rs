@@ -6,7 +6,8 @@ use std::time::{Duration, Instant};
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, PipelineTiming};
-use crate::jit::{AtrousParams, Input, Params, Role, Shape, ValidatedKernel, WORKGROUP};
+use crate::jit::interface::Element;
+use crate::jit::{AtrousParams, Input, Params, PassRole, Role, Shape, ValidatedKernel, WORKGROUP};
 use crate::lang::{Feature, ScalarVar};
 use crate::pipeline::{FilterPipeline, Keep};
 use crate::scene::{Missing, MissingInput, Scene};
@@ -33,6 +34,8 @@ pub struct SceneBuffers {
     pub(super) prepass_dispatch: Option<Duration>,
     /// How long the guide's dispatch took, once a kernel that reads it has run.
     pub(super) guide_dispatch: Option<Duration>,
+    /// Textures of these images, for kernels that sample them.
+    pub(super) sampled: super::sampled::Sampled,
 }
 
 /// Intermediate images of the à-trous passes; they never leave the device.
@@ -165,6 +168,7 @@ impl SceneBuffers {
             scratch,
             prepass_dispatch,
             guide_dispatch: None,
+            sampled: Default::default(),
         })
     }
 
@@ -241,14 +245,16 @@ impl SceneBuffers {
     }
 }
 
-/// The uniform of one dispatch: [`Params`], and for à-trous kernels the pass.
-pub(super) fn uniform_bytes(atrous: bool, base: Params, level: u32, passes: u32) -> Vec<u8> {
+/// The uniform of pass `level` of `passes`; `remodulates` whether the last
+/// pass multiplies the modulation back (not where `planefit` follows: the
+/// fit reads the demodulated image and multiplies it back itself).
+pub(super) fn uniform_bytes(atrous: bool, base: Params, level: u32, passes: u32, remodulates: bool) -> Vec<u8> {
     if atrous {
         let p = AtrousParams {
             base,
             step: FilterPipeline::step(level),
             level,
-            last: u32::from(level + 1 == passes),
+            last: u32::from(remodulates && level + 1 == passes),
             _pad: 0,
         };
         bytemuck::bytes_of(&p).to_vec()
@@ -278,11 +284,27 @@ impl Gpu {
         super::check_radius(kernel, radius)?;
         buffers.check_shape(kernel)?;
         buffers.check_inputs(kernel, scene)?;
-        let (pipeline, timing) = self.pipeline(kernel)?;
+        let (first, mut timing) = self.pipeline_for(kernel, PassRole::First)?;
+        let atrous = kernel.source().shape.atrous;
+        let passes = if atrous { buffers.pipeline.passes() } else { 1 };
+        // Made before the clock starts, like the first pass's (and outside the GL turn, which creation takes).
+        let later = if passes > 1 {
+            let (later, made) = self.pipeline_for(kernel, PassRole::Later)?;
+            timing =
+                PipelineTiming { create: timing.create + made.create, cache_hit: timing.cache_hit && made.cache_hit };
+            Some(later)
+        } else {
+            None
+        };
         self.prepare_guide_for(kernel)?;
         let planefit = buffers.pipeline.planefit;
         if planefit.is_some() {
-            self.planefit_pipeline()?;
+            self.planefit_pipeline(!buffers.pipeline.is_atrous())?;
+        }
+        let sampled = super::sampled::sampled_roles(kernel);
+        if !sampled.is_empty() || planefit.is_some() {
+            self.blit_pipeline(Element::Vec4F32)?;
+            self.blit_pipeline(Element::F32)?;
         }
         let _turn = self.gl_turn();
         for (_, input) in kernel.source().interface.inputs() {
@@ -291,8 +313,7 @@ impl Gpu {
         if planefit.is_some() {
             buffers.ensure(self, scene, Input::Feature(Feature::Normal))?;
         }
-        let atrous = kernel.source().shape.atrous;
-        let passes = if atrous { buffers.pipeline.passes() } else { 1 };
+
         let device = self.device();
         let pixels = (buffers.width * buffers.height) as u64;
         let out = device.create_buffer(&wgpu::BufferDescriptor {
@@ -319,6 +340,16 @@ impl Gpu {
         let start = Instant::now();
         let mut dispatches = 0;
         for level in 0..passes {
+            let pipeline = if level == 0 { &first } else { later.as_ref().expect("made for every later pass") };
+            // The textures this pass samples, blitted first where they are new.
+            let views = if sampled.is_empty() {
+                HashMap::new()
+            } else {
+                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+                let views = buffers.sampled_views(self, &mut encoder, &sampled, level)?;
+                self.queue().submit([encoder.finish()]);
+                views
+            };
             let mut row = 0;
             while row < buffers.height {
                 let rows = band.min(buffers.height - row);
@@ -327,10 +358,11 @@ impl Gpu {
                     Params { width: buffers.width, height: buffers.height, radius, row_offset: row },
                     level,
                     passes,
+                    planefit.is_none(),
                 );
                 let params = self.params_buffer(kernel.source().interface.params(), "params", &params);
                 let buffers = &*buffers;
-                let bind_group = self.bind_group(&pipeline, &kernel.source().interface, |role| match role {
+                let bind_group = self.bind_group(pipeline, &kernel.source().interface, |role| match role {
                     Role::Params => params.as_entire_binding(),
                     // The filtered image: the last pass's goes to `out`, the others to the ping-pong images.
                     Role::Output if atrous && level + 1 < passes => {
@@ -339,6 +371,7 @@ impl Gpu {
                     Role::Output => out.as_entire_binding(),
                     Role::Flags => flags.as_entire_binding(),
                     Role::Reference | Role::Image => unreachable!("filter kernels bind no {role:?}"),
+                    role if views.contains_key(&role) => wgpu::BindingResource::TextureView(&views[&role]),
                     role => buffers.pass_resource(role, level).expect("inputs are uploaded before binding"),
                 });
                 let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });

@@ -3,13 +3,14 @@
 //! for each of its members; the reduction kernel (`jit::reduce`) sums them
 //! per workgroup; only the partial sums come back.
 
+use std::collections::HashMap;
 use std::sync::OnceLock;
 
 use wgpu::util::DeviceExt;
 
 use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
 use super::{Gpu, GpuError, Pipeline};
-use crate::jit::interface::own_params;
+use crate::jit::interface::{own_params, Element};
 use crate::jit::{Input, KernelKind, Params, ReduceParams, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
 use crate::lang::Feature;
 use crate::pipeline::FilterPipeline;
@@ -166,7 +167,7 @@ impl Gpu {
 
     /// Keep only the cached pipelines for which `keep` holds.
     pub fn prune_pipelines(&self, keep: impl Fn(&crate::jit::KernelKey) -> bool) {
-        self.pipelines.lock().expect("pipeline cache lock").retain(|k, _| keep(k));
+        self.pipelines.lock().expect("pipeline cache lock").retain(|(k, _), _| keep(k));
     }
 
     /// Evaluate every fitness kernel on every scene. `result[m][s]` is member
@@ -222,6 +223,11 @@ impl Gpu {
         let reduce = self.reduce_pipeline()?;
         if scenes.iter().any(|fs| fs.buffers.pipeline.planefit.is_some()) {
             self.planefit_terms_pipeline()?;
+        }
+        let sampled: Vec<Vec<Role>> = kernels.iter().map(|k| super::sampled::sampled_roles(k)).collect();
+        if sampled.iter().any(|roles| !roles.is_empty()) {
+            self.blit_pipeline(Element::Vec4F32)?;
+            self.blit_pipeline(Element::F32)?;
         }
         let reduce_interface = crate::jit::BindingInterface::reduce();
         let _turn = self.gl_turn();
@@ -286,7 +292,7 @@ impl Gpu {
                     .flat_map(|level| (first..end).step_by(rows as usize).map(move |row| (level, row)))
                     .map(|(level, row)| {
                         let base = Params { width: fs.width, height: fs.height, radius, row_offset: row };
-                        let bytes = uniform_bytes(atrous, base, level, passes);
+                        let bytes = uniform_bytes(atrous, base, level, passes, true);
                         let buffer = self.params_buffer(own_params(), "params", &bytes);
                         (buffer, level, rows.min(end - row))
                     })
@@ -312,15 +318,24 @@ impl Gpu {
         let mut pending = 0;
         let mut first_member = 0usize;
         for (k, (kernel, pipeline)) in kernels.iter().zip(&pipelines).enumerate() {
-            for (s, fs) in scenes.iter().enumerate() {
+            let scene_count = scenes.len();
+            for (s, fs) in scenes.iter_mut().enumerate() {
                 let (terms, pixel_flags, _) = fs.terms.as_ref().expect("terms are made before dispatching");
+                // The textures a pass samples, blitted as its first band is recorded.
+                let (mut views, mut views_level) = (HashMap::new(), None);
                 for (params, level, rows) in bands[s].iter().take(if run == Pass::Prime { 1 } else { usize::MAX }) {
+                    if !sampled[k].is_empty() && views_level != Some(*level) {
+                        views = fs.buffers.sampled_views(self, &mut encoder, &sampled[k], *level)?;
+                        views_level = Some(*level);
+                    }
+                    let buffers = &fs.buffers;
                     let bind_group = self.bind_group(pipeline, &kernel.source().interface, |role| match role {
                         Role::Params => params.as_entire_binding(),
                         Role::Output => terms.as_entire_binding(),
                         Role::Flags => pixel_flags.as_entire_binding(),
                         Role::Reference => fs.reference.as_entire_binding(),
-                        role => fs.buffers.pass_resource(role, *level).expect("inputs are uploaded before binding"),
+                        role if views.contains_key(&role) => wgpu::BindingResource::TextureView(&views[&role]),
+                        role => buffers.pass_resource(role, *level).expect("inputs are uploaded before binding"),
                     });
                     let groups = match run {
                         Pass::Prime => (1, 1),
@@ -339,7 +354,7 @@ impl Gpu {
                 }
                 // The member's terms are complete once every band (and pass) has run.
                 for member in 0..members[k] as usize {
-                    let at = offsets[(first_member + member) * scenes.len() + s];
+                    let at = offsets[(first_member + member) * scene_count + s];
                     let partial = |buffer, bytes| {
                         let (offset, size) = (at * bytes, std::num::NonZeroU64::new(fs.groups() * bytes));
                         wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size })

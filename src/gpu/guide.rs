@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 
 use super::filter::{rows_per_dispatch, uniform_bytes};
 use super::{Gpu, GpuError};
+use crate::jit::interface::Element;
 use crate::jit::{self, KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
 use crate::pipeline::GUIDE_STENCIL;
 
@@ -27,6 +28,7 @@ impl Gpu {
     pub(super) fn prepare_guide_for(&self, kernel: &ValidatedKernel) -> Result<(), GpuError> {
         if kernel.source().layout.reads_guide() {
             self.pipeline(guide_kernel()?)?;
+            self.blit_pipeline(Element::Vec4F32)?;
         }
         Ok(())
     }
@@ -56,14 +58,18 @@ impl Gpu {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let start = Instant::now();
         let mut encoder = device.create_command_encoder(&Default::default());
+        // The kernel samples the colour, as the form's passes do.
+        let sampled = self.sampled_texture(Element::Vec4F32, (width, height));
+        self.record_blit(&mut encoder, color, &sampled, Element::Vec4F32, (width, height))?;
+        let sampled = sampled.create_view(&Default::default());
         // In bands of rows, as the form's passes are dispatched.
         let band = rows_per_dispatch(width, GUIDE_STENCIL.half_width() as u32);
         for row in (0..height).step_by(band as usize) {
-            let params = uniform_bytes(true, Params { width, height, radius: 0, row_offset: row }, 0, 1);
+            let params = uniform_bytes(true, Params { width, height, radius: 0, row_offset: row }, 0, 1, true);
             let params = self.params_buffer(interface.params(), "guide params", &params);
             let bind_group = self.bind_group(&pipeline, interface, |role| match role {
                 Role::Params => params.as_entire_binding(),
-                Role::Color => color.as_entire_binding(),
+                Role::Color => wgpu::BindingResource::TextureView(&sampled),
                 Role::Output => guide.as_entire_binding(),
                 Role::Flags => flags.as_entire_binding(),
                 other => unreachable!("the guide's kernel binds no {other:?}"),

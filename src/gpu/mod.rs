@@ -8,6 +8,7 @@ mod guide;
 mod planefit;
 mod prepass;
 mod raw;
+mod sampled;
 mod trace;
 
 use std::collections::HashMap;
@@ -20,7 +21,9 @@ pub use raw::{RawBuffer, RawKernel};
 pub use trace::{TraceBand, TraceInputs, TraceScene, PATHTRACE_WGSL};
 
 use crate::jit::interface::{Resource, TexelFormat};
-use crate::jit::{Access, BindingInterface, KernelKey, OutputFormat, Role, Slot, ValidatedKernel, ValidatedModule};
+use crate::jit::{
+    Access, BindingInterface, KernelKey, OutputFormat, PassRole, Role, Slot, ValidatedKernel, ValidatedModule,
+};
 
 #[derive(Debug, thiserror::Error)]
 pub enum GpuError {
@@ -75,13 +78,18 @@ pub struct Gpu {
     queue: wgpu::Queue,
     info: wgpu::AdapterInfo,
     limits: wgpu::Limits,
-    pipelines: Mutex<HashMap<KernelKey, Arc<Pipeline>>>,
+    /// Kernels' pipelines, one per role where the kernel specialises its passes.
+    pipelines: Mutex<HashMap<(KernelKey, PassRole), Arc<Pipeline>>>,
     tracer: OnceLock<Pipeline>,
     prepass: OnceLock<Pipeline>,
-    spread: OnceLock<Pipeline>,
-    spread_surface: OnceLock<Pipeline>,
-    planefit: OnceLock<Pipeline>,
+    /// The spreads' pipelines by stage ([`crate::jit::SPREAD_STAGE`]).
+    spread: Specialised,
+    spread_surface: Specialised,
+    /// planefit's pipelines by [`crate::jit::PLANEFIT_REMODULATED`].
+    planefit: Specialised,
     planefit_terms: OnceLock<Pipeline>,
+    blit_vec4: OnceLock<Pipeline>,
+    blit_scalar: OnceLock<Pipeline>,
     reduce: OnceLock<Pipeline>,
     /// Whether kernels keep wgpu's run-time checks ([`Gpu::set_kernel_runtime_checks`]).
     kernel_checks: std::sync::atomic::AtomicBool,
@@ -91,6 +99,9 @@ pub struct Gpu {
     /// filterjit's own threads therefore take turns here, without a timeout.
     gl_turns: Option<Mutex<()>>,
 }
+
+/// A built-in kernel's pipelines, one per value of its pipeline-overridable constant.
+type Specialised = Mutex<HashMap<u32, Arc<Pipeline>>>;
 
 /// Timings of getting a pipeline.
 #[derive(Clone, Copy, Debug, Default)]
@@ -138,10 +149,12 @@ impl Gpu {
             pipelines: Mutex::new(HashMap::new()),
             tracer: OnceLock::new(),
             prepass: OnceLock::new(),
-            spread: OnceLock::new(),
-            spread_surface: OnceLock::new(),
-            planefit: OnceLock::new(),
+            spread: Specialised::default(),
+            spread_surface: Specialised::default(),
+            planefit: Specialised::default(),
             planefit_terms: OnceLock::new(),
+            blit_vec4: OnceLock::new(),
+            blit_scalar: OnceLock::new(),
             reduce: OnceLock::new(),
             kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,
@@ -213,7 +226,19 @@ impl Gpu {
 
     /// Get the pipeline of a kernel: from the cache, or created and cached.
     pub fn pipeline(&self, kernel: &ValidatedKernel) -> Result<(Arc<Pipeline>, PipelineTiming), GpuError> {
-        if let Some(p) = self.pipelines.lock().expect("pipeline cache lock").get(&kernel.key()) {
+        self.pipeline_for(kernel, PassRole::First)
+    }
+
+    /// The pipeline of a kernel that runs passes of `role`: one of its own
+    /// where the kernel declares [`crate::jit::FIRST_PASS`], else its only one.
+    pub fn pipeline_for(
+        &self,
+        kernel: &ValidatedKernel,
+        role: PassRole,
+    ) -> Result<(Arc<Pipeline>, PipelineTiming), GpuError> {
+        let specialised = kernel.source().first_pass_override;
+        let role = if specialised { role } else { PassRole::First };
+        if let Some(p) = self.pipelines.lock().expect("pipeline cache lock").get(&(kernel.key(), role)) {
             return Ok((p.clone(), PipelineTiming { create: Duration::ZERO, cache_hit: true }));
         }
         self.check_bindings(kernel)?;
@@ -223,17 +248,18 @@ impl Gpu {
         } else {
             RuntimeChecks::InBoundsByConstruction
         };
-        let pipeline =
-            self.create_pipeline_with(kernel.validated(), "filterjit kernel", checks).map_err(|message| {
-                GpuError::Pipeline {
-                    expression: kernel.source().canonical.clone(),
-                    message,
-                    wgsl: kernel.wgsl().to_string(),
-                }
-            })?;
+        let first = if role == PassRole::First { 1.0 } else { 0.0 };
+        let constants: &[(&str, f64)] = if specialised { &[(crate::jit::FIRST_PASS, first)] } else { &[] };
+        let pipeline = self.create_pipeline_with(kernel.validated(), "filterjit kernel", checks, constants).map_err(
+            |message| GpuError::Pipeline {
+                expression: kernel.source().canonical.clone(),
+                message,
+                wgsl: kernel.wgsl().to_string(),
+            },
+        )?;
         let pipeline = Arc::new(pipeline);
         let create = start.elapsed();
-        self.pipelines.lock().expect("pipeline cache lock").insert(kernel.key(), pipeline.clone());
+        self.pipelines.lock().expect("pipeline cache lock").insert((kernel.key(), role), pipeline.clone());
         Ok((pipeline, PipelineTiming { create, cache_hit: false }))
     }
 
@@ -266,11 +292,40 @@ impl Gpu {
         Ok(cell.get_or_init(|| pipeline))
     }
 
+    /// The pipeline of a built-in kernel (as [`Gpu::built_in`]) with its
+    /// pipeline-overridable constant `constant` set to `value`: one per value
+    /// and device, in `cell`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn built_in_specialised(
+        &self,
+        cell: &Specialised,
+        module: &'static OnceLock<Result<ValidatedModule, String>>,
+        name: &str,
+        validate: impl FnOnce() -> Result<ValidatedModule, String>,
+        wgsl: impl FnOnce() -> String,
+        constant: &str,
+        value: u32,
+    ) -> Result<Arc<Pipeline>, GpuError> {
+        if let Some(p) = cell.lock().expect("pipeline cache lock").get(&value) {
+            return Ok(p.clone());
+        }
+        let validated = module.get_or_init(validate).as_ref().map_err(|message| GpuError::Pipeline {
+            expression: name.into(),
+            message: message.clone(),
+            wgsl: String::new(),
+        })?;
+        let label = format!("filterjit {} {constant}={value}", name.trim_matches(|c| c == '<' || c == '>'));
+        let pipeline = self
+            .create_pipeline_with(validated, &label, RuntimeChecks::Full, &[(constant, value as f64)])
+            .map_err(|message| GpuError::Pipeline { expression: name.into(), message, wgsl: wgsl() })?;
+        Ok(cell.lock().expect("pipeline cache lock").entry(value).or_insert_with(|| Arc::new(pipeline)).clone())
+    }
+
     /// A compute pipeline (entry point `main`) from a validated module, with
     /// an explicit layout made from the module's slots, inside a validation
     /// error scope; the error's text on failure.
     pub(crate) fn create_pipeline(&self, validated: &ValidatedModule, label: &str) -> Result<Pipeline, String> {
-        self.create_pipeline_with(validated, label, RuntimeChecks::Full)
+        self.create_pipeline_with(validated, label, RuntimeChecks::Full, &[])
     }
 
     /// Whether kernels keep wgpu's run-time bounds checks and loop bounding
@@ -287,6 +342,7 @@ impl Gpu {
         validated: &ValidatedModule,
         label: &str,
         checks: RuntimeChecks,
+        constants: &[(&str, f64)],
     ) -> Result<Pipeline, String> {
         let _turn = self.gl_turn();
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
@@ -318,7 +374,7 @@ impl Gpu {
             layout: Some(&pipeline_layout),
             module: &shader,
             entry_point: Some("main"),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
             cache: None,
         });
         match pollster::block_on(scope.pop()) {

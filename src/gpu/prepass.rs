@@ -2,14 +2,15 @@
 //! `jit::spread`, with `keep=surface` its surface kernel): one pipeline each
 //! per device, run once per scene when its buffers are prepared.
 
-use std::sync::OnceLock;
+use std::sync::{Arc, OnceLock};
 
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
+use crate::jit::interface::Element;
 use crate::jit::{
     written_before, BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, SpreadTarget,
-    ValidatedModule, WORKGROUP,
+    ValidatedModule, SPREAD_STAGE, WORKGROUP,
 };
 use crate::lang::ScalarVar;
 use crate::pipeline::{FilterPipeline, Keep};
@@ -21,18 +22,21 @@ impl Gpu {
         self.built_in(&self.prepass, &MODULE, "<pre-pass>", validate, || crate::jit::prepass_wgsl(None))
     }
 
-    fn spread_pipeline(&self, keep: Keep) -> Result<&Pipeline, GpuError> {
+    /// The pipeline of `keep`'s spread kernel for the dispatches of `stage`.
+    fn spread_pipeline(&self, keep: Keep, stage: u32) -> Result<Arc<Pipeline>, GpuError> {
         static EVEN: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
         static SURFACE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
         match keep {
             Keep::Even => {
                 let validate = || crate::jit::spread_module(None).map_err(|e| e.to_string());
-                self.built_in(&self.spread, &EVEN, "<spread>", validate, || crate::jit::spread_wgsl(None))
+                let wgsl = || crate::jit::spread_wgsl(None);
+                self.built_in_specialised(&self.spread, &EVEN, "<spread>", validate, wgsl, SPREAD_STAGE, stage)
             }
             Keep::Surface => {
                 let validate = || crate::jit::spread_surface_module(None).map_err(|e| e.to_string());
                 let wgsl = || crate::jit::spread_surface_wgsl(None);
-                self.built_in(&self.spread_surface, &SURFACE, "<surface spread>", validate, wgsl)
+                let name = "<surface spread>";
+                self.built_in_specialised(&self.spread_surface, &SURFACE, name, validate, wgsl, SPREAD_STAGE, stage)
             }
         }
     }
@@ -52,8 +56,17 @@ impl Gpu {
         height: u32,
     ) -> Result<Prepared, GpuError> {
         let kernel = self.prepass_pipeline()?;
+        self.blit_pipeline(Element::Vec4F32)?;
+        // Every dispatch's pipeline, made before the GL turn is taken (creation takes it).
         let spread = match pipeline.keep() {
-            Some(keep) => Some((keep, self.spread_pipeline(keep)?)),
+            Some(keep) => {
+                let sequence = SpreadParams::sequence(keep, width, height);
+                let pipelines = sequence
+                    .iter()
+                    .map(|d| self.spread_pipeline(keep, d.params.stage))
+                    .collect::<Result<Vec<_>, _>>()?;
+                Some((keep, sequence, pipelines))
+            }
             None => None,
         };
         let _turn = self.gl_turn();
@@ -89,7 +102,21 @@ impl Gpu {
             })
         });
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let start = std::time::Instant::now();
+        let mut encoder = device.create_command_encoder(&Default::default());
+        // The kernel samples the colour and the albedo.
+        let size = (width, height);
+        let sampled = |encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer| {
+            let texture = self.sampled_texture(Element::Vec4F32, size);
+            self.record_blit(encoder, buffer, &texture, Element::Vec4F32, size)?;
+            Ok::<_, GpuError>(texture.create_view(&Default::default()))
+        };
+        let noisy = sampled(&mut encoder, color)?;
         // Without demodulation the albedo is never read: the colour stands in for it.
+        let albedo = match &albedo {
+            Some(albedo) => sampled(&mut encoder, albedo)?,
+            None => noisy.clone(),
+        };
         let interface = BindingInterface::prepass(None);
         let bind_group = self.bind_in_slot_order(
             kernel,
@@ -98,8 +125,8 @@ impl Gpu {
                 .iter()
                 .map(|b| match b.role {
                     Role::Params => uniform.as_entire_binding(),
-                    Role::Color => color.as_entire_binding(),
-                    Role::Albedo => albedo.as_ref().unwrap_or(color).as_entire_binding(),
+                    Role::Color => wgpu::BindingResource::TextureView(&noisy),
+                    Role::Albedo => wgpu::BindingResource::TextureView(&albedo),
                     Role::Output => prepared.as_entire_binding(),
                     Role::Modulation => modulation.as_entire_binding(),
                     Role::Input(Input::Variance(v)) if v.from_prepass() => {
@@ -110,15 +137,13 @@ impl Gpu {
                 })
                 .collect(),
         );
-        let start = std::time::Instant::now();
-        let mut encoder = device.create_command_encoder(&Default::default());
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&kernel.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
         }
-        if let Some((keep, spread)) = spread {
+        if let Some((keep, sequence, pipelines)) = spread {
             // `keep`: the pre-pass wrote the clamped colour undivided; spread
             // raw − clamped, then (spread + clamped) / modulation is the colour.
             let interface = crate::jit::spread_interface(keep, None);
@@ -139,21 +164,30 @@ impl Gpu {
                     usage: wgpu::BufferUsages::STORAGE,
                 })
             });
-            let sequence = SpreadParams::sequence(keep, width, height);
-            for (n, dispatch) in sequence.iter().enumerate() {
+            // The kernel samples its images: each is blitted into a texture
+            // once it is written (the scratch images after every dispatch
+            // that writes them), and read from there.
+            let image = sampled(&mut encoder, &prepared)?;
+            let modulation_view = sampled(&mut encoder, &modulation)?;
+            let normal_view = match &normals {
+                Some(normals) => Some(sampled(&mut encoder, normals)?),
+                None => None,
+            };
+            let mut scratch_views: [Option<wgpu::TextureView>; 2] = [None, None];
+            let mut surface_view = None;
+            for (n, (dispatch, spread)) in sequence.iter().zip(&pipelines).enumerate() {
                 let uniform =
                     self.params_buffer(interface.params(), "spread params", bytemuck::bytes_of(&dispatch.params));
+                // An image not yet written is not read: any other texture stands in.
                 let source = match dispatch.source {
-                    SpreadSource::Noisy => color,
-                    SpreadSource::Scratch(k) => &buffers[k],
+                    SpreadSource::Noisy => &noisy,
+                    SpreadSource::Scratch(k) => scratch_views[k].as_ref().unwrap_or(&modulation_view),
                 };
                 let target = match dispatch.target {
                     SpreadTarget::Scratch(k) => &buffers[k],
                     SpreadTarget::Total => &total,
                     SpreadTarget::Surface => surface.as_ref().expect("keep=surface has a surface image"),
                 };
-                // An image not yet written is not read: any other buffer stands in.
-                let read = |image, buffer| if written_before(&sequence, n, image) { buffer } else { &modulation };
                 let bind_group = self.bind_in_slot_order(
                     spread,
                     interface
@@ -161,26 +195,43 @@ impl Gpu {
                         .iter()
                         .map(|b| match b.role {
                             Role::Params => uniform.as_entire_binding(),
-                            Role::Color => source.as_entire_binding(),
-                            Role::Image => prepared.as_entire_binding(),
-                            Role::Modulation => modulation.as_entire_binding(),
+                            Role::Color => wgpu::BindingResource::TextureView(source),
+                            Role::Image => wgpu::BindingResource::TextureView(&image),
+                            Role::Modulation => wgpu::BindingResource::TextureView(&modulation_view),
                             Role::Output => target.as_entire_binding(),
-                            Role::Total => read(SpreadTarget::Total, &total).as_entire_binding(),
-                            Role::Surface => {
-                                read(SpreadTarget::Surface, surface.as_ref().expect("keep=surface has a surface image"))
+                            Role::Total => {
+                                if written_before(&sequence, n, SpreadTarget::Total) { &total } else { &modulation }
                                     .as_entire_binding()
                             }
-                            Role::Input(_) => {
-                                normals.as_ref().expect("keep=surface is given the normals").as_entire_binding()
+                            Role::Surface => {
+                                wgpu::BindingResource::TextureView(surface_view.as_ref().unwrap_or(&modulation_view))
                             }
+                            Role::Input(_) => wgpu::BindingResource::TextureView(
+                                normal_view.as_ref().expect("keep=surface is given the normals"),
+                            ),
                             other => unreachable!("the spread has no {other:?} binding"),
                         })
                         .collect(),
                 );
-                let mut pass = encoder.begin_compute_pass(&Default::default());
-                pass.set_pipeline(&spread.pipeline);
-                pass.set_bind_group(0, &bind_group, &[]);
-                pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
+                {
+                    let mut pass = encoder.begin_compute_pass(&Default::default());
+                    pass.set_pipeline(&spread.pipeline);
+                    pass.set_bind_group(0, &bind_group, &[]);
+                    // The total is one workgroup's work: the others would do nothing.
+                    if dispatch.target == SpreadTarget::Total {
+                        pass.dispatch_workgroups(1, 1, 1);
+                    } else {
+                        pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
+                    }
+                }
+                // What a later dispatch reads, onto its texture.
+                if n + 1 < sequence.len() {
+                    match dispatch.target {
+                        SpreadTarget::Scratch(k) => scratch_views[k] = Some(sampled(&mut encoder, &buffers[k])?),
+                        SpreadTarget::Surface => surface_view = Some(sampled(&mut encoder, target)?),
+                        SpreadTarget::Total => {}
+                    }
+                }
             }
             // The finishing dispatch wrote the colour the form filters.
             let SpreadTarget::Scratch(last) = sequence.last().expect("a spread has dispatches").target else {

@@ -88,10 +88,17 @@ pub(super) struct KernelContext {
     pub output_format: Option<&'static str>,
     pub tile: Option<Tile>,
     pub atrous: bool,
+    /// The pipeline-overridable constant the kernel declares for its pass's role, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub first_pass_override: Option<&'static str>,
     pub remodulate: bool,
     pub shaped: bool,
     /// Whether an à-trous pass carries the colour variance to the next.
     pub carry_variance: bool,
+    /// The centre pixel's colour texel, and its modulation's (remodulating kernels).
+    pub centre_color: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub centre_modulation: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub neighbour_variance: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]

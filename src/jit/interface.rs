@@ -234,10 +234,12 @@ impl BindingInterface {
     /// pass's image (à-trous fitness kernels).
     pub fn of(kind: KernelKind, layout: &KernelLayout, shape: Shape) -> BindingInterface {
         let textures = matches!(kind, KernelKind::Export(_));
-        // What the kernel reads: textures in exported shaders, storage buffers in filterjit's own.
-        let prefix = if textures { "tex_" } else { "buf_" };
+        // What the kernel reads: textures in exported shaders and in
+        // filterjit's à-trous form ([`Self::samples_images`]), storage buffers elsewhere.
+        let sampled = Self::samples_images(kind, shape);
+        let prefix = if sampled { "tex_" } else { "buf_" };
         let read = |element| {
-            if textures {
+            if sampled {
                 Resource::SampledTexture
             } else {
                 Resource::Storage { element, writable: false }
@@ -267,7 +269,9 @@ impl BindingInterface {
             roles.push((Role::Input(*input), read(Element::of_input(*input)), ident));
         }
         if kind == KernelKind::Fitness {
-            roles.push((Role::Reference, read(Element::Vec4F32), "buf_reference".into()));
+            // Read at the pixel itself, as the fitness kernels after the form read it.
+            let reference = Resource::Storage { element: Element::Vec4F32, writable: false };
+            roles.push((Role::Reference, reference, "buf_reference".into()));
         }
         if shape.remodulate {
             roles.push((Role::Modulation, read(Element::Vec4F32), format!("{prefix}modulation")));
@@ -317,21 +321,59 @@ impl BindingInterface {
         BindingInterface { kind, bindings, uniform, uniform_bytes }
     }
 
+    /// Whether a `kind` kernel of `shape` reads its images (colour, inputs,
+    /// modulation) as sampled textures: exported shaders, and filterjit's own
+    /// à-trous filter and fitness kernels, whose taps are most of a frame's loads. A
+    /// texel fetch loads a pixel's channels for every lane at once on software
+    /// drivers, where a storage-buffer load goes lane by lane, channel by
+    /// channel (docs/BENCHMARKS.md, "Textures for the form's taps"). Window
+    /// kernels keep storage buffers: their workgroup tiles stage them.
+    pub fn samples_images(kind: KernelKind, shape: Shape) -> bool {
+        match kind {
+            KernelKind::Export(_) => true,
+            KernelKind::Filter | KernelKind::Fitness => shape.atrous,
+            KernelKind::Probe => false,
+        }
+    }
+
+    /// The interface of the blit that copies an image of `element`s (`Vec4F32`
+    /// or `F32`) from a storage buffer into a texture of the same values
+    /// (`templates/blit.wgsl.tera`), for kernels that sample their images.
+    pub fn blit(element: Element) -> BindingInterface {
+        let format = match element {
+            Element::F32 => TexelFormat::R32float,
+            _ => TexelFormat::Color(OutputFormat::Rgba32float),
+        };
+        let bindings = dense([
+            (Role::Params, own_params(), "params".to_string()),
+            (Role::Color, Resource::Storage { element, writable: false }, "buf_source".to_string()),
+            (Role::Output, Resource::StorageTexture(format), "tex_out".to_string()),
+        ]);
+        let uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("_pad0", "u32", 8, "unused"),
+            field("_pad1", "u32", 12, "unused"),
+        ];
+        BindingInterface { kind: KernelKind::Filter, bindings, uniform, uniform_bytes: 16 }
+    }
+
     /// The interface of the pipeline's pre-pass (`jit::prepass`): the uniform
     /// `PrepassParams`, the colour, the raw albedo, the prepared colour and
-    /// the modulation it writes. In storage buffers for filterjit (`None`),
-    /// or, for an exported pre-pass, sampled textures in and storage
-    /// textures of `format` out.
+    /// the modulation it writes. Sampled textures in, and storage buffers out
+    /// for filterjit (`None`) or storage textures of `format` out for an
+    /// exported pre-pass.
     pub fn prepass(textures: Option<OutputFormat>) -> BindingInterface {
         let (kind, roles) = match textures {
             None => {
-                let read = Resource::Storage { element: Element::Vec4F32, writable: false };
+                // Sampled, as every image stage of filterjit's filter ([`Self::samples_images`]).
+                let read = Resource::SampledTexture;
                 let written = Resource::Storage { element: Element::Vec4F32, writable: true };
                 (
                     KernelKind::Filter,
                     vec![
-                        (Role::Color, read, "buf_color".to_string()),
-                        (Role::Albedo, read, "buf_albedo".into()),
+                        (Role::Color, read, "tex_color".to_string()),
+                        (Role::Albedo, read, "tex_albedo".into()),
                         (Role::Output, written, "buf_prepared".into()),
                         (Role::Modulation, written, "buf_modulation".into()),
                     ]
@@ -423,7 +465,7 @@ impl BindingInterface {
             None => Resource::Storage { element: Element::Vec4F32, writable: true },
             Some(_) => Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float)),
         };
-        Self::image_stage(textures, &reads, written, [("step", step), ("stage", stage)])
+        Self::image_stage(textures, true, &reads, written, [("step", step), ("stage", stage)])
     }
 
     /// The interface of `planefit`'s kernel (`jit::planefit`): the uniform
@@ -436,7 +478,7 @@ impl BindingInterface {
             None => Resource::Storage { element: Element::Vec4F32, writable: true },
             Some(format) => Resource::StorageTexture(TexelFormat::Color(format)),
         };
-        Self::image_stage(textures, &Self::PLANEFIT_READS, written, Self::PLANEFIT_UNIFORM)
+        Self::image_stage(textures, true, &Self::PLANEFIT_READS, written, Self::PLANEFIT_UNIFORM)
     }
 
     /// The interface of `planefit`'s fitness kernel: [`BindingInterface::planefit`]'s
@@ -446,7 +488,7 @@ impl BindingInterface {
         let reads: Vec<(Role, &str)> =
             Self::PLANEFIT_READS.into_iter().chain([(Role::Reference, "reference")]).collect();
         let written = Resource::Storage { element: Element::Vec2F32, writable: true };
-        Self::image_stage(None, &reads, written, Self::PLANEFIT_UNIFORM)
+        Self::image_stage(None, false, &reads, written, Self::PLANEFIT_UNIFORM)
     }
 
     const PLANEFIT_READS: [(Role, &'static str); 3] = [
@@ -461,29 +503,33 @@ impl BindingInterface {
     ];
 
     /// A built-in image stage's interface (the spreads, `planefit`): the
-    /// uniform (width, height, then two u32 `fields`), `reads` (named
-    /// `buf_NAME`, or exported `tex_NAME` as sampled textures), then the
-    /// output `written`.
+    /// uniform (width, height, then two u32 `fields`), `reads` (sampled
+    /// textures `tex_NAME` where `sampled` or exported, as
+    /// [`Self::samples_images`] says why; else storage buffers `buf_NAME`),
+    /// then the output `written` (`buf_out`, or exported `tex_out`).
     fn image_stage(
         textures: Option<OutputFormat>,
+        sampled: bool,
         reads: &[(Role, &str)],
         written: Resource,
         fields: [(&str, &str); 2],
     ) -> BindingInterface {
-        let (kind, params, read, prefix) = match textures {
-            None => (
-                KernelKind::Filter,
-                own_params(),
-                Resource::Storage { element: Element::Vec4F32, writable: false },
-                "buf",
-            ),
-            Some(format) => (KernelKind::Export(format), Resource::Uniform, Resource::SampledTexture, "tex"),
+        let (kind, params, out) = match textures {
+            None => (KernelKind::Filter, own_params(), "buf_out"),
+            Some(format) => (KernelKind::Export(format), Resource::Uniform, "tex_out"),
         };
-        let reads = reads.iter().map(|&(role, name)| (role, read, format!("{prefix}_{name}")));
+        // The one-texel total stays a buffer in filterjit's own kernels: every invocation reads the same texel.
+        let reads = reads.iter().map(|&(role, name)| {
+            if textures.is_some() || (sampled && role != Role::Total) {
+                (role, Resource::SampledTexture, format!("tex_{name}"))
+            } else {
+                (role, Resource::Storage { element: Element::Vec4F32, writable: false }, format!("buf_{name}"))
+            }
+        });
         let bindings = dense(std::iter::once((Role::Params, params, "params".to_string())).chain(reads).chain([(
             Role::Output,
             written,
-            format!("{prefix}_out"),
+            out.to_string(),
         )]));
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
@@ -517,6 +563,11 @@ impl BindingInterface {
             field("_pad", "u32", 12, "unused"),
         ];
         BindingInterface { kind: KernelKind::Fitness, bindings, uniform, uniform_bytes: 16 }
+    }
+
+    /// Whether the kernel reads its colour (and its other images) as sampled textures.
+    pub fn samples_color(&self) -> bool {
+        self.binding(Role::Color).is_some_and(|b| b.resource == Resource::SampledTexture)
     }
 
     /// The binding that plays `role`, if the kernel has one.

@@ -18,6 +18,33 @@ pub const TEMPLATE_VERSION: u32 = 7;
 /// Workgroup shape of every filter kernel.
 pub const WORKGROUP: [u32; 2] = [8, 8];
 
+/// The pipeline-overridable constant (a `bool`) of an à-trous filter kernel
+/// that reads the guide: whether the pipeline runs the first pass, the only
+/// one that loads the guide (docs/SEMANTICS.md, "The guide"). A dispatch's
+/// role is known when its pipeline is made, so the kernel holds no branch on
+/// it: software drivers execute both sides of a branch on a uniform, and
+/// the guide's load is one of a tap's few costs (docs/BENCHMARKS.md).
+pub const FIRST_PASS: &str = "FIRST_PASS";
+
+/// Which passes of an à-trous form one pipeline of a kernel runs: the
+/// first, or the later ones (see [`FIRST_PASS`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum PassRole {
+    First,
+    Later,
+}
+
+impl PassRole {
+    /// The role of pass `level` (0 is the first).
+    pub fn of(level: u32) -> Self {
+        if level == 0 {
+            PassRole::First
+        } else {
+            PassRole::Later
+        }
+    }
+}
+
 /// Per-pixel data a kernel reads, besides the colour every kernel reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Input {

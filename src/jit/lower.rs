@@ -12,7 +12,7 @@ use super::helpers;
 use super::interface::{BindingInterface, Element, Role};
 use super::ir::{self, feature_ident, var_ident};
 use super::kernel::{
-    wgsl_f32, Input, KernelKind, KernelLayout, LowerOptions, Shape, TEMPLATE_VERSION, WORKGROUP,
+    wgsl_f32, Input, KernelKind, KernelLayout, LowerOptions, Shape, FIRST_PASS, TEMPLATE_VERSION, WORKGROUP,
     WORKGROUP_STORAGE_BUDGET,
 };
 use crate::lang::{Expr, Feature, ScalarVar};
@@ -35,6 +35,9 @@ pub struct KernelSource {
     /// The radius the kernel's workgroup tiles were made for, if it has them:
     /// it must be dispatched with exactly this radius.
     pub tile_radius: Option<u32>,
+    /// Whether the kernel declares [`FIRST_PASS`]: each pipeline of it runs
+    /// the first pass or the later ones ([`PassRole`]).
+    pub first_pass_override: bool,
     pub wgsl: String,
 }
 
@@ -155,6 +158,7 @@ fn lower_members(
         .chain(kind.template_helpers().iter().map(|h| h.to_string()));
     let carried = Input::Variance(ScalarVar::ColorVariance);
     let carry_variance = shape.atrous && layout.inputs.contains(&carried);
+    let first_pass_override = loads.specialises_passes() && shape.atrous && layout.reads_guide();
     let tile_radius = tile.as_ref().map(|t| t.radius);
     let context = KernelContext {
         crate_version: env!("CARGO_PKG_VERSION"),
@@ -184,9 +188,12 @@ fn lower_members(
         },
         tile,
         atrous: shape.atrous,
+        first_pass_override: first_pass_override.then_some(FIRST_PASS),
         remodulate: shape.remodulate,
         shaped: shape != Shape::WINDOW,
         carry_variance,
+        centre_color: loads.centre_image(Role::Color),
+        centre_modulation: shape.remodulate.then(|| loads.centre_image(Role::Modulation)),
         neighbour_variance: carry_variance.then(|| loads.carried_variance_at_neighbour()),
         centre_variance: carry_variance.then(|| var_ident(ScalarVar::ColorVariance)),
         atrous_half: shape.stencil.half_width(),
@@ -195,7 +202,18 @@ fn lower_members(
     };
     let context = tera::Context::from_serialize(&context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
     let wgsl = templates().render(template_of(kind), &context).map_err(|e| LowerError::Template(format!("{e:?}")))?;
-    Ok(KernelSource { kind, options, shape, exprs: exprs.to_vec(), canonical, layout, interface, tile_radius, wgsl })
+    Ok(KernelSource {
+        kind,
+        options,
+        shape,
+        exprs: exprs.to_vec(),
+        canonical,
+        layout,
+        interface,
+        tile_radius,
+        first_pass_override,
+        wgsl,
+    })
 }
 
 impl Tile {
@@ -287,6 +305,9 @@ enum Loads<'a> {
     /// Sampled textures read with `textureLoad`, normalised in the shader by
     /// `params.scale[k]`, k the input's index among the inputs (exported shaders).
     Textures(&'a BindingInterface),
+    /// Sampled textures read with `textureLoad`, already normalised
+    /// (filterjit's own à-trous form, [`BindingInterface::samples_images`]).
+    OwnTextures(&'a BindingInterface),
     /// The workgroup tile, at cell `t` (neighbour side of tiled kernels).
     Tiled,
 }
@@ -295,8 +316,19 @@ impl<'a> Loads<'a> {
     fn of(interface: &'a BindingInterface) -> Self {
         if interface.kind.reads_textures() {
             Loads::Textures(interface)
+        } else if interface.samples_color() {
+            Loads::OwnTextures(interface)
         } else {
             Loads::Buffers(interface)
+        }
+    }
+
+    /// The whole texel (vec4) of the image bound to `role` at the centre pixel.
+    fn centre_image(&self, role: Role) -> String {
+        match self {
+            Loads::Buffers(i) => format!("{}[i]", i.ident(role)),
+            Loads::Textures(i) | Loads::OwnTextures(i) => texel(i.ident(role), ("x", "y")),
+            Loads::Tiled => unreachable!("the centre is never read from a tile"),
         }
     }
 
@@ -313,7 +345,17 @@ impl<'a> Loads<'a> {
             (Loads::Tiled, Feature::Color) => "tile_color[t].xyz".to_string(),
             (Loads::Tiled, _) if f.dimension() == 1 => format!("vec3<f32>({}[t], 0.0, 0.0)", tile_ident(f)),
             (Loads::Tiled, _) => format!("{}[t].xyz", tile_ident(f)),
-            (Loads::Textures(i), Feature::Color) => format!("{}.xyz", texel(i.ident(Role::Color), coords)),
+            (Loads::Textures(i) | Loads::OwnTextures(i), Feature::Color) => {
+                format!("{}.xyz", texel(i.ident(Role::Color), coords))
+            }
+            (Loads::OwnTextures(i), _) => {
+                let texel = texel(i.ident(input), coords);
+                if f.dimension() == 1 {
+                    format!("vec3<f32>({texel}.x, 0.0, 0.0)")
+                } else {
+                    format!("{texel}.xyz")
+                }
+            }
             // In the colour's own units, like the colour.
             (Loads::Textures(i), Feature::Guide) => format!("{}.xyz", texel(i.ident(input), coords)),
             (Loads::Textures(i), _) => {
@@ -328,9 +370,19 @@ impl<'a> Loads<'a> {
     /// Whether the kernel runs as à-trous passes, its pass in `params.level`.
     fn has_passes(&self) -> bool {
         match self {
-            Loads::Buffers(i) | Loads::Textures(i) => i.uniform.iter().any(|f| f.name == "level"),
+            Loads::Buffers(i) | Loads::Textures(i) | Loads::OwnTextures(i) => {
+                i.uniform.iter().any(|f| f.name == "level")
+            }
             Loads::Tiled => false,
         }
+    }
+
+    /// Whether a pass's role is a pipeline-overridable constant ([`FIRST_PASS`])
+    /// rather than read from the uniform: in filterjit's own filter kernels,
+    /// which make a pipeline per role. Fitness kernels, compiled one per
+    /// candidate, and exported shaders, run by other programs, keep one.
+    fn specialises_passes(&self) -> bool {
+        matches!(self, Loads::Buffers(i) | Loads::OwnTextures(i) if i.kind == KernelKind::Filter)
     }
 
     /// The line that binds feature `f` at `side` (`i` or `j`) to `value`;
@@ -341,7 +393,8 @@ impl<'a> Loads<'a> {
     fn bind(&self, side: char, f: Feature, value: String, color: &str) -> String {
         let ident = feature_ident(side, f);
         if f == Feature::Guide && self.has_passes() {
-            format!("var {ident} = {color}; if (params.level == 0u) {{ {ident} = {value}; }}")
+            let first = if self.specialises_passes() { FIRST_PASS } else { "params.level == 0u" };
+            format!("var {ident} = {color}; if ({first}) {{ {ident} = {value}; }}")
         } else {
             format!("let {ident} = {value};")
         }
@@ -353,7 +406,9 @@ impl<'a> Loads<'a> {
             Loads::Buffers(i) => {
                 vec!["let j = u32(yj * w + xj);".into(), format!("let color_j = {}[j].xyz;", i.ident(Role::Color))]
             }
-            Loads::Textures(i) => vec![format!("let color_j = {}.xyz;", texel(i.ident(Role::Color), ("xj", "yj")))],
+            Loads::Textures(i) | Loads::OwnTextures(i) => {
+                vec![format!("let color_j = {}.xyz;", texel(i.ident(Role::Color), ("xj", "yj")))]
+            }
             Loads::Tiled => vec![
                 "let t = u32((yj - tile_y) * TILE_W + (xj - tile_x));".into(),
                 "let color_j = tile_color[t].xyz;".into(),
@@ -366,7 +421,7 @@ impl<'a> Loads<'a> {
     fn variance(&self, v: ScalarVar) -> String {
         let input = Input::Variance(v);
         match self {
-            Loads::Buffers(_) | Loads::Textures(_) if v == ScalarVar::Level => {
+            Loads::Buffers(_) | Loads::Textures(_) | Loads::OwnTextures(_) if v == ScalarVar::Level => {
                 if self.has_passes() {
                     "f32(params.level)".into()
                 } else {
@@ -374,6 +429,7 @@ impl<'a> Loads<'a> {
                 }
             }
             Loads::Buffers(i) => format!("{}[i]", i.ident(Role::Input(input))),
+            Loads::OwnTextures(i) => format!("{}.x", texel(i.ident(Role::Input(input)), ("x", "y"))),
             Loads::Tiled => unreachable!("variances are read at the centre pixel, never from a tile"),
             // Bound to the pre-pass's packed `local` texture: x, y, z in `FROM_PREPASS` order.
             Loads::Textures(i) if v.from_prepass() => {
@@ -399,6 +455,7 @@ impl<'a> Loads<'a> {
         let input = Input::Variance(ScalarVar::ColorVariance);
         match self {
             Loads::Buffers(i) => format!("{}[j]", i.ident(Role::Input(input))),
+            Loads::OwnTextures(i) => format!("{}.x", texel(i.ident(Role::Input(input)), ("xj", "yj"))),
             Loads::Textures(i) => {
                 let texel = texel(i.ident(Role::Input(input)), ("xj", "yj"));
                 format!("fj_carried({texel}.x, {})", scale_of(i, input))

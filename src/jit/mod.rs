@@ -1,6 +1,7 @@
 //! The JIT: typed expression → WGSL (lower) → naga-validated kernel (validate).
 //! Nothing here talks to wgpu; [`crate::gpu`] turns a [`ValidatedKernel`] into a pipeline.
 
+pub mod blit;
 mod context;
 pub mod helpers;
 pub mod interface;
@@ -13,19 +14,22 @@ pub mod reduce;
 pub mod spread;
 pub mod validate;
 
+pub use blit::{blit_module, blit_wgsl, BlitParams};
 pub use helpers::Helper;
 pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot};
 pub use kernel::{
-    wgsl_f32, Input, KernelKind, KernelLayout, LowerOptions, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP,
-    WORKGROUP_STORAGE_BUDGET,
+    wgsl_f32, Input, KernelKind, KernelLayout, LowerOptions, OutputFormat, PassRole, Shape, FIRST_PASS,
+    TEMPLATE_VERSION, WORKGROUP, WORKGROUP_STORAGE_BUDGET,
 };
 pub use lower::{lower, lower_fused, lower_kind, lower_shaped, lower_with, KernelSource, LowerError};
-pub use planefit::{planefit_module, planefit_terms_module, planefit_terms_wgsl, planefit_wgsl, PlaneFitParams};
+pub use planefit::{
+    planefit_module, planefit_terms_module, planefit_terms_wgsl, planefit_wgsl, PlaneFitParams, PLANEFIT_REMODULATED,
+};
 pub use prepass::{prepass_module, prepass_wgsl, PrepassParams};
 pub use reduce::{reduce_module, reduce_wgsl, ReduceParams};
 pub use spread::{
     spread_interface, spread_kernel, spread_module, spread_surface_module, spread_surface_wgsl, spread_wgsl,
-    written_before, SpreadDispatch, SpreadParams, SpreadSource, SpreadStage, SpreadTarget, SurfaceStage,
+    written_before, SpreadDispatch, SpreadParams, SpreadSource, SpreadStage, SpreadTarget, SurfaceStage, SPREAD_STAGE,
 };
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 

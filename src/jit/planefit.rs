@@ -9,6 +9,13 @@ use super::kernel::{wgsl_f32, OutputFormat};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 use crate::pipeline::{self, FilterPipeline, PlaneFit};
 
+/// The pipeline-overridable constant (a `bool`) of filterjit's own planefit
+/// kernels: whether the colour it reads was multiplied by the modulation (a
+/// window form's was; filterjit's à-trous form leaves remodulation to the
+/// fit, which then reads two images a tap, not three). Exported kernels
+/// divide whenever `params.demodulate` says the pipeline demodulates.
+pub const PLANEFIT_REMODULATED: &str = "REMODULATED";
+
 /// The kernel's uniform (`struct Params` of its module; fields in
 /// [`BindingInterface::planefit`]).
 #[repr(C)]
@@ -62,5 +69,7 @@ fn render(interface: &BindingInterface, textures: Option<OutputFormat>, fitness:
     context.insert("relmse_epsilon", &wgsl_f32(crate::metrics::RELMSE_EPSILON));
     context.insert("textures", &textures.is_some());
     context.insert("fitness", &fitness);
+    context.insert("sampled", &interface.samples_color());
+    context.insert("remodulated", PLANEFIT_REMODULATED);
     render_builtin("planefit", include_str!("../../templates/planefit.wgsl.tera"), &context)
 }

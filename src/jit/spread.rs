@@ -10,6 +10,20 @@ use super::kernel::{wgsl_f32, OutputFormat};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 use crate::pipeline::{self, Keep};
 
+/// The pipeline-overridable constant (a `u32`) that holds a dispatch's stage
+/// bits in filterjit's own spread kernels, which make a pipeline per stage;
+/// exported kernels read `params.stage`.
+pub const SPREAD_STAGE: &str = "STAGE";
+
+/// How a spread kernel's text names its stage bits.
+fn stage_name(textures: Option<OutputFormat>) -> &'static str {
+    if textures.is_some() {
+        "params.stage"
+    } else {
+        SPREAD_STAGE
+    }
+}
+
 /// What one pass of the spread kernel does: bits of `params.stage`.
 pub struct SpreadStage;
 
@@ -144,6 +158,7 @@ pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
     let half = pipeline::KEEP_STENCIL.half_width();
     context.insert("passes", &pipeline::KEEP_PASSES);
     context.insert("textures", &textures.is_some());
+    context.insert("stage", stage_name(textures));
     // Each tap's offset and weight h(offset), across the stencil in order.
     let taps: Vec<(i32, String)> = (-half..=half).map(|d| (d, wgsl_f32(pipeline::KEEP_STENCIL.weight(d)))).collect();
     context.insert("taps", &taps);
@@ -169,6 +184,7 @@ pub fn spread_surface_wgsl(textures: Option<OutputFormat>) -> String {
     let half = pipeline::KEEP_STENCIL.half_width();
     context.insert("dispatches", &SpreadParams::sequence(Keep::Surface, 0, 0).len());
     context.insert("textures", &textures.is_some());
+    context.insert("stage", stage_name(textures));
     // Each tap's offsets (dx, dy) and weight h(dx)·h(dy), row by row.
     let taps: Vec<(i32, i32, String)> = (-half..=half)
         .flat_map(|dy| (-half..=half).map(move |dx| (dx, dy)))
