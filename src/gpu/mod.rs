@@ -278,11 +278,7 @@ impl Gpu {
         if let Some(p) = cell.get() {
             return Ok(p);
         }
-        let validated = module.get_or_init(validate).as_ref().map_err(|message| GpuError::Pipeline {
-            expression: name.into(),
-            message: message.clone(),
-            wgsl: String::new(),
-        })?;
+        let validated = built_in_module(module, name, validate)?;
         let label = format!("filterjit {}", name.trim_matches(|c| c == '<' || c == '>'));
         let pipeline = self.create_pipeline(validated, &label).map_err(|message| GpuError::Pipeline {
             expression: name.into(),
@@ -309,11 +305,7 @@ impl Gpu {
         if let Some(p) = cell.lock().expect("pipeline cache lock").get(&value) {
             return Ok(p.clone());
         }
-        let validated = module.get_or_init(validate).as_ref().map_err(|message| GpuError::Pipeline {
-            expression: name.into(),
-            message: message.clone(),
-            wgsl: String::new(),
-        })?;
+        let validated = built_in_module(module, name, validate)?;
         let label = format!("filterjit {} {constant}={value}", name.trim_matches(|c| c == '<' || c == '>'));
         let pipeline = self
             .create_pipeline_with(validated, &label, RuntimeChecks::Full, &[(constant, value as f64)])
@@ -467,6 +459,19 @@ pub struct Pipeline {
 }
 
 /// The bind-group layout entry of one slot.
+/// A built-in kernel's module (`name`, e.g. `<pre-pass>`), validated once per process in `module`.
+fn built_in_module<'m>(
+    module: &'m OnceLock<Result<ValidatedModule, String>>,
+    name: &str,
+    validate: impl FnOnce() -> Result<ValidatedModule, String>,
+) -> Result<&'m ValidatedModule, GpuError> {
+    module.get_or_init(validate).as_ref().map_err(|message| GpuError::Pipeline {
+        expression: name.into(),
+        message: message.clone(),
+        wgsl: String::new(),
+    })
+}
+
 fn layout_entry(slot: &Slot) -> wgpu::BindGroupLayoutEntry {
     let buffer = |ty| wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None };
     let ty = match slot.access {

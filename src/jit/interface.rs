@@ -349,12 +349,7 @@ impl BindingInterface {
             (Role::Color, Resource::Storage { element, writable: false }, "buf_source".to_string()),
             (Role::Output, Resource::StorageTexture(format), "tex_out".to_string()),
         ]);
-        let uniform = vec![
-            field("width", "u32", 0, "image width in pixels"),
-            field("height", "u32", 4, "image height in pixels"),
-            field("_pad0", "u32", 8, "unused"),
-            field("_pad1", "u32", 12, "unused"),
-        ];
+        let uniform = image_uniform([("_pad0", "unused"), ("_pad1", "unused")]);
         BindingInterface { kind: KernelKind::Filter, bindings, uniform, uniform_bytes: 16 }
     }
 
@@ -418,9 +413,10 @@ impl BindingInterface {
 
     /// The interface of `keep`'s spread kernel (`jit::spread`): the uniform
     /// `SpreadParams`, the image it spreads (`Color`), the clamped colour
-    /// (`Image`), the modulation, and its output. In storage buffers for
-    /// filterjit (`None`), or, exported, sampled textures in and an
-    /// `rgba32float` storage texture out.
+    /// (`Image`), the modulation, and its output. Sampled textures in, and a
+    /// storage buffer out for filterjit (`None`) or, exported, an
+    /// `rgba32float` storage texture (the one-texel `Total` of the surface
+    /// spread stays a buffer in filterjit's).
     pub fn spread(textures: Option<OutputFormat>) -> BindingInterface {
         let stage = "0: spread colour - image; 1: spread colour; 2: (colour + image) / modulation";
         Self::spread_with(textures, &[], "pixel step between taps: 2^pass", stage)
@@ -470,9 +466,9 @@ impl BindingInterface {
 
     /// The interface of `planefit`'s kernel (`jit::planefit`): the uniform
     /// `PlaneFitParams`, the form's output (`Color`), the surface normal, the
-    /// modulation it divides by and multiplies back, and its output. In
-    /// storage buffers for filterjit (`None`), or, exported, sampled textures
-    /// in and a storage texture of the output format out.
+    /// modulation it divides by and multiplies back, and its output. Sampled
+    /// textures in, and a storage buffer out for filterjit (`None`) or,
+    /// exported, a storage texture of the output format.
     pub fn planefit(textures: Option<OutputFormat>) -> BindingInterface {
         let written = match textures {
             None => Resource::Storage { element: Element::Vec4F32, writable: true },
@@ -531,13 +527,7 @@ impl BindingInterface {
             written,
             out.to_string(),
         )]));
-        let uniform = vec![
-            field("width", "u32", 0, "image width in pixels"),
-            field("height", "u32", 4, "image height in pixels"),
-            field(fields[0].0, "u32", 8, fields[0].1),
-            field(fields[1].0, "u32", 12, fields[1].1),
-        ];
-        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+        BindingInterface { kind, bindings, uniform: image_uniform(fields), uniform_bytes: 16 }
     }
 
     /// The interface of the fitness reduction (`jit::reduce`): the uniform
@@ -556,12 +546,8 @@ impl BindingInterface {
             ]
             .map(|(role, resource, ident)| (role, resource, ident.to_string())),
         );
-        let uniform = vec![
-            field("width", "u32", 0, "image width in pixels"),
-            field("height", "u32", 4, "image height in pixels"),
-            field("member", "u32", 8, "which member's terms: from member * width * height"),
-            field("_pad", "u32", 12, "unused"),
-        ];
+        let uniform =
+            image_uniform([("member", "which member's terms: from member * width * height"), ("_pad", "unused")]);
         BindingInterface { kind: KernelKind::Fitness, bindings, uniform, uniform_bytes: 16 }
     }
 
@@ -675,6 +661,16 @@ pub const fn own_params() -> Resource {
     Resource::ParamsStorage
 }
 
+/// The 16-byte uniform of a kernel over whole images: width, height, then two u32 `fields` (name, meaning).
+fn image_uniform(fields: [(&str, &str); 2]) -> Vec<UniformField> {
+    vec![
+        field("width", "u32", 0, "image width in pixels"),
+        field("height", "u32", 4, "image height in pixels"),
+        field(fields[0].0, "u32", 8, fields[0].1),
+        field(fields[1].0, "u32", 12, fields[1].1),
+    ]
+}
+
 fn dense(roles: impl IntoIterator<Item = (Role, Resource, String)>) -> Vec<Binding> {
     roles
         .into_iter()
@@ -727,5 +723,35 @@ mod tests {
         assert_eq!(export.binding(Role::Flags), None);
         assert_eq!(export.uniform_bytes, 16 + 32);
         assert_eq!(export.sampled_textures(), 3);
+    }
+
+    #[test]
+    fn the_a_trous_form_samples_its_images_and_writes_buffers() {
+        let layout =
+            KernelLayout { inputs: vec![Input::Feature(Feature::Normal), Input::Variance(ScalarVar::ColorVariance)] };
+        let atrous = Shape { atrous: true, remodulate: true, stencil: crate::pipeline::Stencil::Cubic5 };
+        for kind in [KernelKind::Filter, KernelKind::Fitness] {
+            let interface = BindingInterface::of(kind, &layout, atrous);
+            assert!(interface.samples_color(), "{kind:?}");
+            // Colour, the two inputs and the modulation are read per tap or at the pixel.
+            assert_eq!(interface.sampled_textures(), 4, "{kind:?}");
+            for role in [Role::Output, Role::Flags, Role::VarianceOut] {
+                let written = interface.binding(role).expect("written").resource;
+                assert!(matches!(written, Resource::Storage { writable: true, .. }), "{kind:?} {role:?}");
+            }
+            let window = BindingInterface::of(kind, &layout, Shape::WINDOW);
+            assert!(!window.samples_color() && window.sampled_textures() == 0, "{kind:?}: tiles stage buffers");
+        }
+        let fitness = BindingInterface::of(KernelKind::Fitness, &layout, atrous);
+        assert!(matches!(fitness.binding(Role::Reference).unwrap().resource, Resource::Storage { .. }));
+        // The built-in stages of filterjit's pipeline sample too; the surface spread's total stays a buffer.
+        assert!(BindingInterface::prepass(None).samples_color());
+        assert!(BindingInterface::planefit(None).samples_color());
+        assert!(!BindingInterface::planefit_terms().samples_color());
+        let surface = BindingInterface::spread_surface(None);
+        assert!(surface.samples_color());
+        assert!(matches!(surface.binding(Role::Total).unwrap().resource, Resource::Storage { .. }));
+        let blit = BindingInterface::blit(Element::F32);
+        assert_eq!(blit.binding(Role::Output).unwrap().resource, Resource::StorageTexture(TexelFormat::R32float));
     }
 }

@@ -34,7 +34,7 @@ impl PlaneFitParams {
     }
 }
 
-/// The kernel's WGSL: on storage buffers (filterjit's, `None`), or exported,
+/// The kernel's WGSL: its images sampled, its output a storage buffer (filterjit's, `None`), or exported,
 /// on textures with its output in `format`.
 pub fn planefit_wgsl(textures: Option<OutputFormat>) -> String {
     render(&BindingInterface::planefit(textures), textures, false)

@@ -151,7 +151,7 @@ impl SpreadParams {
     }
 }
 
-/// The spread kernel's WGSL: on storage buffers (filterjit's, `None`), or
+/// The spread kernel's WGSL: its images sampled, its output a storage buffer (filterjit's, `None`), or
 /// exported, on textures (its output `rgba32float` whatever `format` is).
 pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
     let mut context = BindingInterface::spread(textures).template_context();
