@@ -765,3 +765,20 @@ fn planefit_keeps_planes_and_edges_and_flattens_blotches() {
         assert!((o[0] - a[0] as f64).abs() < 1e-6, "{} for {}", o[0], a[0]);
     }
 }
+
+/// An image wider than the device's textures is refused by name before any
+/// work, where the pipeline samples its images; a window without a pre-pass
+/// (storage buffers) still filters it.
+#[test]
+fn an_image_wider_than_a_texture_is_refused_naming_it() {
+    use filterjit::gpu::GpuError;
+    let gpu = gpu();
+    let mut scene = synthetic_scene(gpu.max_image_side() as usize + 1, 1, 5);
+    scene.name = "panorama".into();
+    let err = SceneBuffers::for_pipeline(&gpu, &scene, &pipeline("atrous=2")).err().expect("refused");
+    assert!(matches!(err, GpuError::ImageTooLarge { .. }), "{err}");
+    let message = err.to_string();
+    assert!(message.contains("panorama") && message.contains(&format!("{}x1", scene.width)), "{message}");
+    let window = gpu_filter(&gpu, &parse_expr("exp(-distance2(color))").unwrap(), &scene, &FilterPipeline::WINDOW, 1);
+    assert_eq!(window.len(), scene.width);
+}

@@ -106,6 +106,19 @@ impl SceneBuffers {
 
     /// Upload the scene's colour and run `pipeline`'s pre-pass on the device.
     pub fn for_pipeline(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
+        // The pre-pass, an à-trous form and `planefit` sample their images (`BindingInterface::samples_images`).
+        let samples = pipeline.has_prepass() || pipeline.is_atrous() || pipeline.planefit.is_some();
+        let limit = gpu.max_image_side();
+        if samples && (scene.width as u64 > limit as u64 || scene.height as u64 > limit as u64) {
+            return Err(GpuError::ImageTooLarge {
+                scene: scene.name.clone(),
+                width: scene.width as u32,
+                height: scene.height as u32,
+                pipeline: *pipeline,
+                limit,
+                adapter: gpu.info().name.clone(),
+            });
+        }
         let rgba = |c: &[[f32; 3]]| -> Vec<[f32; 4]> { c.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect() };
         let color = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("color"),
@@ -313,7 +326,6 @@ impl Gpu {
         if planefit.is_some() {
             buffers.ensure(self, scene, Input::Feature(Feature::Normal))?;
         }
-
         let device = self.device();
         let pixels = (buffers.width * buffers.height) as u64;
         let out = device.create_buffer(&wgpu::BufferDescriptor {

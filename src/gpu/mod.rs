@@ -58,6 +58,18 @@ pub enum GpuError {
     Shape { expression: String, shape: crate::jit::Shape, pipeline: crate::pipeline::FilterPipeline },
     #[error("scoring `planefit` needs an à-trous form before it; pipeline `{pipeline}` has a window")]
     PlaneFitAfterWindow { pipeline: crate::pipeline::FilterPipeline },
+    #[error(
+        "scene `{scene}` is {width}x{height} pixels; pipeline `{pipeline}` reads its images as textures, which {adapter} \
+         allows at most {limit} pixels a side (a `window` form without a pre-pass reads storage buffers instead)"
+    )]
+    ImageTooLarge {
+        scene: String,
+        width: u32,
+        height: u32,
+        pipeline: crate::pipeline::FilterPipeline,
+        limit: u32,
+        adapter: String,
+    },
     #[error("the kernel for `{expression}` stages tiles for radius {tiled}; it cannot filter with radius {radius}")]
     TileRadius { expression: String, tiled: u32, radius: u32 },
 }
@@ -205,6 +217,12 @@ impl Gpu {
 
     /// Whether the device allows as many storage buffers as the kernel binds.
     /// Storage buffers a kernel may bind on this device.
+    /// The longest side of a texture on this device: the largest image a
+    /// pipeline whose kernels sample their images can filter.
+    pub fn max_image_side(&self) -> u32 {
+        self.limits.max_texture_dimension_2d
+    }
+
     pub fn storage_buffer_limit(&self) -> u32 {
         self.limits.max_storage_buffers_per_shader_stage
     }

@@ -171,7 +171,8 @@ pub struct AtrousParams {
     pub step: u32,
     /// The pass index, from 0.
     pub level: u32,
-    /// 1 in the last pass (which remodulates), else 0.
+    /// 1 in the last pass where it remodulates, else 0 (filterjit's form
+    /// leaves remodulation to `planefit` where the fit follows).
     pub last: u32,
     pub _pad: u32,
 }

@@ -36,7 +36,7 @@ pub struct KernelSource {
     /// it must be dispatched with exactly this radius.
     pub tile_radius: Option<u32>,
     /// Whether the kernel declares [`FIRST_PASS`]: each pipeline of it runs
-    /// the first pass or the later ones ([`PassRole`]).
+    /// the first pass or the later ones ([`super::kernel::PassRole`]).
     pub first_pass_override: bool,
     pub wgsl: String,
 }
