@@ -231,7 +231,11 @@ impl SceneBuffers {
         }
         if input == Input::Feature(Feature::Guide) {
             // Made from the colour on the device, once.
-            let (guide, dispatch) = gpu.guide(&self.color, self.width, self.height)?;
+            // Its kernel samples the colour, as the form's first pass does: one texture for both.
+            let mut encoder = gpu.device().create_command_encoder(&Default::default());
+            let views = self.sampled_views(gpu, &mut encoder, &[Role::Color], 0)?;
+            gpu.queue().submit([encoder.finish()]);
+            let (guide, dispatch) = gpu.guide(&views[&Role::Color], self.width, self.height)?;
             self.guide_dispatch = Some(dispatch);
             self.inputs.insert(input, guide);
             return Ok(());

@@ -33,11 +33,11 @@ impl Gpu {
         Ok(())
     }
 
-    /// The guide of `color` (RGBA per pixel, `width` × `height`), left on
-    /// the device, and how long its dispatch took. Callers hold the GL turn.
+    /// The guide of `color` (the colour's texture, `width` × `height`), left
+    /// on the device, and how long its dispatch took. Callers hold the GL turn.
     pub(super) fn guide(
         &self,
-        color: &wgpu::Buffer,
+        color: &wgpu::TextureView,
         width: u32,
         height: u32,
     ) -> Result<(wgpu::Buffer, Duration), GpuError> {
@@ -58,10 +58,6 @@ impl Gpu {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let start = Instant::now();
         let mut encoder = device.create_command_encoder(&Default::default());
-        // The kernel samples the colour, as the form's passes do.
-        let sampled = self.sampled_texture(Element::Vec4F32, (width, height));
-        self.record_blit(&mut encoder, color, &sampled, Element::Vec4F32, (width, height))?;
-        let sampled = sampled.create_view(&Default::default());
         // In bands of rows, as the form's passes are dispatched.
         let band = rows_per_dispatch(width, GUIDE_STENCIL.half_width() as u32);
         for row in (0..height).step_by(band as usize) {
@@ -69,7 +65,7 @@ impl Gpu {
             let params = self.params_buffer(interface.params(), "guide params", &params);
             let bind_group = self.bind_group(&pipeline, interface, |role| match role {
                 Role::Params => params.as_entire_binding(),
-                Role::Color => wgpu::BindingResource::TextureView(&sampled),
+                Role::Color => wgpu::BindingResource::TextureView(color),
                 Role::Output => guide.as_entire_binding(),
                 Role::Flags => flags.as_entire_binding(),
                 other => unreachable!("the guide's kernel binds no {other:?}"),
