@@ -78,9 +78,7 @@ impl Gpu {
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let colour = self.sampled_texture(Element::Vec4F32, size);
-        self.record_blit(encoder, image, &colour, Element::Vec4F32, size)?;
-        let colour = colour.create_view(&Default::default());
+        let colour = self.blitted(encoder, image, Element::Vec4F32, size)?.create_view(&Default::default());
         let normal = Role::Input(Input::Feature(Feature::Normal));
         let roles: &[Role] = if buffers.modulation.is_some() { &[normal, Role::Modulation] } else { &[normal] };
         let views = buffers.sampled_views(self, encoder, roles, 0)?;

@@ -107,9 +107,7 @@ impl Gpu {
         // The kernel samples the colour and the albedo.
         let size = (width, height);
         let sampled = |encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer| {
-            let texture = self.sampled_texture(Element::Vec4F32, size);
-            self.record_blit(encoder, buffer, &texture, Element::Vec4F32, size)?;
-            Ok::<_, GpuError>(texture.create_view(&Default::default()))
+            Ok::<_, GpuError>(self.blitted(encoder, buffer, Element::Vec4F32, size)?.create_view(&Default::default()))
         };
         let noisy = sampled(&mut encoder, color)?;
         // Without demodulation the albedo is never read: the colour stands in for it.

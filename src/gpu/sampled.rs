@@ -39,7 +39,7 @@ impl Gpu {
     }
 
     /// Record into `encoder` the blit of `source` (`element`s) into `target`.
-    pub(super) fn record_blit(
+    fn record_blit(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         source: &wgpu::Buffer,
@@ -65,8 +65,22 @@ impl Gpu {
         Ok(())
     }
 
+    /// A new texture of `source`'s values (`element`s, a frame of `size`),
+    /// its blit recorded into `encoder`.
+    pub(super) fn blitted(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        source: &wgpu::Buffer,
+        element: Element,
+        size: (u32, u32),
+    ) -> Result<wgpu::Texture, GpuError> {
+        let texture = self.sampled_texture(element, size);
+        self.record_blit(encoder, source, &texture, element, size)?;
+        Ok(texture)
+    }
+
     /// A texture of the frame's size for an image of `element`s.
-    pub(super) fn sampled_texture(&self, element: Element, (width, height): (u32, u32)) -> wgpu::Texture {
+    fn sampled_texture(&self, element: Element, (width, height): (u32, u32)) -> wgpu::Texture {
         self.device().create_texture(&wgpu::TextureDescriptor {
             label: Some("sampled image"),
             size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
@@ -133,8 +147,7 @@ impl SceneBuffers {
                     Role::Input(input) => self.inputs.get(&input).expect("inputs are uploaded before binding"),
                     other => unreachable!("a form samples no {other:?}"),
                 };
-                let texture = gpu.sampled_texture(element_of(role), size);
-                gpu.record_blit(encoder, source, &texture, element_of(role), size)?;
+                let texture = gpu.blitted(encoder, source, element_of(role), size)?;
                 self.sampled.scene.insert(role, texture.clone());
                 texture
             };
