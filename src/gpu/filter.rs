@@ -123,7 +123,7 @@ impl SceneBuffers {
         let color = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("color"),
             contents: bytemuck::cast_slice(&rgba(&scene.color)),
-            usage: wgpu::BufferUsages::STORAGE,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         });
         let (width, height) = (scene.width as u32, scene.height as u32);
         if pipeline.planefit.is_some() {
@@ -255,7 +255,7 @@ impl SceneBuffers {
         let buffer = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
             label: Some("input"),
             contents: bytemuck::cast_slice(&data),
-            usage: wgpu::BufferUsages::STORAGE,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
         });
         self.inputs.insert(input, buffer);
         Ok(())

@@ -81,7 +81,7 @@ impl Gpu {
             device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some("albedo"),
                 contents: bytemuck::cast_slice(a),
-                usage: wgpu::BufferUsages::STORAGE,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             })
         });
         let make = |label| {
@@ -159,7 +159,7 @@ impl Gpu {
                 device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("normals"),
                     contents: bytemuck::cast_slice(n),
-                    usage: wgpu::BufferUsages::STORAGE,
+                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 })
             });
             // The kernel samples its images: each is blitted into a texture

@@ -2,8 +2,8 @@
 //! ([`crate::jit::BindingInterface::samples_images`]: filterjit's à-trous
 //! form). [`SceneBuffers`] keeps every image in a storage buffer, which the
 //! other kernels read; a kernel that samples gets textures of the same
-//! values, blitted on the device (`jit::blit`): the scene's once, the pass
-//! images before each pass that reads them.
+//! values, copied or blitted on the device (`jit::blit`): the scene's once,
+//! the pass images before each pass that reads them.
 
 use std::collections::HashMap;
 use std::sync::OnceLock;
@@ -38,7 +38,12 @@ impl Gpu {
         self.built_in(cell, module, "<blit>", validate, || crate::jit::blit_wgsl(element))
     }
 
-    /// Record into `encoder` the blit of `source` (`element`s) into `target`.
+    /// Record into `encoder` the blit of `source` (`element`s) into `target`:
+    /// a buffer-to-texture copy where the rows' bytes meet the copy's
+    /// alignment (and `source` may be copied from), else the blit kernel. The
+    /// texel values are the same either way; the copy skips a dispatch and
+    /// the clear wgpu gives a texture a kernel writes first (about 0.8 ms a
+    /// 256² image on lavapipe; docs/BENCHMARKS.md, "Where the default's frame goes").
     fn record_blit(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -47,6 +52,27 @@ impl Gpu {
         element: Element,
         (width, height): (u32, u32),
     ) -> Result<(), GpuError> {
+        // The texture's texel is the element's bytes for these two (the formats of `sampled_texture`).
+        let same_layout = matches!(element, Element::F32 | Element::Vec4F32);
+        let row_bytes = width * element.bytes();
+        if same_layout
+            && source.usage().contains(wgpu::BufferUsages::COPY_SRC)
+            && row_bytes.is_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
+        {
+            encoder.copy_buffer_to_texture(
+                wgpu::TexelCopyBufferInfo {
+                    buffer: source,
+                    layout: wgpu::TexelCopyBufferLayout {
+                        offset: 0,
+                        bytes_per_row: Some(row_bytes),
+                        rows_per_image: Some(height),
+                    },
+                },
+                target.as_image_copy(),
+                wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+            );
+            return Ok(());
+        }
         let pipeline = self.blit_pipeline(element)?;
         let interface = BindingInterface::blit(element);
         let params = BlitParams { width, height, _pad: [0; 2] };
@@ -91,7 +117,10 @@ impl Gpu {
                 Element::F32 => wgpu::TextureFormat::R32Float,
                 _ => wgpu::TextureFormat::Rgba32Float,
             },
-            usage: wgpu::TextureUsages::STORAGE_BINDING | wgpu::TextureUsages::TEXTURE_BINDING,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_DST
+                | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         })
     }
@@ -154,5 +183,69 @@ impl SceneBuffers {
             views.insert(role, texture.create_view(&Default::default()));
         }
         Ok(views)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use wgpu::util::DeviceExt;
+
+    use super::*;
+
+    /// The texture `blitted` makes of `values` (`element`s, `width` wide),
+    /// read back; `copyable`: whether the buffer allows the copy path.
+    fn texels(gpu: &Gpu, values: &[f32], element: Element, width: u32, copyable: bool) -> Vec<f32> {
+        let floats = element.bytes() / 4;
+        let height = values.len() as u32 / floats / width;
+        let extra = if copyable { wgpu::BufferUsages::COPY_SRC } else { wgpu::BufferUsages::empty() };
+        let source = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
+            label: None,
+            contents: bytemuck::cast_slice(values),
+            usage: wgpu::BufferUsages::STORAGE | extra,
+        });
+        let row = (width * element.bytes()).next_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT);
+        let staging = gpu.device().create_buffer(&wgpu::BufferDescriptor {
+            label: None,
+            size: (row * height) as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let scope = gpu.device().push_error_scope(wgpu::ErrorFilter::Validation);
+        let mut encoder = gpu.device().create_command_encoder(&Default::default());
+        let texture = gpu.blitted(&mut encoder, &source, element, (width, height)).unwrap();
+        encoder.copy_texture_to_buffer(
+            texture.as_image_copy(),
+            wgpu::TexelCopyBufferInfo {
+                buffer: &staging,
+                layout: wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(row),
+                    rows_per_image: Some(height),
+                },
+            },
+            wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        );
+        let bytes = gpu.finish_and_read(encoder, scope, "reading a texture back", &staging).unwrap();
+        let read: Vec<f32> = bytemuck::pod_collect_to_vec(&bytes);
+        let (row, line) = ((row / 4) as usize, (width * floats) as usize);
+        (0..height as usize).flat_map(|y| read[y * row..][..line].to_vec()).collect()
+    }
+
+    /// A buffer reaches its texture by a copy where its rows allow one and
+    /// by the blit kernel elsewhere, with the same texel values either way.
+    #[test]
+    fn copied_and_blitted_textures_hold_the_buffers_values() {
+        let gpu = Gpu::open(&Default::default()).expect("an adapter");
+        // 16 RGBA texels and 64 scalars a row meet the copy's 256-byte alignment; 17 and 65 do not.
+        for (element, widths) in [(Element::Vec4F32, [16, 17]), (Element::F32, [64, 65])] {
+            for width in widths {
+                let count = (width * 3 * element.bytes() / 4) as usize;
+                let values: Vec<f32> = (0..count).map(|i| (i as f32 * 0.37).sin() * 1e3 + i as f32).collect();
+                for copyable in [true, false] {
+                    let got = texels(&gpu, &values, element, width, copyable);
+                    assert_eq!(got, values, "{element:?}, {width} wide, copyable {copyable}");
+                }
+            }
+        }
     }
 }
