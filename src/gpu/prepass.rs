@@ -162,7 +162,7 @@ impl Gpu {
                     usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                 })
             });
-            // The kernel samples its images: each is blitted into a texture
+            // The kernel samples its images: each is copied (or blitted) into a texture
             // once it is written (the scratch images after every dispatch
             // that writes them), and read from there.
             let image = sampled(&mut encoder, &prepared)?;

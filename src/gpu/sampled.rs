@@ -117,6 +117,8 @@ impl Gpu {
                 Element::F32 => wgpu::TextureFormat::R32Float,
                 _ => wgpu::TextureFormat::Rgba32Float,
             },
+            // Written by the blit (storage) or a copy (COPY_DST), sampled by
+            // the kernels, read back by the tests (COPY_SRC).
             usage: wgpu::TextureUsages::STORAGE_BINDING
                 | wgpu::TextureUsages::TEXTURE_BINDING
                 | wgpu::TextureUsages::COPY_DST
