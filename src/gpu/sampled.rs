@@ -237,10 +237,9 @@ mod tests {
     /// by the blit kernel elsewhere, with the same texel values either way.
     #[test]
     fn copied_and_blitted_textures_hold_the_buffers_values() {
-        // On the backend the tests run on (`FILTERJIT_BACKEND`, as `environment` reads it for the binary).
-        let name = std::env::var("FILTERJIT_BACKEND").unwrap_or_default();
-        let backends = crate::gpu::adapter::backends_named(&name).expect("FILTERJIT_BACKEND names a backend");
-        let gpu = Gpu::open(&crate::gpu::adapter::Request { backends, name: None }).expect("an adapter");
+        // On the adapter the tests run on, read at the edge as `tests/common` reads it.
+        let environment = crate::environment::Environment::read().expect("FILTERJIT_BACKEND names a backend");
+        let gpu = Gpu::open(&environment.adapter).expect("an adapter");
         eprintln!("on {}", gpu.describe());
         // 16 RGBA texels and 64 scalars a row meet the copy's 256-byte alignment; 17 and 65 do not.
         for (element, widths) in [(Element::Vec4F32, [16, 17]), (Element::F32, [64, 65])] {
