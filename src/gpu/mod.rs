@@ -215,14 +215,13 @@ impl Gpu {
         self.pipelines.lock().expect("pipeline cache lock").len()
     }
 
-    /// Whether the device allows as many storage buffers as the kernel binds.
-    /// Storage buffers a kernel may bind on this device.
     /// The longest side of a texture on this device: the largest image a
     /// pipeline whose kernels sample their images can filter.
     pub fn max_image_side(&self) -> u32 {
         self.limits.max_texture_dimension_2d
     }
 
+    /// Storage buffers a kernel may bind on this device.
     pub fn storage_buffer_limit(&self) -> u32 {
         self.limits.max_storage_buffers_per_shader_stage
     }

@@ -92,7 +92,7 @@ impl Gpu {
     }
 
     /// A new texture of `source`'s values (`element`s, a frame of `size`),
-    /// its blit recorded into `encoder`.
+    /// its copy or blit recorded into `encoder` (`record_blit`).
     pub(super) fn blitted(
         &self,
         encoder: &mut wgpu::CommandEncoder,
