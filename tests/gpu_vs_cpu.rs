@@ -20,6 +20,7 @@ use filterjit::lang::random::Alphabet;
 use filterjit::lang::{parse_expr, BinaryOp, Expr, Feature, PairOp, UnaryOp};
 use filterjit::rng::Rng;
 use filterjit::scene::{self, Absent, Request};
+use filterjit::semantics::BIG;
 use filterjit::{corpus, metrics, Scene};
 
 use crate::common::{agree_fraction, env_usize, gpu, mitsuba_sample, synthetic_scene};
@@ -87,8 +88,18 @@ fn wgsl_accuracy(op: &str, a: f64, b: f64, c: f64) -> f64 {
     let trig = 2f64.powi(-11);
     match op {
         "sin" | "cos" => trig,
-        // Inherited from sin/cos: an error e in either moves tan by about e·(1 + tan²).
-        "tan" => trig * (1.0 + c * c) * 2.0,
+        // Inherited from sin/cos: tan = sin / cos with each off by up to `trig`.
+        // Where cos is that close to 0 its sign is not the device's to keep, and
+        // tan may be anything in [−BIG, BIG]: an NVIDIA H200 gives +BIG at f32's
+        // π/2, where the exact value is −2.3e7 (docs/SEMANTICS.md).
+        "tan" => {
+            let (sin, cos) = (a.sin().abs(), a.cos().abs());
+            if cos <= 2.0 * trig {
+                2.0 * BIG
+            } else {
+                2.0 * ((sin + trig) / (cos - trig) - sin / cos)
+            }
+        }
         // The kernel composes two sines and a division by (τπ²s²) for s ≥ SINC_SMALL.
         "sinc" => {
             trig * 4.0
