@@ -80,7 +80,7 @@ pub fn calibrate(
         interleaved(gpu, &refs, buffers, scene, radius, rounds)?.into_iter().map(|s| s.median).collect();
     let constant_near = stat(
         (0..rounds)
-            .map(|_| Ok(ms(gpu.filter(&kernels[1], buffers, scene, 1)?.dispatch)))
+            .map(|_| Ok(ms(gpu.filter(&kernels[1], buffers, scene, 1)?.kernel_time())))
             .collect::<anyhow::Result<Vec<f64>>>()?,
     )
     .median;

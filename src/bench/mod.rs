@@ -51,6 +51,8 @@ pub struct BenchSettings {
 #[derive(Clone, Debug, Serialize)]
 pub struct Report {
     pub device: String,
+    /// What warm kernel times are read from.
+    pub clock: Clock,
     pub scene: String,
     pub width: usize,
     pub height: usize,
@@ -72,6 +74,16 @@ pub struct Report {
     /// The bench scene's noisy input's light, beside the frames' outputs'.
     pub noisy_light: Option<f64>,
     pub generations: Vec<GenerationResult>,
+}
+
+/// The clock warm kernels are timed by ([`crate::gpu::Filtered::kernel_time`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Clock {
+    /// The device's timestamps around the commands.
+    Device,
+    /// Wall time from submission to completion: the device has no timestamps.
+    Wall,
 }
 
 /// Run everything on `scene` (which must carry the corpus's features and a reference).
@@ -103,6 +115,7 @@ pub fn run(
     let generations = generation::measure(gpu, generation_scenes, settings, progress)?;
     Ok(Report {
         device: gpu.describe(),
+        clock: if gpu.has_device_clock() { Clock::Device } else { Clock::Wall },
         scene: scene.name.clone(),
         width: scene.width,
         height: scene.height,

@@ -1,13 +1,19 @@
 //! The report as the text table `filterjit bench` prints.
 
-use super::{Report, FRAME_SIDE, THESIS_TABLE_4_1};
+use super::{Clock, Report, FRAME_SIDE, THESIS_TABLE_4_1};
 
 pub fn table(r: &Report) -> String {
     let mut t = String::new();
     t += &format!(
-        "device  {}\nscene   {} ({}x{}), radius {}, {} repeats per figure (median [min, max])\n\n",
+        "device  {}\nscene   {} ({}x{}), radius {}, {} repeats per figure (median [min, max])\n",
         r.device, r.scene, r.width, r.height, r.settings.radius, r.settings.repeats
     );
+    t += match r.clock {
+        Clock::Device => {
+            "clock   warm kernels on the device's own clock (timestamps around the commands); whole frames by wall time\n\n"
+        }
+        Clock::Wall => "clock   wall time, submission to completion (this device has no timestamps)\n\n",
+    };
     t += "compile latency and throughput per expression (ms)\n";
     t += &format!(
         "{:>4} {:>7} {:>8} {:>9} {:>9} {:>10} {:>10} {:>11} {:>9} {:>10}\n",

@@ -38,7 +38,7 @@ pub(super) fn interleaved(
     let mut times = vec![Vec::new(); kernels.len()];
     for _ in 0..repeats.max(1) {
         for (k, kernel) in kernels.iter().enumerate() {
-            times[k].push(ms(gpu.filter(kernel, buffers, scene, radius)?.dispatch));
+            times[k].push(ms(gpu.filter(kernel, buffers, scene, radius)?.kernel_time()));
         }
     }
     Ok(times.into_iter().map(stat).collect())

@@ -84,7 +84,8 @@ impl Front {
 /// Side of the scene the front is timed on: large enough for stable times.
 pub const FRONT_TIMING_SIDE: usize = 256;
 
-/// Time each filter through `pipeline` on `scene`: one warm-up, then the median of `repeats`, in ms per megapixel.
+/// Time each filter through `pipeline` on `scene`: one warm-up, then the median of `repeats`, in ms per megapixel,
+/// on the device's clock where it has one (`Filtered::kernel_time`).
 pub fn time_filters(
     gpu: &Gpu,
     exprs: &[(Expr, u32)],
@@ -102,7 +103,7 @@ pub fn time_filters(
             let kernel = jit::compile_shaped(e, KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
             gpu.filter(&kernel, &mut buffers, scene, radius)?;
             let mut times: Vec<f64> = (0..repeats.max(1))
-                .map(|_| Ok(gpu.filter(&kernel, &mut buffers, scene, radius)?.dispatch.as_secs_f64()))
+                .map(|_| Ok(gpu.filter(&kernel, &mut buffers, scene, radius)?.kernel_time().as_secs_f64()))
                 .collect::<Result<_>>()?;
             times.sort_by(f64::total_cmp);
             Ok(times[times.len() / 2] * 1e3 / mpx)

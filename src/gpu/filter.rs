@@ -76,8 +76,13 @@ pub struct Filtered {
     /// Domain-error bits per pixel.
     pub flags: Vec<u32>,
     pub pipeline: PipelineTiming,
-    /// Wall time from submission until the results were on the device, all bands.
+    /// Wall time from recording the first pass until the results were on
+    /// the device, all bands and passes.
     pub dispatch: Duration,
+    /// The same span on the device's own clock (`Gpu::has_device_clock`):
+    /// the GPU's work without the submit–wait round trip; `None` where the
+    /// device has no clock.
+    pub device_time: Option<Duration>,
     /// Number of dispatches the image was split into.
     pub dispatches: usize,
 }
@@ -85,6 +90,12 @@ pub struct Filtered {
 impl Filtered {
     pub fn rgb(&self) -> Vec<[f32; 3]> {
         self.color.iter().map(|c| [c[0], c[1], c[2]]).collect()
+    }
+
+    /// What the kernel's work took: on the device's clock where it has one,
+    /// else by wall time.
+    pub fn kernel_time(&self) -> Duration {
+        self.device_time.unwrap_or(self.dispatch)
     }
 
     /// Number of pixels with at least one domain error.
@@ -353,18 +364,24 @@ impl Gpu {
 
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let band = rows_per_dispatch(buffers.width, buffers.pipeline.pass_radius(radius));
+        let stopwatch = self.stopwatch();
         let start = Instant::now();
         let mut dispatches = 0;
+        // The whole frame is one submission, waited for once: on a hardware
+        // GPU each submit–wait round trip costs about as much as a 256²
+        // pass itself (docs/BENCHMARKS.md, "On a GPU"). Bands keep each
+        // dispatch short for watchdogs; they need no wait between them.
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        if let Some(stopwatch) = &stopwatch {
+            stopwatch.start(&mut encoder);
+        }
         for level in 0..passes {
             let pipeline = if level == 0 { &first } else { later.as_ref().expect("made for every later pass") };
-            // The textures this pass samples, blitted first where they are new.
+            // The textures this pass samples, copied first where they are new.
             let views = if sampled.is_empty() {
                 HashMap::new()
             } else {
-                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-                let views = buffers.sampled_views(self, &mut encoder, &sampled, level)?;
-                self.queue().submit([encoder.finish()]);
-                views
+                buffers.sampled_views(self, &mut encoder, &sampled, level)?
             };
             let mut row = 0;
             while row < buffers.height {
@@ -390,7 +407,6 @@ impl Gpu {
                     role if views.contains_key(&role) => wgpu::BindingResource::TextureView(&views[&role]),
                     role => buffers.pass_resource(role, level).expect("inputs are uploaded before binding"),
                 });
-                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
                 {
                     let mut pass = encoder
                         .begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
@@ -398,8 +414,6 @@ impl Gpu {
                     pass.set_bind_group(0, &bind_group, &[]);
                     pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
                 }
-                self.queue().submit([encoder.finish()]);
-                self.wait("filtering")?;
                 dispatches += 1;
                 row += rows;
             }
@@ -407,16 +421,19 @@ impl Gpu {
         // `planefit` after the form: one dispatch over the last pass's whole image.
         let out = match planefit {
             Some(fit) => {
-                let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
                 let fitted = self.planefit(&mut encoder, buffers, fit, &out)?;
-                self.queue().submit([encoder.finish()]);
-                self.wait("fitting planes")?;
                 dispatches += 1;
                 fitted
             }
             None => out,
         };
+        if let Some(stopwatch) = &stopwatch {
+            stopwatch.stop(&mut encoder);
+        }
+        self.queue().submit([encoder.finish()]);
+        self.wait("filtering")?;
         let dispatch = start.elapsed();
+        let device_time = stopwatch.map(|s| s.read(self)).transpose()?;
 
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, pixels * 16);
@@ -424,7 +441,7 @@ impl Gpu {
         let bytes = self.finish_and_read(encoder, scope, "filtering", &staging)?;
         let color: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes[..(pixels * 16) as usize]);
         let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(pixels * 16) as usize..]);
-        Ok(Filtered { color, flags, pipeline: timing, dispatch, dispatches })
+        Ok(Filtered { color, flags, pipeline: timing, dispatch, device_time, dispatches })
     }
 
     /// Run a probe kernel ([`crate::jit::KernelKind::Probe`]): the raw weight

@@ -2,6 +2,7 @@
 //! buffers and filter dispatches. Only validated kernels come in.
 
 pub mod adapter;
+mod clock;
 mod filter;
 mod fitness;
 mod guide;
@@ -110,6 +111,8 @@ pub struct Gpu {
     /// thread waits for a long dispatch or links a large program). On GL,
     /// filterjit's own threads therefore take turns here, without a timeout.
     gl_turns: Option<Mutex<()>>,
+    /// Stopwatches on the device's clock not in use ([`Gpu::stopwatch`]).
+    stopwatches: Mutex<Vec<clock::Stopwatch>>,
 }
 
 /// A built-in kernel's pipelines, one per value of its pipeline-overridable constant.
@@ -146,7 +149,8 @@ impl Gpu {
         let limits = adapter.limits();
         let descriptor = wgpu::DeviceDescriptor {
             label: Some("filterjit"),
-            required_features: wgpu::Features::empty(),
+            // The device's clock where offered: `filterjit bench` times kernels by it.
+            required_features: adapter.features() & clock::CLOCK_FEATURES,
             required_limits: limits.clone(),
             ..Default::default()
         };
@@ -170,6 +174,7 @@ impl Gpu {
             reduce: OnceLock::new(),
             kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,
+            stopwatches: Mutex::new(Vec::new()),
         })
     }
 

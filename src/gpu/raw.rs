@@ -29,8 +29,10 @@ impl Gpu {
         Ok(RawKernel { pipeline })
     }
 
-    /// One dispatch of `groups` workgroups; returns its wall time (submission
-    /// to completion) and the contents of the `Write` buffers.
+    /// One dispatch of `groups` workgroups; returns its time (on the
+    /// device's clock where it has one, as [`Filtered::kernel_time`](super::Filtered::kernel_time),
+    /// else wall time from submission to completion) and the contents of the
+    /// `Write` buffers.
     pub fn run_raw(
         &self,
         kernel: &RawKernel,
@@ -68,17 +70,28 @@ impl Gpu {
             .chain(made.iter().map(|(buffer, _)| buffer.as_entire_binding()))
             .collect();
         let bind_group = self.bind_in_slot_order(&kernel.pipeline, resources);
+        let stopwatch = self.stopwatch();
         let mut encoder = device.create_command_encoder(&Default::default());
+        if let Some(stopwatch) = &stopwatch {
+            stopwatch.start(&mut encoder);
+        }
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&kernel.pipeline.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
+        if let Some(stopwatch) = &stopwatch {
+            stopwatch.stop(&mut encoder);
+        }
         let start = Instant::now();
         self.queue().submit([encoder.finish()]);
         self.wait("running a raw kernel")?;
-        let elapsed = start.elapsed();
+        let wall = start.elapsed();
+        let elapsed = match stopwatch {
+            Some(stopwatch) => stopwatch.read(self)?,
+            None => wall,
+        };
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "running a raw kernel", message: e.to_string() });
         }

@@ -1,0 +1,115 @@
+//! The device's own clock: timestamps the GPU writes at the start and at the
+//! end of a command buffer, where the adapter offers them (wgpu's
+//! `TIMESTAMP_QUERY` with `TIMESTAMP_QUERY_INSIDE_ENCODERS`). On a hardware
+//! GPU a small dispatch's wall time is mostly the submit–wait round trip
+//! (about 0.2 ms on an NVIDIA H200 whatever the kernel, docs/BENCHMARKS.md,
+//! "On a GPU"); the device's clock measures the work itself, so kernels
+//! compare by what they cost rather than by that floor.
+
+use std::time::Duration;
+
+use super::{Gpu, GpuError};
+
+/// What the device must offer for [`Stopwatch`]es.
+pub(super) const CLOCK_FEATURES: wgpu::Features =
+    wgpu::Features::TIMESTAMP_QUERY.union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS);
+
+/// Two timestamps around the commands recorded between [`Stopwatch::start`]
+/// and [`Stopwatch::stop`] in one encoder.
+pub(crate) struct Stopwatch {
+    set: wgpu::QuerySet,
+    resolved: wgpu::Buffer,
+    staging: wgpu::Buffer,
+}
+
+impl Gpu {
+    /// Whether this device has its own clock ([`Filtered::device_time`](super::Filtered::device_time)).
+    pub fn has_device_clock(&self) -> bool {
+        self.device.features().contains(CLOCK_FEATURES)
+    }
+
+    /// A stopwatch on the device's clock, or `None` where it has none: a
+    /// used one where one is free ([`Stopwatch::read`] hands it back), so
+    /// that timing a frame allocates nothing on the device.
+    pub(super) fn stopwatch(&self) -> Option<Stopwatch> {
+        if !self.has_device_clock() {
+            return None;
+        }
+        if let Some(free) = self.stopwatches.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).pop() {
+            return Some(free);
+        }
+        let buffer = |label, usage| {
+            self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: 16,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        Some(Stopwatch {
+            set: self.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("stopwatch"),
+                ty: wgpu::QueryType::Timestamp,
+                count: 2,
+            }),
+            resolved: buffer("stopwatch resolved", wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC),
+            staging: buffer("stopwatch readback", wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST),
+        })
+    }
+}
+
+impl Stopwatch {
+    /// Record the first timestamp: before every later command of `encoder`.
+    pub fn start(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.write_timestamp(&self.set, 0);
+    }
+
+    /// Record the second timestamp and what makes both readable.
+    pub fn stop(&self, encoder: &mut wgpu::CommandEncoder) {
+        encoder.write_timestamp(&self.set, 1);
+        encoder.resolve_query_set(&self.set, 0..2, &self.resolved, 0);
+        encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.staging, 0, 16);
+    }
+
+    /// The time between the two, once the encoder's submission is done;
+    /// the stopwatch goes back to `gpu`'s free ones.
+    pub fn read(self, gpu: &Gpu) -> Result<Duration, GpuError> {
+        let bytes = gpu.read(&self.staging)?;
+        let ticks: [u64; 2] = bytemuck::pod_read_unaligned(&bytes[..16]);
+        let nanoseconds = ticks[1].saturating_sub(ticks[0]) as f64 * f64::from(gpu.queue().get_timestamp_period());
+        gpu.stopwatches.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).push(self);
+        Ok(Duration::from_secs_f64(nanoseconds * 1e-9))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::gpu::SceneBuffers;
+    use crate::scene::Scene;
+
+    /// Where the device has a clock, a frame's time on it is positive and
+    /// lies inside the frame's wall time; elsewhere there is none.
+    #[test]
+    fn the_device_clock_times_the_work_inside_its_wall_time() {
+        // On the adapter the tests run on, read at the edge as `tests/common` reads it.
+        let environment = crate::environment::Environment::read().expect("FILTERJIT_BACKEND names a backend");
+        let gpu = Gpu::open(&environment.adapter).expect("an adapter");
+        let (width, height) = (48, 40);
+        let color = (0..width * height).map(|i| [(i as f32 * 0.1).sin().abs(), 0.5, (i % 7) as f32 * 0.1]).collect();
+        let scene = Scene::from_color("clock", width, height, color);
+        let expr = crate::lang::parse_expr("exp(-distance2(color) / (1 + sqrt(distance2(pixel))))").unwrap();
+        let kernel = crate::jit::compile(&expr).unwrap();
+        let mut buffers = SceneBuffers::new(&gpu, &scene);
+        for _ in 0..3 {
+            let frame = gpu.filter(&kernel, &mut buffers, &scene, 4).unwrap();
+            eprintln!("on {}: wall {:?}, device {:?}", gpu.describe(), frame.dispatch, frame.device_time);
+            assert_eq!(frame.device_time.is_some(), gpu.has_device_clock());
+            if let Some(device) = frame.device_time {
+                assert!(device > Duration::ZERO, "the device's clock did not move");
+                assert!(device <= frame.dispatch, "device {device:?} longer than the wall time {:?}", frame.dispatch);
+                assert_eq!(frame.kernel_time(), device);
+            }
+        }
+    }
+}
