@@ -690,7 +690,8 @@ fn test_results_state_each_outputs_light() {
 
 /// `filterjit evolve` with no preset improves on the best shipped filter: it
 /// is the seed, scored against, and kept (2 elites), so the best's training
-/// fitness is at most the seed's (1), and the last line compares the two.
+/// fitness is at most the seed's (1), and the last lines compare the two
+/// (then, where the seed stayed best, say how to search longer).
 #[test]
 fn the_default_search_starts_from_the_shipped_filter_and_says_how_it_compares() {
     let (training, test) = datasets();
@@ -711,8 +712,29 @@ fn the_default_search_starts_from_the_shipped_filter_and_says_how_it_compares() 
     let said = format!("{stdout}{stderr}");
     let pipeline = filterjit::corpus::resolve_with_pipeline(&format!("@{shipped}")).unwrap().pipeline.unwrap();
     assert!(said.contains(&format!("pipeline {pipeline},")), "in the shipped filter's pipeline ({pipeline}): {said}");
-    let last = stdout.lines().last().unwrap();
-    assert!(last.starts_with(&format!("against   @{shipped}, the seed: on the test scenes")), "{last}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    let against = lines.iter().rposition(|l| l.starts_with("against   ")).expect("an `against` line");
+    assert!(lines[against].starts_with(&format!("against   @{shipped}, the seed: on the test scenes")), "{stdout}");
+    // What follows it: nothing where the best beat the seed, else how to search longer.
+    let figures: Vec<f64> = lines[against]
+        .split(" is ")
+        .nth(1)
+        .and_then(|rest| rest.split(" (").next())
+        .map(|pair| pair.split(" against ").filter_map(|x| x.trim().parse().ok()).collect())
+        .unwrap_or_default();
+    let [best, seed] = figures[..] else { panic!("`best against seed` in {}", lines[against]) };
+    match &lines[against + 1..] {
+        [] => assert!(best <= seed, "nothing beat the seed and nothing says how to search longer: {stdout}"),
+        [longer] => {
+            assert!(best >= seed, "the best beat the seed, yet: {longer}");
+            assert!(
+                longer.starts_with("longer    nothing beat the seed on the test scenes in 2 generations"),
+                "{longer}"
+            );
+            assert!(longer.contains("`--generations 20`"), "{longer}");
+        }
+        more => panic!("lines after the comparison: {more:?}"),
+    }
     let fitness: f64 = stdout
         .lines()
         .find_map(|l| l.strip_prefix("fitness   ")?.split_whitespace().next()?.parse().ok())

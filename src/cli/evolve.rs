@@ -153,6 +153,7 @@ pub(crate) fn evolve_on(
     // The run's fitness rule in words, so that the final figure is read as what it is
     // (a resumed run must have the same settings, so these are the checkpoint's).
     let rule = config.fitness.describe();
+    let generations = settings.generations;
     let summary = ev::run_with(
         &gpu,
         ev::RunOptions {
@@ -270,6 +271,16 @@ pub(crate) fn evolve_on(
     );
     if let Some(line) = compared {
         println!("{line}");
+        // On a GPU the default's generations take seconds (docs/BENCHMARKS.md,
+        // "evolve on the H200"): say how to search longer when this one found nothing.
+        if summary.test_best.normalised >= summary.test_seed.normalised {
+            println!(
+                "longer    nothing beat the seed on the test scenes in {generations} generation{} ({:.0} s): `--generations {}` searches ten times as long",
+                if generations == 1 { "" } else { "s" },
+                summary.seconds,
+                10 * generations
+            );
+        }
     }
     Ok(())
 }
