@@ -43,6 +43,9 @@ impl Auxiliary {
 pub struct Denoised {
     pub color: Vec<[f32; 3]>,
     pub warm_ms: Vec<f64>,
+    /// The kind of device OIDN chose, as it names it (`CPU`, `CUDA`, …): its
+    /// default is the fastest it finds, a GPU where its build supports one.
+    pub device: String,
 }
 
 impl Oidn {
@@ -119,7 +122,12 @@ impl Oidn {
         if (ow, oh) != (w, h) {
             bail!("{}: {ow}x{oh}, expected {w}x{h}", output.display());
         }
-        Ok(Denoised { color, warm_ms: times.into_iter().skip(1).collect() })
+        // "  device=CUDA, version=…": the device it initialised.
+        let device = stdout
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("device=")?.split(',').next().map(str::to_string))
+            .unwrap_or_else(|| "device unnamed".to_string());
+        Ok(Denoised { color, warm_ms: times.into_iter().skip(1).collect(), device })
     }
 }
 

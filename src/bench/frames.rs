@@ -1,12 +1,12 @@
 //! The filter pipeline's stages and forms, and whole frames of the shipped
 //! à-trous filters against the peer, on a frame of [`FRAME_SIDE`]².
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
 use super::timing::{ms, stat, Stat};
-use crate::gpu::{Gpu, SceneBuffers};
+use crate::gpu::{Gpu, SceneBuffers, Span};
 use crate::jit::{self, KernelKind, LowerOptions};
 use crate::lang::{parse_expr, Expr};
 use crate::metrics;
@@ -25,9 +25,9 @@ pub struct StageResult {
 }
 
 /// One way to denoise a whole frame of [`FRAME_SIDE`]²: a shipped filter in
-/// the pipeline it is stored with (device time of the pre-pass and every pass
-/// of the form), or OIDN (CPU wall time of each execution, as `oidnDenoise`
-/// reports it).
+/// the pipeline it is stored with (wall time of the pre-pass and every pass
+/// of the form, each from recording to completion), or OIDN (wall time of
+/// each execution, as `oidnDenoise` reports it, on the device it chose).
 #[derive(Clone, Debug, Serialize)]
 pub struct FrameResult {
     pub method: String,
@@ -45,6 +45,10 @@ pub struct FrameResult {
     /// (outliers, `keep`'s spread, demodulation), its guide and its passes,
     /// in ms (none for OIDN). They need not add up to `warm_ms`'s median.
     pub parts_ms: Option<FrameParts>,
+    /// The same frame on the device's own clock, the sum of its parts' (none
+    /// where the device has no clock, and for OIDN): the GPU's work, without
+    /// the submit–wait round trips.
+    pub device_ms: Option<Stat>,
 }
 
 /// The medians of a frame's three parts, in ms.
@@ -163,16 +167,22 @@ pub(super) fn whole_frames(
     }
     let mut times = vec![Vec::new(); prepared.len()];
     let mut parts = vec![[Vec::new(), Vec::new(), Vec::new()]; prepared.len()];
+    let mut on_device = vec![Vec::new(); prepared.len()];
     for _ in 0..repeats.max(1) * 2 {
         for (k, (_, pipeline, kernel, _, _)) in prepared.iter().enumerate() {
             let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
-            let passes = gpu.filter(kernel, &mut buffers, &frame, radius)?.dispatch;
+            let filtered = gpu.filter(kernel, &mut buffers, &frame, radius)?;
+            let passes = Span { wall: filtered.dispatch, device: filtered.device_time };
             // The guide, where the weight reads it, is made by the filter's first run.
-            let (prepass, guide) =
-                (buffers.prepass_time().unwrap_or_default(), buffers.guide_time().unwrap_or_default());
-            times[k].push(ms(prepass + guide + passes));
-            for (part, t) in parts[k].iter_mut().zip([prepass, guide, passes]) {
+            let stages = [buffers.prepass_time(), buffers.guide_time(), Some(passes)];
+            let wall = stages.map(|s| s.map_or(Duration::ZERO, |s| s.wall));
+            times[k].push(ms(wall.iter().sum()));
+            for (part, t) in parts[k].iter_mut().zip(wall) {
                 part.push(ms(t));
+            }
+            // Every stage that ran, on the device's clock (none where it has none).
+            if let Some(device) = stages.iter().flatten().map(|s| s.device).sum::<Option<Duration>>() {
+                on_device[k].push(ms(device));
             }
         }
     }
@@ -182,16 +192,18 @@ pub(super) fn whole_frames(
             let denoised = oidn.denoise(&frame, crate::oidn::Auxiliary::AlbedoNormal, repeats.max(1) * 2, &dir);
             let on_scene = oidn.denoise(scene, crate::oidn::Auxiliary::AlbedoNormal, 1, &dir);
             let _ = std::fs::remove_dir_all(&dir);
-            Some((stat(denoised?.warm_ms), metrics::light(&on_scene?.color, reference)))
+            let denoised = denoised?;
+            Some((stat(denoised.warm_ms), metrics::light(&on_scene?.color, reference), denoised.device))
         }
         None => None,
     };
-    let over = |median: f64| oidn.as_ref().map(|(o, _)| median / o.median);
+    let over = |median: f64| oidn.as_ref().map(|(o, _, _)| median / o.median);
     let mut results: Vec<FrameResult> = prepared
         .into_iter()
         .zip(times)
         .zip(parts)
-        .map(|(((name, pipeline, _, compile_ms, light), times), [prepass, guide, passes])| {
+        .zip(on_device)
+        .map(|((((name, pipeline, _, compile_ms, light), times), [prepass, guide, passes]), on_device)| {
             let warm_ms = stat(times);
             let parts_ms =
                 FrameParts { prepass: stat(prepass).median, guide: stat(guide).median, passes: stat(passes).median };
@@ -204,12 +216,13 @@ pub(super) fn whole_frames(
                 warm_ms,
                 light,
                 parts_ms: Some(parts_ms),
+                device_ms: (!on_device.is_empty()).then(|| stat(on_device)),
             }
         })
         .collect();
-    if let Some((warm_ms, light)) = oidn {
+    if let Some((warm_ms, light, device)) = oidn {
         results.push(FrameResult {
-            method: "OIDN colour+albedo+normal (CPU)".into(),
+            method: format!("OIDN colour+albedo+normal ({device})"),
             pipeline: "-".into(),
             compile_ms: None,
             ms_per_mpx: warm_ms.median / mpx,
@@ -217,6 +230,7 @@ pub(super) fn whole_frames(
             warm_ms,
             light,
             parts_ms: None,
+            device_ms: None,
         });
     }
     Ok(results)

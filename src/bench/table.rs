@@ -10,7 +10,7 @@ pub fn table(r: &Report) -> String {
     );
     t += match r.clock {
         Clock::Device => {
-            "clock   warm kernels on the device's own clock (timestamps around the commands); whole frames by wall time\n\n"
+            "clock   warm kernels on the device's own clock (timestamps around the commands); whole frames by wall time and on it\n\n"
         }
         Clock::Wall => "clock   wall time, submission to completion (this device has no timestamps)\n\n",
     };
@@ -115,22 +115,31 @@ pub fn table(r: &Report) -> String {
     }
     if !r.frames.is_empty() {
         t += &format!(
-            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: device time of pre-pass, guide + passes; OIDN: CPU wall time; warm median [min, max], ms; pre / guide / passes: the medians of the pre-pass, the guide and the passes; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
+            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: wall time of pre-pass, guide + passes; OIDN: wall time of each execution on the device it chose; warm median [min, max], ms; pre / guide / passes: the medians of the pre-pass, the guide and the passes; on device: the frame's median on the device's own clock; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
             r.noisy_light.map_or("-".into(), |l| format!("{l:.3}"))
         );
         let pipeline_width = r.frames.iter().map(|f| f.pipeline.len()).max().unwrap_or(0).max("pipeline".len());
         t += &format!(
-            "  {:<34} {:<pipeline_width$} {:>10} {:>22} {:>22} {:>10} {:>8} {:>7}\n",
-            "method", "pipeline", "compile ms", "warm ms", "pre / guide / passes", "ms/Mpx", "/ OIDN", "light"
+            "  {:<34} {:<pipeline_width$} {:>10} {:>22} {:>22} {:>9} {:>10} {:>8} {:>7}\n",
+            "method",
+            "pipeline",
+            "compile ms",
+            "warm ms",
+            "pre / guide / passes",
+            "on device",
+            "ms/Mpx",
+            "/ OIDN",
+            "light"
         );
         for f in &r.frames {
             t += &format!(
-                "  {:<34} {:<pipeline_width$} {:>10} {:>22} {:>22} {:>10.1} {:>8} {:>7}\n",
+                "  {:<34} {:<pipeline_width$} {:>10} {:>22} {:>22} {:>9} {:>10.1} {:>8} {:>7}\n",
                 f.method,
                 f.pipeline,
                 f.compile_ms.map_or("-".into(), |v| format!("{v:.1}")),
                 format!("{:.2} [{:.2}, {:.2}]", f.warm_ms.median, f.warm_ms.min, f.warm_ms.max),
                 f.parts_ms.map_or("-".into(), |p| format!("{:.1} / {:.1} / {:.1}", p.prepass, p.guide, p.passes)),
+                f.device_ms.as_ref().map_or("-".into(), |d| format!("{:.3}", d.median)),
                 f.ms_per_mpx,
                 f.over_oidn.map_or("-".into(), |v| format!("{v:.2}x")),
                 f.light.map_or("-".into(), |v| format!("{v:.3}")),

@@ -10,6 +10,15 @@ use std::time::Duration;
 
 use super::{Gpu, GpuError};
 
+/// How long a stage of a frame took: by wall time, from recording its
+/// commands until the device was done, and on the device's own clock where it
+/// has one (the GPU's work without the submit–wait round trip).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Span {
+    pub wall: Duration,
+    pub device: Option<Duration>,
+}
+
 /// What the device must offer for [`Stopwatch`]es.
 pub(super) const CLOCK_FEATURES: wgpu::Features =
     wgpu::Features::TIMESTAMP_QUERY.union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS);
@@ -101,15 +110,22 @@ mod tests {
         let expr = crate::lang::parse_expr("exp(-distance2(color) / (1 + sqrt(distance2(pixel))))").unwrap();
         let kernel = crate::jit::compile(&expr).unwrap();
         let mut buffers = SceneBuffers::new(&gpu, &scene);
+        let within = |span: Span| {
+            assert_eq!(span.device.is_some(), gpu.has_device_clock());
+            if let Some(device) = span.device {
+                assert!(device > Duration::ZERO, "the device's clock did not move");
+                assert!(device <= span.wall, "device {device:?} longer than the wall time {:?}", span.wall);
+            }
+        };
         for _ in 0..3 {
             let frame = gpu.filter(&kernel, &mut buffers, &scene, 4).unwrap();
             eprintln!("on {}: wall {:?}, device {:?}", gpu.describe(), frame.dispatch, frame.device_time);
-            assert_eq!(frame.device_time.is_some(), gpu.has_device_clock());
-            if let Some(device) = frame.device_time {
-                assert!(device > Duration::ZERO, "the device's clock did not move");
-                assert!(device <= frame.dispatch, "device {device:?} longer than the wall time {:?}", frame.dispatch);
-                assert_eq!(frame.kernel_time(), device);
-            }
+            within(Span { wall: frame.dispatch, device: frame.device_time });
+            assert_eq!(frame.kernel_time(), frame.device_time.unwrap_or(frame.dispatch));
         }
+        // The pre-pass (with `keep`'s spread) is timed on both clocks too.
+        let pipeline: crate::pipeline::FilterPipeline = "outliers=2,keep,atrous=2".parse().unwrap();
+        let prepared = SceneBuffers::for_pipeline(&gpu, &scene, &pipeline).unwrap();
+        within(prepared.prepass_time().expect("a pipeline with a pre-pass times it"));
     }
 }

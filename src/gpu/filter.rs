@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use wgpu::util::DeviceExt;
 
-use super::{Gpu, GpuError, PipelineTiming};
+use super::{Gpu, GpuError, PipelineTiming, Span};
 use crate::jit::interface::Element;
 use crate::jit::{AtrousParams, Input, Params, PassRole, Role, Shape, ValidatedKernel, WORKGROUP};
 use crate::lang::{Feature, ScalarVar};
@@ -31,9 +31,9 @@ pub struct SceneBuffers {
     /// Ping-pong images and carried variances of the à-trous passes.
     pub(super) scratch: Option<Scratch>,
     /// How long the pre-pass's dispatch took (pipelines with a pre-pass).
-    pub(super) prepass_dispatch: Option<Duration>,
+    pub(super) prepass_dispatch: Option<Span>,
     /// How long the guide's dispatch took, once a kernel that reads it has run.
-    pub(super) guide_dispatch: Option<Duration>,
+    pub(super) guide_dispatch: Option<Span>,
     /// Textures of these images, for kernels that sample them.
     pub(super) sampled: super::sampled::Sampled,
 }
@@ -201,17 +201,17 @@ impl SceneBuffers {
         &self.pipeline
     }
 
-    /// Wall time of the pre-pass's dispatch when these buffers were prepared
-    /// (submission to completion; uploads excluded), or `None` without a
-    /// pre-pass: with [`Filtered::dispatch`], a frame's device time.
-    pub fn prepass_time(&self) -> Option<Duration> {
+    /// Time of the pre-pass's dispatch when these buffers were prepared
+    /// (recording to completion; uploads excluded), or `None` without a
+    /// pre-pass: with [`Filtered::dispatch`], a frame's time.
+    pub fn prepass_time(&self) -> Option<Span> {
         self.prepass_dispatch
     }
 
-    /// Wall time of the guide's dispatch (docs/SEMANTICS.md, "The guide"),
+    /// Time of the guide's dispatch (docs/SEMANTICS.md, "The guide"),
     /// made when a kernel that reads `guide` first ran on these buffers, or
     /// `None` before: a frame of such a kernel also costs this.
-    pub fn guide_time(&self) -> Option<Duration> {
+    pub fn guide_time(&self) -> Option<Span> {
         self.guide_dispatch
     }
 

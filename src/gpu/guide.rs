@@ -5,10 +5,10 @@
 //! is its reference.
 
 use std::sync::OnceLock;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use super::filter::{rows_per_dispatch, uniform_bytes};
-use super::{Gpu, GpuError};
+use super::{Gpu, GpuError, Span};
 use crate::jit::interface::Element;
 use crate::jit::{self, KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
 use crate::pipeline::GUIDE_STENCIL;
@@ -40,7 +40,7 @@ impl Gpu {
         color: &wgpu::TextureView,
         width: u32,
         height: u32,
-    ) -> Result<(wgpu::Buffer, Duration), GpuError> {
+    ) -> Result<(wgpu::Buffer, Span), GpuError> {
         let kernel = guide_kernel()?;
         // A cache hit: `prepare_guide_for` made it before the caller's GL turn.
         let (pipeline, _) = self.pipeline(kernel)?;
@@ -56,8 +56,12 @@ impl Gpu {
         let (guide, flags) = (make("guide", 16), make("guide flags", 4));
         let interface = &kernel.source().interface;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let stopwatch = self.stopwatch();
         let start = Instant::now();
         let mut encoder = device.create_command_encoder(&Default::default());
+        if let Some(stopwatch) = &stopwatch {
+            stopwatch.start(&mut encoder);
+        }
         // In bands of rows, as the form's passes are dispatched.
         let band = rows_per_dispatch(width, GUIDE_STENCIL.half_width() as u32);
         for row in (0..height).step_by(band as usize) {
@@ -75,12 +79,15 @@ impl Gpu {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), band.min(height - row).div_ceil(WORKGROUP[1]), 1);
         }
+        if let Some(stopwatch) = &stopwatch {
+            stopwatch.stop(&mut encoder);
+        }
         self.queue().submit([encoder.finish()]);
         self.wait("blurring the guide")?;
-        let dispatch = start.elapsed();
+        let wall = start.elapsed();
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "blurring the guide", message: error.to_string() });
         }
-        Ok((guide, dispatch))
+        Ok((guide, Span { wall, device: stopwatch.map(|s| s.read(self)).transpose()? }))
     }
 }

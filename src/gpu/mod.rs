@@ -16,6 +16,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
+pub use clock::Span;
 pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
 pub use fitness::{FitnessScene, Region, SceneError as FitnessError};
 pub use raw::{RawBuffer, RawKernel};

@@ -6,7 +6,7 @@ use std::sync::{Arc, OnceLock};
 
 use wgpu::util::DeviceExt;
 
-use super::{Gpu, GpuError, Pipeline};
+use super::{Gpu, GpuError, Pipeline, Span};
 use crate::jit::interface::Element;
 use crate::jit::{
     written_before, BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, SpreadTarget,
@@ -102,8 +102,12 @@ impl Gpu {
             })
         });
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let stopwatch = self.stopwatch();
         let start = std::time::Instant::now();
         let mut encoder = device.create_command_encoder(&Default::default());
+        if let Some(stopwatch) = &stopwatch {
+            stopwatch.start(&mut encoder);
+        }
         // The kernel samples the colour and the albedo.
         let size = (width, height);
         let sampled = |encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer| {
@@ -237,12 +241,16 @@ impl Gpu {
             };
             std::mem::swap(&mut prepared, &mut buffers[last]);
         }
+        if let Some(stopwatch) = &stopwatch {
+            stopwatch.stop(&mut encoder);
+        }
         self.queue().submit([encoder.finish()]);
         self.wait("running the pre-pass")?;
-        let dispatch = start.elapsed();
+        let wall = start.elapsed();
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "running the pre-pass", message: error.to_string() });
         }
+        let dispatch = Span { wall, device: stopwatch.map(|s| s.read(self)).transpose()? };
         Ok(Prepared { color: prepared, modulation, local, dispatch })
     }
 }
@@ -253,6 +261,6 @@ pub(super) struct Prepared {
     pub modulation: wgpu::Buffer,
     /// `ScalarVar::FROM_PREPASS`, in that order.
     pub local: [wgpu::Buffer; 3],
-    /// Wall time from submission until the pre-pass was done.
-    pub dispatch: std::time::Duration,
+    /// From recording until the pre-pass was done.
+    pub dispatch: Span,
 }

@@ -257,7 +257,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                     .map(|_| SceneBuffers::for_pipeline(gpu, &timing_scene, &method.pipeline))
                     .collect::<Result<Vec<_>, _>>()?;
                 let mut prepass_ms: Vec<f64> =
-                    preparations.iter().map(|b| b.prepass_time().unwrap_or_default().as_secs_f64() * 1e3).collect();
+                    preparations.iter().map(|b| b.prepass_time().map_or(0.0, |t| t.wall.as_secs_f64() * 1e3)).collect();
                 prepass_ms.sort_by(f64::total_cmp);
                 let timing_buffers = preparations.pop().expect("at least one preparation");
                 prepared.insert(key.clone(), (buffers, timing_buffers, prepass_ms[prepass_ms.len() / 2]));
@@ -415,7 +415,7 @@ fn measure(
     gpu.filter(kernel, timing.buffers, timing.scene, radius)?;
     // The guide runs once a frame too, where the weight reads it (the warm-up made it).
     let guide = match kernel.source().layout.reads_guide() {
-        true => timing.buffers.guide_time().unwrap_or_default().as_secs_f64(),
+        true => timing.buffers.guide_time().map_or(0.0, |t| t.wall.as_secs_f64()),
         false => 0.0,
     };
     let mut times = Vec::new();
