@@ -368,9 +368,9 @@ impl Gpu {
         let start = Instant::now();
         let mut dispatches = 0;
         // The whole frame is one submission, waited for once: on a hardware
-        // GPU each submit–wait round trip costs about as much as a 256²
-        // pass itself (docs/BENCHMARKS.md, "On a GPU"). Bands keep each
-        // dispatch short for watchdogs; they need no wait between them.
+        // GPU each submit–wait round trip costs 0.25–0.3 ms, several times a
+        // 256² pass's own work (docs/BENCHMARKS.md, "On a GPU"). Bands keep
+        // each dispatch short for watchdogs; they need no wait between them.
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         if let Some(stopwatch) = &stopwatch {
             stopwatch.start(&mut encoder);
