@@ -13,19 +13,23 @@ use super::{Gpu, GpuError};
 /// How long a stage of a frame took: by wall time, from recording its
 /// commands until the device was done, and on the device's own clock where it
 /// has one (the GPU's work without the submit–wait round trip).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Span {
     pub wall: Duration,
     pub device: Option<Duration>,
 }
 
-/// What the device must offer for [`Stopwatch`]es.
+/// What the device must offer for a [`Stopwatch`] to time anything.
 pub(super) const CLOCK_FEATURES: wgpu::Features =
     wgpu::Features::TIMESTAMP_QUERY.union(wgpu::Features::TIMESTAMP_QUERY_INSIDE_ENCODERS);
 
-/// Two timestamps around the commands recorded between [`Stopwatch::start`]
-/// and [`Stopwatch::stop`] in one encoder.
-pub(crate) struct Stopwatch {
+/// The device's clock around the commands recorded between
+/// [`Stopwatch::start`] and [`Stopwatch::stop`] in one encoder; on a device
+/// without one it records nothing and reads `None`.
+pub(crate) struct Stopwatch(Option<Timestamps>);
+
+/// Two timestamps and what reads them back.
+pub(crate) struct Timestamps {
     set: wgpu::QuerySet,
     resolved: wgpu::Buffer,
     staging: wgpu::Buffer,
@@ -37,15 +41,15 @@ impl Gpu {
         self.device.features().contains(CLOCK_FEATURES)
     }
 
-    /// A stopwatch on the device's clock, or `None` where it has none: a
-    /// used one where one is free ([`Stopwatch::read`] hands it back), so
-    /// that timing a frame allocates nothing on the device.
-    pub(super) fn stopwatch(&self) -> Option<Stopwatch> {
+    /// A stopwatch on the device's clock: used timestamps where some are free
+    /// ([`Stopwatch::read`] hands them back), so that timing a frame
+    /// allocates nothing on the device.
+    pub(super) fn stopwatch(&self) -> Stopwatch {
         if !self.has_device_clock() {
-            return None;
+            return Stopwatch(None);
         }
         if let Some(free) = self.stopwatches.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).pop() {
-            return Some(free);
+            return Stopwatch(Some(free));
         }
         let buffer = |label, usage| {
             self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -55,7 +59,7 @@ impl Gpu {
                 mapped_at_creation: false,
             })
         };
-        Some(Stopwatch {
+        Stopwatch(Some(Timestamps {
             set: self.device.create_query_set(&wgpu::QuerySetDescriptor {
                 label: Some("stopwatch"),
                 ty: wgpu::QueryType::Timestamp,
@@ -63,31 +67,36 @@ impl Gpu {
             }),
             resolved: buffer("stopwatch resolved", wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC),
             staging: buffer("stopwatch readback", wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST),
-        })
+        }))
     }
 }
 
 impl Stopwatch {
     /// Record the first timestamp: before every later command of `encoder`.
     pub fn start(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.write_timestamp(&self.set, 0);
+        if let Some(t) = &self.0 {
+            encoder.write_timestamp(&t.set, 0);
+        }
     }
 
     /// Record the second timestamp and what makes both readable.
     pub fn stop(&self, encoder: &mut wgpu::CommandEncoder) {
-        encoder.write_timestamp(&self.set, 1);
-        encoder.resolve_query_set(&self.set, 0..2, &self.resolved, 0);
-        encoder.copy_buffer_to_buffer(&self.resolved, 0, &self.staging, 0, 16);
+        if let Some(t) = &self.0 {
+            encoder.write_timestamp(&t.set, 1);
+            encoder.resolve_query_set(&t.set, 0..2, &t.resolved, 0);
+            encoder.copy_buffer_to_buffer(&t.resolved, 0, &t.staging, 0, 16);
+        }
     }
 
-    /// The time between the two, once the encoder's submission is done;
-    /// the stopwatch goes back to `gpu`'s free ones.
-    pub fn read(self, gpu: &Gpu) -> Result<Duration, GpuError> {
-        let bytes = gpu.read(&self.staging)?;
+    /// The time between the two once the encoder's submission is done
+    /// (`None` without a clock); the timestamps go back to `gpu`'s free ones.
+    pub fn read(self, gpu: &Gpu) -> Result<Option<Duration>, GpuError> {
+        let Some(t) = self.0 else { return Ok(None) };
+        let bytes = gpu.read(&t.staging)?;
         let ticks: [u64; 2] = bytemuck::pod_read_unaligned(&bytes[..16]);
         let nanoseconds = ticks[1].saturating_sub(ticks[0]) as f64 * f64::from(gpu.queue().get_timestamp_period());
-        gpu.stopwatches.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).push(self);
-        Ok(Duration::from_secs_f64(nanoseconds * 1e-9))
+        gpu.stopwatches.lock().unwrap_or_else(|poisoned| poisoned.into_inner()).push(t);
+        Ok(Some(Duration::from_secs_f64(nanoseconds * 1e-9)))
     }
 }
 

@@ -372,9 +372,7 @@ impl Gpu {
         // 256² pass's own work (docs/BENCHMARKS.md, "On a GPU"). Bands keep
         // each dispatch short for watchdogs; they need no wait between them.
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        if let Some(stopwatch) = &stopwatch {
-            stopwatch.start(&mut encoder);
-        }
+        stopwatch.start(&mut encoder);
         for level in 0..passes {
             let pipeline = if level == 0 { &first } else { later.as_ref().expect("made for every later pass") };
             // The textures this pass samples, copied first where they are new.
@@ -427,13 +425,11 @@ impl Gpu {
             }
             None => out,
         };
-        if let Some(stopwatch) = &stopwatch {
-            stopwatch.stop(&mut encoder);
-        }
+        stopwatch.stop(&mut encoder);
         self.queue().submit([encoder.finish()]);
         self.wait("filtering")?;
         let dispatch = start.elapsed();
-        let device_time = stopwatch.map(|s| s.read(self)).transpose()?;
+        let device_time = stopwatch.read(self)?;
 
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, pixels * 16);

@@ -59,9 +59,7 @@ impl Gpu {
         let stopwatch = self.stopwatch();
         let start = Instant::now();
         let mut encoder = device.create_command_encoder(&Default::default());
-        if let Some(stopwatch) = &stopwatch {
-            stopwatch.start(&mut encoder);
-        }
+        stopwatch.start(&mut encoder);
         // In bands of rows, as the form's passes are dispatched.
         let band = rows_per_dispatch(width, GUIDE_STENCIL.half_width() as u32);
         for row in (0..height).step_by(band as usize) {
@@ -79,15 +77,13 @@ impl Gpu {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), band.min(height - row).div_ceil(WORKGROUP[1]), 1);
         }
-        if let Some(stopwatch) = &stopwatch {
-            stopwatch.stop(&mut encoder);
-        }
+        stopwatch.stop(&mut encoder);
         self.queue().submit([encoder.finish()]);
         self.wait("blurring the guide")?;
         let wall = start.elapsed();
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "blurring the guide", message: error.to_string() });
         }
-        Ok((guide, Span { wall, device: stopwatch.map(|s| s.read(self)).transpose()? }))
+        Ok((guide, Span { wall, device: stopwatch.read(self)? }))
     }
 }

@@ -112,8 +112,8 @@ pub struct Gpu {
     /// thread waits for a long dispatch or links a large program). On GL,
     /// filterjit's own threads therefore take turns here, without a timeout.
     gl_turns: Option<Mutex<()>>,
-    /// Stopwatches on the device's clock not in use ([`Gpu::stopwatch`]).
-    stopwatches: Mutex<Vec<clock::Stopwatch>>,
+    /// Timestamps on the device's clock not in use ([`Gpu::stopwatch`]).
+    stopwatches: Mutex<Vec<clock::Timestamps>>,
 }
 
 /// A built-in kernel's pipelines, one per value of its pipeline-overridable constant.

@@ -105,9 +105,7 @@ impl Gpu {
         let stopwatch = self.stopwatch();
         let start = std::time::Instant::now();
         let mut encoder = device.create_command_encoder(&Default::default());
-        if let Some(stopwatch) = &stopwatch {
-            stopwatch.start(&mut encoder);
-        }
+        stopwatch.start(&mut encoder);
         // The kernel samples the colour and the albedo.
         let size = (width, height);
         let sampled = |encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer| {
@@ -241,16 +239,14 @@ impl Gpu {
             };
             std::mem::swap(&mut prepared, &mut buffers[last]);
         }
-        if let Some(stopwatch) = &stopwatch {
-            stopwatch.stop(&mut encoder);
-        }
+        stopwatch.stop(&mut encoder);
         self.queue().submit([encoder.finish()]);
         self.wait("running the pre-pass")?;
         let wall = start.elapsed();
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "running the pre-pass", message: error.to_string() });
         }
-        let dispatch = Span { wall, device: stopwatch.map(|s| s.read(self)).transpose()? };
+        let dispatch = Span { wall, device: stopwatch.read(self)? };
         Ok(Prepared { color: prepared, modulation, local, dispatch })
     }
 }

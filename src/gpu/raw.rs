@@ -72,26 +72,19 @@ impl Gpu {
         let bind_group = self.bind_in_slot_order(&kernel.pipeline, resources);
         let stopwatch = self.stopwatch();
         let mut encoder = device.create_command_encoder(&Default::default());
-        if let Some(stopwatch) = &stopwatch {
-            stopwatch.start(&mut encoder);
-        }
+        stopwatch.start(&mut encoder);
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&kernel.pipeline.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
-        if let Some(stopwatch) = &stopwatch {
-            stopwatch.stop(&mut encoder);
-        }
+        stopwatch.stop(&mut encoder);
         let start = Instant::now();
         self.queue().submit([encoder.finish()]);
         self.wait("running a raw kernel")?;
         let wall = start.elapsed();
-        let elapsed = match stopwatch {
-            Some(stopwatch) => stopwatch.read(self)?,
-            None => wall,
-        };
+        let elapsed = stopwatch.read(self)?.unwrap_or(wall);
         if let Some(e) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "running a raw kernel", message: e.to_string() });
         }
