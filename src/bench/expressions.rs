@@ -147,7 +147,7 @@ pub(super) fn measure(
             lower_ms: ms(lower),
             validate_ms: ms(validate),
             pipeline_ms: ms(first.pipeline.create),
-            first_dispatch_ms: ms(first.dispatch),
+            first_dispatch_ms: ms(first.time.wall),
             interpreter_ratio: interpreter_ms.as_ref().map(|i| i.median / jit_ms.median),
             jit_plain_ms,
             variant_ms,

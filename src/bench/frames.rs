@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use super::timing::{ms, stat, Stat};
-use crate::gpu::{Gpu, SceneBuffers, Span};
+use crate::gpu::{Gpu, SceneBuffers};
 use crate::jit::{self, KernelKind, LowerOptions};
 use crate::lang::{parse_expr, Expr};
 use crate::metrics;
@@ -115,7 +115,7 @@ pub(super) fn pipeline_stages(gpu: &Gpu, scene: &Scene, repeats: usize) -> anyho
     let mut times = vec![Vec::new(); prepared.len()];
     for _ in 0..repeats.max(1) * 2 {
         for (k, (_, kernel, buffers, radius, _, _)) in prepared.iter_mut().enumerate() {
-            times[k].push(ms(gpu.filter(kernel, buffers, &frame, *radius)?.dispatch));
+            times[k].push(ms(gpu.filter(kernel, buffers, &frame, *radius)?.time.wall));
         }
     }
     for ((name, _, _, _, lower_validate, compile_ms), times) in prepared.into_iter().zip(times) {
@@ -171,8 +171,7 @@ pub(super) fn whole_frames(
     for _ in 0..repeats.max(1) * 2 {
         for (k, (_, pipeline, kernel, _, _)) in prepared.iter().enumerate() {
             let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
-            let filtered = gpu.filter(kernel, &mut buffers, &frame, radius)?;
-            let passes = Span { wall: filtered.dispatch, device: filtered.device_time };
+            let passes = gpu.filter(kernel, &mut buffers, &frame, radius)?.time;
             // The guide, where the weight reads it, is made by the filter's first run.
             let stages = [buffers.prepass_time(), buffers.guide_time(), Some(passes)];
             let wall = stages.map(|s| s.map_or(Duration::ZERO, |s| s.wall));

@@ -382,9 +382,9 @@ pub(crate) fn filter(
         ms(lower_validate),
         ms(prepass_time),
         ms(first.pipeline.create),
-        ms(first.dispatch),
-        ms(warm.dispatch),
-        ms(warm.dispatch) / megapixels,
+        ms(first.time.wall),
+        ms(warm.time.wall),
+        ms(warm.time.wall) / megapixels,
         warm.dispatches,
         if warm.dispatches == 1 { "" } else { "es" }
     );

@@ -36,7 +36,7 @@ pub(crate) struct Timestamps {
 }
 
 impl Gpu {
-    /// Whether this device has its own clock ([`Filtered::device_time`](super::Filtered::device_time)).
+    /// Whether this device has its own clock ([`Filtered::time`](super::Filtered::time)).
     pub fn has_device_clock(&self) -> bool {
         self.device.features().contains(CLOCK_FEATURES)
     }
@@ -128,9 +128,9 @@ mod tests {
         };
         for _ in 0..3 {
             let frame = gpu.filter(&kernel, &mut buffers, &scene, 4).unwrap();
-            eprintln!("on {}: wall {:?}, device {:?}", gpu.describe(), frame.dispatch, frame.device_time);
-            within(Span { wall: frame.dispatch, device: frame.device_time });
-            assert_eq!(frame.kernel_time(), frame.device_time.unwrap_or(frame.dispatch));
+            eprintln!("on {}: wall {:?}, device {:?}", gpu.describe(), frame.time.wall, frame.time.device);
+            within(frame.time);
+            assert_eq!(frame.kernel_time(), frame.time.device.unwrap_or(frame.time.wall));
         }
         // The pre-pass (with `keep`'s spread) is timed on both clocks too.
         let pipeline: crate::pipeline::FilterPipeline = "outliers=2,keep,atrous=2".parse().unwrap();

@@ -76,13 +76,10 @@ pub struct Filtered {
     /// Domain-error bits per pixel.
     pub flags: Vec<u32>,
     pub pipeline: PipelineTiming,
-    /// Wall time from recording the first pass until the results were on
-    /// the device, all bands and passes.
-    pub dispatch: Duration,
-    /// The same span on the device's own clock (`Gpu::has_device_clock`):
-    /// the GPU's work without the submit–wait round trip; `None` where the
-    /// device has no clock.
-    pub device_time: Option<Duration>,
+    /// From recording the first pass until the results were on the device,
+    /// all bands and passes: by wall time, and on the device's own clock
+    /// where it has one (`Gpu::has_device_clock`).
+    pub time: Span,
     /// Number of dispatches the image was split into.
     pub dispatches: usize,
 }
@@ -95,7 +92,7 @@ impl Filtered {
     /// What the kernel's work took: on the device's clock where it has one,
     /// else by wall time.
     pub fn kernel_time(&self) -> Duration {
-        self.device_time.unwrap_or(self.dispatch)
+        self.time.device.unwrap_or(self.time.wall)
     }
 
     /// Number of pixels with at least one domain error.
@@ -203,7 +200,7 @@ impl SceneBuffers {
 
     /// Time of the pre-pass's dispatch when these buffers were prepared
     /// (recording to completion; uploads excluded), or `None` without a
-    /// pre-pass: with [`Filtered::dispatch`], a frame's time.
+    /// pre-pass: with [`Filtered::time`], a frame's time.
     pub fn prepass_time(&self) -> Option<Span> {
         self.prepass_dispatch
     }
@@ -428,8 +425,7 @@ impl Gpu {
         stopwatch.stop(&mut encoder);
         self.queue().submit([encoder.finish()]);
         self.wait("filtering")?;
-        let dispatch = start.elapsed();
-        let device_time = stopwatch.read(self)?;
+        let time = Span { wall: start.elapsed(), device: stopwatch.read(self)? };
 
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, pixels * 16);
@@ -437,7 +433,7 @@ impl Gpu {
         let bytes = self.finish_and_read(encoder, scope, "filtering", &staging)?;
         let color: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes[..(pixels * 16) as usize]);
         let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(pixels * 16) as usize..]);
-        Ok(Filtered { color, flags, pipeline: timing, dispatch, device_time, dispatches })
+        Ok(Filtered { color, flags, pipeline: timing, time, dispatches })
     }
 
     /// Run a probe kernel ([`crate::jit::KernelKind::Probe`]): the raw weight

@@ -420,7 +420,7 @@ fn measure(
     };
     let mut times = Vec::new();
     for _ in 0..settings.repeats.max(1) {
-        let form = gpu.filter(kernel, timing.buffers, timing.scene, radius)?.dispatch.as_secs_f64();
+        let form = gpu.filter(kernel, timing.buffers, timing.scene, radius)?.time.wall.as_secs_f64();
         times.push(form + guide + timing.prepass_ms / 1e3);
     }
     times.sort_by(f64::total_cmp);
