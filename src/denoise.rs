@@ -254,9 +254,9 @@ pub fn shipped() -> Result<Vec<Shipped>> {
 }
 
 /// `scene` filtered on `gpu` with `kernel` (the choice's, [`Choice::compile`]):
-/// the pre-pass, then the form, read back.
+/// the pre-pass, then the form, in one submission, read back.
 pub fn filter(gpu: &Gpu, choice: &Choice, kernel: &jit::ValidatedKernel, scene: &Scene) -> Result<Filtered> {
-    let mut buffers = SceneBuffers::for_pipeline(gpu, scene, &choice.pipeline)?;
+    let mut buffers = SceneBuffers::for_frame(gpu, scene, &choice.pipeline)?;
     Ok(gpu.filter(kernel, &mut buffers, scene, choice.radius)?)
 }
 

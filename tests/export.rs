@@ -206,7 +206,20 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
 
         let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&pipeline)).unwrap();
         let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &pipeline).unwrap();
-        let filtered = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap().rgb();
+        let staged = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap();
+        let filtered = staged.rgb();
+        // A frame in one submission (pre-pass, guide and passes recorded
+        // together) computes the same bits as a submission a stage, and
+        // times the same stages; its second filter reuses what the first made.
+        let mut frame_buffers = SceneBuffers::for_frame(&gpu, &scene, &pipeline).unwrap();
+        let bits = |c: &[[f32; 4]]| c.iter().flatten().map(|v| v.to_bits()).collect::<Vec<_>>();
+        for run in 0..2 {
+            let one = gpu.filter(&kernel, &mut frame_buffers, &scene, 2).unwrap();
+            assert!(bits(&one.color) == bits(&staged.color), "{text}, run {run}: one submission changed the image");
+            assert_eq!(one.flags, staged.flags, "{text}, run {run}");
+        }
+        assert_eq!(frame_buffers.prepass_time().is_some(), exported.prepass.is_some(), "{text}: the pre-pass timed");
+        assert_eq!(frame_buffers.guide_time().is_some(), guided, "{text}: the guide timed where it ran");
         let error = ours
             .iter()
             .zip(&filtered)

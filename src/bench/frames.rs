@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 use serde::Serialize;
 
 use super::timing::{ms, stat, Stat};
-use crate::gpu::{Gpu, SceneBuffers};
+use crate::gpu::{Gpu, SceneBuffers, Span};
 use crate::jit::{self, KernelKind, LowerOptions};
 use crate::lang::{parse_expr, Expr};
 use crate::metrics;
@@ -25,9 +25,10 @@ pub struct StageResult {
 }
 
 /// One way to denoise a whole frame of [`FRAME_SIDE`]²: a shipped filter in
-/// the pipeline it is stored with (wall time of the pre-pass and every pass
-/// of the form, each from recording to completion), or OIDN (wall time of
-/// each execution, as `oidnDenoise` reports it, on the device it chose).
+/// the pipeline it is stored with (wall time from recording its pre-pass,
+/// guide and passes, in one submission, to completion; uploads excluded), or
+/// OIDN (wall time of each execution, as `oidnDenoise` reports it, on the
+/// device it chose).
 #[derive(Clone, Debug, Serialize)]
 pub struct FrameResult {
     pub method: String,
@@ -43,7 +44,8 @@ pub struct FrameResult {
     pub light: Option<f64>,
     /// Where a shipped filter's frame goes: the medians of its pre-pass
     /// (outliers, `keep`'s spread, demodulation), its guide and its passes,
-    /// in ms (none for OIDN). They need not add up to `warm_ms`'s median.
+    /// in ms, on the device's clock where it has one (none for OIDN). They
+    /// need not add up to `warm_ms`'s median.
     pub parts_ms: Option<FrameParts>,
     /// The same frame on the device's own clock, the sum of its parts' (none
     /// where the device has no clock, and for OIDN): the GPU's work, without
@@ -170,17 +172,20 @@ pub(super) fn whole_frames(
     let mut on_device = vec![Vec::new(); prepared.len()];
     for _ in 0..repeats.max(1) * 2 {
         for (k, (_, pipeline, kernel, _, _)) in prepared.iter().enumerate() {
-            let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
-            let passes = gpu.filter(kernel, &mut buffers, &frame, radius)?.time;
-            // The guide, where the weight reads it, is made by the filter's first run.
-            let stages = [buffers.prepass_time(), buffers.guide_time(), Some(passes)];
-            let wall = stages.map(|s| s.map_or(Duration::ZERO, |s| s.wall));
-            times[k].push(ms(wall.iter().sum()));
-            for (part, t) in parts[k].iter_mut().zip(wall) {
+            // A frame as a renderer runs it: the pre-pass, the guide (where
+            // the weight reads it) and the passes in one submission, uploads excluded.
+            let mut buffers = SceneBuffers::for_frame(gpu, &frame, pipeline)?;
+            let whole = gpu.filter(kernel, &mut buffers, &frame, radius)?.time;
+            times[k].push(ms(whole.wall));
+            // Its parts on the device's clock where it has one, else the
+            // recording's wall time (the passes' then hold the waiting).
+            let part = |span: Option<Span>| span.map_or(Duration::ZERO, |s| s.device.unwrap_or(s.wall));
+            let (prepass, guide) = (part(buffers.prepass_time()), part(buffers.guide_time()));
+            let passes = whole.device.unwrap_or(whole.wall).saturating_sub(prepass + guide);
+            for (part, t) in parts[k].iter_mut().zip([prepass, guide, passes]) {
                 part.push(ms(t));
             }
-            // Every stage that ran, on the device's clock (none where it has none).
-            if let Some(device) = stages.iter().flatten().map(|s| s.device).sum::<Option<Duration>>() {
+            if let Some(device) = whole.device {
                 on_device[k].push(ms(device));
             }
         }

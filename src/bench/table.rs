@@ -115,7 +115,7 @@ pub fn table(r: &Report) -> String {
     }
     if !r.frames.is_empty() {
         t += &format!(
-            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: wall time of pre-pass, guide + passes; OIDN: wall time of each execution on the device it chose; warm median [min, max], ms; pre / guide / passes: the medians of the pre-pass, the guide and the passes; on device: the frame's median on the device's own clock; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
+            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: wall time of pre-pass, guide and passes in one submission; OIDN: wall time of each execution on the device it chose; warm median [min, max], ms; pre / guide / passes: the medians of the pre-pass, the guide and the passes, on the device's clock where it has one; on device: the frame's median on the device's own clock; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
             r.noisy_light.map_or("-".into(), |l| format!("{l:.3}"))
         );
         let pipeline_width = r.frames.iter().map(|f| f.pipeline.len()).max().unwrap_or(0).max("pipeline".len());

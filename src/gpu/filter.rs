@@ -5,6 +5,7 @@ use std::time::{Duration, Instant};
 
 use wgpu::util::DeviceExt;
 
+use super::prepass::{PrepassInputs, PrepassPipelines};
 use super::{Gpu, GpuError, PipelineTiming, Span};
 use crate::jit::interface::Element;
 use crate::jit::{AtrousParams, Input, Params, PassRole, Role, Shape, ValidatedKernel, WORKGROUP};
@@ -30,6 +31,12 @@ pub struct SceneBuffers {
     pub(super) modulation: Option<wgpu::Buffer>,
     /// Ping-pong images and carried variances of the à-trous passes.
     pub(super) scratch: Option<Scratch>,
+    /// The pre-pass's inputs, uploaded, until the pre-pass is recorded: by
+    /// the first [`Gpu::filter`] of buffers made by [`SceneBuffers::for_frame`].
+    pub(super) pending: Option<PrepassInputs>,
+    /// Made by [`SceneBuffers::for_frame`]: the first filter also records
+    /// the guide into its submission.
+    pub(super) one_submission: bool,
     /// How long the pre-pass's dispatch took (pipelines with a pre-pass).
     pub(super) prepass_dispatch: Option<Span>,
     /// How long the guide's dispatch took, once a kernel that reads it has run.
@@ -112,8 +119,40 @@ impl SceneBuffers {
         Self::for_pipeline(gpu, scene, &FilterPipeline::WINDOW).expect("the window pipeline has no pre-pass to fail")
     }
 
-    /// Upload the scene's colour and run `pipeline`'s pre-pass on the device.
+    /// Upload the scene's colour and run `pipeline`'s pre-pass on the device,
+    /// in a submission of its own, timed ([`SceneBuffers::prepass_time`]).
     pub fn for_pipeline(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
+        let mut buffers = Self::for_frame(gpu, scene, pipeline)?;
+        buffers.one_submission = false;
+        if buffers.pending.is_none() {
+            return Ok(buffers);
+        }
+        let pipelines = gpu.prepass_pipelines(pipeline, buffers.width, buffers.height)?;
+        let _turn = gpu.gl_turn();
+        let scope = gpu.device().push_error_scope(wgpu::ErrorFilter::Validation);
+        let stopwatch = gpu.stopwatch();
+        let start = Instant::now();
+        let mut encoder = gpu.device().create_command_encoder(&Default::default());
+        stopwatch.start(&mut encoder);
+        buffers.record_prepass(gpu, &mut encoder, pipelines)?;
+        stopwatch.stop(&mut encoder);
+        gpu.queue().submit([encoder.finish()]);
+        gpu.wait("running the pre-pass")?;
+        let wall = start.elapsed();
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "running the pre-pass", message: error.to_string() });
+        }
+        buffers.prepass_dispatch = Some(Span { wall, device: stopwatch.read(gpu)? });
+        Ok(buffers)
+    }
+
+    /// Upload the scene's colour (and what `pipeline`'s pre-pass reads), and
+    /// leave the pre-pass to the first [`Gpu::filter`] on these buffers: it
+    /// records the pre-pass, the guide and the form in one submission,
+    /// waited for once, a frame as a renderer would run it. On a hardware GPU
+    /// each submit–wait round trip saved is 0.25–0.3 ms (docs/BENCHMARKS.md,
+    /// "One submission a frame").
+    pub fn for_frame(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
         // The pre-pass, an à-trous form and `planefit` sample their images (`BindingInterface::samples_images`).
         let samples = pipeline.has_prepass() || pipeline.is_atrous() || pipeline.planefit.is_some();
         let limit = gpu.max_image_side();
@@ -127,22 +166,23 @@ impl SceneBuffers {
                 adapter: gpu.info().name.clone(),
             });
         }
-        let rgba = |c: &[[f32; 3]]| -> Vec<[f32; 4]> { c.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect() };
-        let color = gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("color"),
-            contents: bytemuck::cast_slice(&rgba(&scene.color)),
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-        });
+        let upload = |label, c: &[[f32; 3]]| {
+            let rgba: Vec<[f32; 4]> = c.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
+            gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::cast_slice(&rgba),
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+            })
+        };
+        let color = upload("color", &scene.color);
         let (width, height) = (scene.width as u32, scene.height as u32);
         if pipeline.planefit.is_some() {
             // `planefit` reads the normals after the form: a scene without them fails here, before any work.
             scene.required_feature(Feature::Normal)?;
         }
-        let mut inputs = HashMap::new();
-        let mut prepass_dispatch = None;
-        let (color, modulation) = if pipeline.has_prepass() {
+        let (color, pending) = if pipeline.has_prepass() {
             let albedo = match (&scene.albedo, pipeline.demodulate) {
-                (Some(albedo), true) => Some(rgba(albedo)),
+                (Some(albedo), true) => Some(upload("albedo", albedo)),
                 (None, true) => {
                     let missing = MissingInput { scene: scene.name.clone(), missing: Missing::Albedo };
                     return Err(GpuError::MissingInput(missing));
@@ -150,18 +190,17 @@ impl SceneBuffers {
                 (_, false) => None,
             };
             let normals = match pipeline.keep() {
-                Some(Keep::Surface) => Some(rgba(scene.required_feature(Feature::Normal)?)),
+                Some(Keep::Surface) => Some(upload("normals", scene.required_feature(Feature::Normal)?)),
                 _ => None,
             };
-            let prepared = gpu.prepass(pipeline, &color, albedo.as_deref(), normals.as_deref(), width, height)?;
-            prepass_dispatch = Some(prepared.dispatch);
-            if pipeline.outliers.is_some() {
-                // What the outlier rule measured is an input like any other, already on the device.
-                for (v, buffer) in ScalarVar::FROM_PREPASS.into_iter().zip(prepared.local) {
-                    inputs.insert(Input::Variance(v), buffer);
-                }
-            }
-            (prepared.color, pipeline.demodulate.then_some(prepared.modulation))
+            // Bound nowhere until the pre-pass replaces it with its output.
+            let placeholder = gpu.device().create_buffer(&wgpu::BufferDescriptor {
+                label: Some("colour before the pre-pass"),
+                size: 16,
+                usage: wgpu::BufferUsages::STORAGE,
+                mapped_at_creation: false,
+            });
+            (placeholder, Some(PrepassInputs { color, albedo, normals, width, height }))
         } else {
             (color, None)
         };
@@ -183,14 +222,37 @@ impl SceneBuffers {
             width,
             height,
             color,
-            inputs,
+            inputs: HashMap::new(),
             pipeline: *pipeline,
-            modulation,
+            modulation: None,
             scratch,
-            prepass_dispatch,
+            pending,
+            one_submission: true,
+            prepass_dispatch: None,
             guide_dispatch: None,
             sampled: Default::default(),
         })
+    }
+
+    /// Record the pending pre-pass into `encoder`; its outputs become these
+    /// buffers' colour, modulation and pre-pass measures. Callers hold the GL turn.
+    fn record_prepass(
+        &mut self,
+        gpu: &Gpu,
+        encoder: &mut wgpu::CommandEncoder,
+        pipelines: PrepassPipelines<'_>,
+    ) -> Result<(), GpuError> {
+        let inputs = self.pending.take().expect("a pre-pass is pending");
+        let prepared = gpu.record_prepass(encoder, pipelines, &self.pipeline, &inputs)?;
+        if self.pipeline.outliers.is_some() {
+            // What the outlier rule measured is an input like any other, already on the device.
+            for (v, buffer) in ScalarVar::FROM_PREPASS.into_iter().zip(prepared.local) {
+                self.inputs.insert(Input::Variance(v), buffer);
+            }
+        }
+        self.color = prepared.color;
+        self.modulation = self.pipeline.demodulate.then_some(prepared.modulation);
+        Ok(())
     }
 
     /// The pipeline these buffers were prepared for.
@@ -200,14 +262,19 @@ impl SceneBuffers {
 
     /// Time of the pre-pass's dispatch when these buffers were prepared
     /// (recording to completion; uploads excluded), or `None` without a
-    /// pre-pass: with [`Filtered::time`], a frame's time.
+    /// pre-pass: with [`Filtered::time`], a frame's time. Buffers made by
+    /// [`SceneBuffers::for_frame`] run it in their first filter's
+    /// submission: there its wall time is the recording's alone, and the
+    /// filter's time holds the rest.
     pub fn prepass_time(&self) -> Option<Span> {
         self.prepass_dispatch
     }
 
     /// Time of the guide's dispatch (docs/SEMANTICS.md, "The guide"),
     /// made when a kernel that reads `guide` first ran on these buffers, or
-    /// `None` before: a frame of such a kernel also costs this.
+    /// `None` before: a frame of such a kernel also costs this. As for
+    /// [`SceneBuffers::prepass_time`], buffers made by
+    /// [`SceneBuffers::for_frame`] record it into that filter's submission.
     pub fn guide_time(&self) -> Option<Span> {
         self.guide_dispatch
     }
@@ -270,6 +337,12 @@ impl SceneBuffers {
     }
 }
 
+/// A stage a frame's first filter records before the form ([`SceneBuffers::for_frame`]).
+enum Part {
+    Prepass,
+    Guide,
+}
+
 /// The uniform of pass `level` of `passes`; `remodulates` whether the last
 /// pass multiplies the modulation back (not where `planefit` follows: the
 /// fit reads the demodulated image and multiplies it back itself).
@@ -322,6 +395,14 @@ impl Gpu {
             None
         };
         self.prepare_guide_for(kernel)?;
+        let prepass = match buffers.pending {
+            Some(_) => Some(self.prepass_pipelines(&buffers.pipeline, buffers.width, buffers.height)?),
+            None => None,
+        };
+        let guide = Input::Feature(Feature::Guide);
+        // Made in this submission: a frame's first filter on buffers from `for_frame`.
+        let records_guide =
+            buffers.one_submission && kernel.source().layout.reads_guide() && !buffers.inputs.contains_key(&guide);
         let planefit = buffers.pipeline.planefit;
         if planefit.is_some() {
             self.planefit_pipeline(!buffers.pipeline.is_atrous())?;
@@ -333,7 +414,11 @@ impl Gpu {
         }
         let _turn = self.gl_turn();
         for (_, input) in kernel.source().interface.inputs() {
-            buffers.ensure(self, scene, input)?;
+            // Uploads stay outside the frame's time; what the pre-pass and the guide make is recorded below.
+            let from_prepass = matches!(input, Input::Variance(v) if v.from_prepass()) && prepass.is_some();
+            if !from_prepass && !(records_guide && input == guide) {
+                buffers.ensure(self, scene, input)?;
+            }
         }
         if planefit.is_some() {
             buffers.ensure(self, scene, Input::Feature(Feature::Normal))?;
@@ -370,6 +455,24 @@ impl Gpu {
         // each dispatch short for watchdogs; they need no wait between them.
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         stopwatch.start(&mut encoder);
+        // A frame's pre-pass and guide, each timed on the device's clock where it has one.
+        let mut parts = Vec::new();
+        if let Some(pipelines) = prepass {
+            let (part, recording) = (self.stopwatch(), Instant::now());
+            part.start(&mut encoder);
+            buffers.record_prepass(self, &mut encoder, pipelines)?;
+            part.stop(&mut encoder);
+            parts.push((Part::Prepass, recording.elapsed(), part));
+        }
+        if records_guide {
+            let (part, recording) = (self.stopwatch(), Instant::now());
+            part.start(&mut encoder);
+            let views = buffers.sampled_views(self, &mut encoder, &[Role::Color], 0)?;
+            let made = self.record_guide(&mut encoder, &views[&Role::Color], buffers.width, buffers.height)?;
+            buffers.inputs.insert(guide, made);
+            part.stop(&mut encoder);
+            parts.push((Part::Guide, recording.elapsed(), part));
+        }
         for level in 0..passes {
             let pipeline = if level == 0 { &first } else { later.as_ref().expect("made for every later pass") };
             // The textures this pass samples, copied first where they are new.
@@ -423,14 +526,24 @@ impl Gpu {
             None => out,
         };
         stopwatch.stop(&mut encoder);
+        // The results' copy for reading back goes in the same submission: one wait less a call.
+        encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, pixels * 16);
+        encoder.copy_buffer_to_buffer(&flags, 0, &staging, pixels * 16, pixels * 4);
         self.queue().submit([encoder.finish()]);
         self.wait("filtering")?;
         let time = Span { wall: start.elapsed(), device: stopwatch.read(self)? };
+        for (part, recording, stopwatch) in parts {
+            let span = Some(Span { wall: recording, device: stopwatch.read(self)? });
+            match part {
+                Part::Prepass => buffers.prepass_dispatch = span,
+                Part::Guide => buffers.guide_dispatch = span,
+            }
+        }
 
-        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, pixels * 16);
-        encoder.copy_buffer_to_buffer(&flags, 0, &staging, pixels * 16, pixels * 4);
-        let bytes = self.finish_and_read(encoder, scope, "filtering", &staging)?;
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "filtering", message: error.to_string() });
+        }
+        let bytes = self.read(&staging)?;
         let color: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes[..(pixels * 16) as usize]);
         let flags: Vec<u32> = bytemuck::pod_collect_to_vec(&bytes[(pixels * 16) as usize..]);
         Ok(Filtered { color, flags, pipeline: timing, time, dispatches })

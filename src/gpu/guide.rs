@@ -34,13 +34,39 @@ impl Gpu {
     }
 
     /// The guide of `color` (the colour's texture, `width` × `height`), left
-    /// on the device, and how long its dispatch took. Callers hold the GL turn.
+    /// on the device, and how long its dispatch took: its own submission,
+    /// waited for. Callers hold the GL turn.
     pub(super) fn guide(
         &self,
         color: &wgpu::TextureView,
         width: u32,
         height: u32,
     ) -> Result<(wgpu::Buffer, Span), GpuError> {
+        let scope = self.device().push_error_scope(wgpu::ErrorFilter::Validation);
+        let stopwatch = self.stopwatch();
+        let start = Instant::now();
+        let mut encoder = self.device().create_command_encoder(&Default::default());
+        stopwatch.start(&mut encoder);
+        let guide = self.record_guide(&mut encoder, color, width, height)?;
+        stopwatch.stop(&mut encoder);
+        self.queue().submit([encoder.finish()]);
+        self.wait("blurring the guide")?;
+        let wall = start.elapsed();
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during: "blurring the guide", message: error.to_string() });
+        }
+        Ok((guide, Span { wall, device: stopwatch.read(self)? }))
+    }
+
+    /// Record the guide of `color` into `encoder`; callers hold the GL turn
+    /// and made its pipeline ([`Gpu::prepare_guide_for`]).
+    pub(super) fn record_guide(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        color: &wgpu::TextureView,
+        width: u32,
+        height: u32,
+    ) -> Result<wgpu::Buffer, GpuError> {
         let kernel = guide_kernel()?;
         // A cache hit: `prepare_guide_for` made it before the caller's GL turn.
         let (pipeline, _) = self.pipeline(kernel)?;
@@ -55,11 +81,6 @@ impl Gpu {
         };
         let (guide, flags) = (make("guide", 16), make("guide flags", 4));
         let interface = &kernel.source().interface;
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let stopwatch = self.stopwatch();
-        let start = Instant::now();
-        let mut encoder = device.create_command_encoder(&Default::default());
-        stopwatch.start(&mut encoder);
         // In bands of rows, as the form's passes are dispatched.
         let band = rows_per_dispatch(width, GUIDE_STENCIL.half_width() as u32);
         for row in (0..height).step_by(band as usize) {
@@ -77,13 +98,6 @@ impl Gpu {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), band.min(height - row).div_ceil(WORKGROUP[1]), 1);
         }
-        stopwatch.stop(&mut encoder);
-        self.queue().submit([encoder.finish()]);
-        self.wait("blurring the guide")?;
-        let wall = start.elapsed();
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Runtime { during: "blurring the guide", message: error.to_string() });
-        }
-        Ok((guide, Span { wall, device: stopwatch.read(self)? }))
+        Ok(guide)
     }
 }

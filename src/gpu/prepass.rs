@@ -4,9 +4,7 @@
 
 use std::sync::{Arc, OnceLock};
 
-use wgpu::util::DeviceExt;
-
-use super::{Gpu, GpuError, Pipeline, Span};
+use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::Element;
 use crate::jit::{
     written_before, BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, SpreadTarget,
@@ -41,23 +39,16 @@ impl Gpu {
         }
     }
 
-    /// Run `pipeline`'s pre-pass on `color` (RGBA per pixel; `albedo` the raw
-    /// albedo when demodulating): the colour the form filters, the
-    /// modulation (1 without demodulation), and what the outlier rule
-    /// measured (`ScalarVar::FROM_PREPASS`, in that order; 0 without it). All
-    /// stay on the device. `normals`: the scene's, which `keep=surface` reads.
-    pub(super) fn prepass(
+    /// Every pipeline `pipeline`'s pre-pass dispatches on a `width` ×
+    /// `height` image, made now: before a GL turn, since creation takes it.
+    pub(super) fn prepass_pipelines(
         &self,
         pipeline: &FilterPipeline,
-        color: &wgpu::Buffer,
-        albedo: Option<&[[f32; 4]]>,
-        normals: Option<&[[f32; 4]]>,
         width: u32,
         height: u32,
-    ) -> Result<Prepared, GpuError> {
+    ) -> Result<PrepassPipelines<'_>, GpuError> {
         let kernel = self.prepass_pipeline()?;
         self.blit_pipeline(Element::Vec4F32)?;
-        // Every dispatch's pipeline, made before the GL turn is taken (creation takes it).
         let spread = match pipeline.keep() {
             Some(keep) => {
                 let sequence = SpreadParams::sequence(keep, width, height);
@@ -69,7 +60,24 @@ impl Gpu {
             }
             None => None,
         };
-        let _turn = self.gl_turn();
+        Ok(PrepassPipelines { kernel, spread })
+    }
+
+    /// Record `pipeline`'s pre-pass on `inputs` into `encoder`: the colour the
+    /// form filters, the modulation (1 without demodulation), and what the
+    /// outlier rule measured (`ScalarVar::FROM_PREPASS`, in that order; 0
+    /// without it). All stay on the device. `pipelines`: this pipeline's,
+    /// from [`Gpu::prepass_pipelines`]; callers hold the GL turn.
+    pub(super) fn record_prepass(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        pipelines: PrepassPipelines<'_>,
+        pipeline: &FilterPipeline,
+        inputs: &PrepassInputs,
+    ) -> Result<Prepared, GpuError> {
+        let PrepassPipelines { kernel, spread } = pipelines;
+        let PrepassInputs { color, albedo, normals, width, height } = inputs;
+        let (width, height) = (*width, *height);
         let device = self.device();
         let params = PrepassParams::of(pipeline, width, height);
         let uniform = self.params_buffer(
@@ -77,13 +85,6 @@ impl Gpu {
             "pre-pass params",
             bytemuck::bytes_of(&params),
         );
-        let albedo = albedo.map(|a| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("albedo"),
-                contents: bytemuck::cast_slice(a),
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            })
-        });
         let make = |label| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -101,20 +102,15 @@ impl Gpu {
                 mapped_at_creation: false,
             })
         });
-        let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let stopwatch = self.stopwatch();
-        let start = std::time::Instant::now();
-        let mut encoder = device.create_command_encoder(&Default::default());
-        stopwatch.start(&mut encoder);
         // The kernel samples the colour and the albedo.
         let size = (width, height);
         let sampled = |encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer| {
             Ok::<_, GpuError>(self.blitted(encoder, buffer, Element::Vec4F32, size)?.create_view(&Default::default()))
         };
-        let noisy = sampled(&mut encoder, color)?;
+        let noisy = sampled(encoder, color)?;
         // Without demodulation the albedo is never read: the colour stands in for it.
-        let albedo = match &albedo {
-            Some(albedo) => sampled(&mut encoder, albedo)?,
+        let albedo = match albedo {
+            Some(albedo) => sampled(encoder, albedo)?,
             None => noisy.clone(),
         };
         let interface = BindingInterface::prepass(None);
@@ -157,20 +153,13 @@ impl Gpu {
             });
             // Each pixel's direction and clamped luminance (`keep=surface`).
             let surface = (keep == Keep::Surface).then(|| make("spread surface"));
-            let normals = normals.map(|n| {
-                device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("normals"),
-                    contents: bytemuck::cast_slice(n),
-                    usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                })
-            });
             // The kernel samples its images: each is copied (or blitted) into a texture
             // once it is written (the scratch images after every dispatch
             // that writes them), and read from there.
-            let image = sampled(&mut encoder, &prepared)?;
-            let modulation_view = sampled(&mut encoder, &modulation)?;
+            let image = sampled(encoder, &prepared)?;
+            let modulation_view = sampled(encoder, &modulation)?;
             let normal_view = match &normals {
-                Some(normals) => Some(sampled(&mut encoder, normals)?),
+                Some(normals) => Some(sampled(encoder, normals)?),
                 None => None,
             };
             let mut scratch_views: [Option<wgpu::TextureView>; 2] = [None, None];
@@ -227,8 +216,8 @@ impl Gpu {
                 // What a later dispatch reads, onto its texture.
                 if n + 1 < sequence.len() {
                     match dispatch.target {
-                        SpreadTarget::Scratch(k) => scratch_views[k] = Some(sampled(&mut encoder, &buffers[k])?),
-                        SpreadTarget::Surface => surface_view = Some(sampled(&mut encoder, target)?),
+                        SpreadTarget::Scratch(k) => scratch_views[k] = Some(sampled(encoder, &buffers[k])?),
+                        SpreadTarget::Surface => surface_view = Some(sampled(encoder, target)?),
                         SpreadTarget::Total => {}
                     }
                 }
@@ -239,15 +228,7 @@ impl Gpu {
             };
             std::mem::swap(&mut prepared, &mut buffers[last]);
         }
-        stopwatch.stop(&mut encoder);
-        self.queue().submit([encoder.finish()]);
-        self.wait("running the pre-pass")?;
-        let wall = start.elapsed();
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Runtime { during: "running the pre-pass", message: error.to_string() });
-        }
-        let dispatch = Span { wall, device: stopwatch.read(self)? };
-        Ok(Prepared { color: prepared, modulation, local, dispatch })
+        Ok(Prepared { color: prepared, modulation, local })
     }
 }
 
@@ -257,6 +238,21 @@ pub(super) struct Prepared {
     pub modulation: wgpu::Buffer,
     /// `ScalarVar::FROM_PREPASS`, in that order.
     pub local: [wgpu::Buffer; 3],
-    /// From recording until the pre-pass was done.
-    pub dispatch: Span,
+}
+
+/// The pipelines a pre-pass dispatches ([`Gpu::prepass_pipelines`]).
+pub(super) struct PrepassPipelines<'a> {
+    kernel: &'a Pipeline,
+    /// `keep`'s spread: its dispatches and a pipeline for each.
+    spread: Option<(Keep, Vec<crate::jit::SpreadDispatch>, Vec<Arc<Pipeline>>)>,
+}
+
+/// What a pre-pass reads, uploaded: the noisy colour, the raw albedo where
+/// the pipeline demodulates, the normals where `keep=surface` spreads.
+pub(super) struct PrepassInputs {
+    pub color: wgpu::Buffer,
+    pub albedo: Option<wgpu::Buffer>,
+    pub normals: Option<wgpu::Buffer>,
+    pub width: u32,
+    pub height: u32,
 }
