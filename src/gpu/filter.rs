@@ -415,8 +415,9 @@ impl Gpu {
         let _turn = self.gl_turn();
         for (_, input) in kernel.source().interface.inputs() {
             // Uploads stay outside the frame's time; what the pre-pass and the guide make is recorded below.
-            let from_prepass = matches!(input, Input::Variance(v) if v.from_prepass()) && prepass.is_some();
-            if !from_prepass && !(records_guide && input == guide) {
+            let made_here = (matches!(input, Input::Variance(v) if v.from_prepass()) && prepass.is_some())
+                || (records_guide && input == guide);
+            if !made_here {
                 buffers.ensure(self, scene, input)?;
             }
         }
