@@ -122,8 +122,7 @@ impl SceneBuffers {
     /// Upload the scene's colour and run `pipeline`'s pre-pass on the device,
     /// in a submission of its own, timed ([`SceneBuffers::prepass_time`]).
     pub fn for_pipeline(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
-        let mut buffers = Self::for_frame(gpu, scene, pipeline)?;
-        buffers.one_submission = false;
+        let mut buffers = Self::upload(gpu, scene, pipeline, false)?;
         if buffers.pending.is_none() {
             return Ok(buffers);
         }
@@ -153,6 +152,11 @@ impl SceneBuffers {
     /// each submit–wait round trip saved is 0.25–0.3 ms (docs/BENCHMARKS.md,
     /// "One submission a frame").
     pub fn for_frame(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
+        Self::upload(gpu, scene, pipeline, true)
+    }
+
+    /// The scene's colour and the pre-pass's inputs on the device, the pre-pass pending.
+    fn upload(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline, one_submission: bool) -> Result<Self, GpuError> {
         // The pre-pass, an à-trous form and `planefit` sample their images (`BindingInterface::samples_images`).
         let samples = pipeline.has_prepass() || pipeline.is_atrous() || pipeline.planefit.is_some();
         let limit = gpu.max_image_side();
@@ -227,7 +231,7 @@ impl SceneBuffers {
             modulation: None,
             scratch,
             pending,
-            one_submission: true,
+            one_submission,
             prepass_dispatch: None,
             guide_dispatch: None,
             sampled: Default::default(),
