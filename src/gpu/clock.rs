@@ -71,6 +71,33 @@ impl Gpu {
     }
 }
 
+impl Gpu {
+    /// Record commands with `record` into an encoder of their own, submit them
+    /// and wait: what `record` returned, and the time from recording until the
+    /// device was done, by wall and on the device's clock. A validation error
+    /// in them, or a failed wait, is an error `during` that work. Callers hold the GL turn.
+    pub(super) fn timed_submission<T>(
+        &self,
+        during: &'static str,
+        record: impl FnOnce(&mut wgpu::CommandEncoder) -> Result<T, GpuError>,
+    ) -> Result<(T, Span), GpuError> {
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let stopwatch = self.stopwatch();
+        let start = std::time::Instant::now();
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        stopwatch.start(&mut encoder);
+        let recorded = record(&mut encoder)?;
+        stopwatch.stop(&mut encoder);
+        self.queue().submit([encoder.finish()]);
+        self.wait(during)?;
+        let wall = start.elapsed();
+        if let Some(error) = pollster::block_on(scope.pop()) {
+            return Err(GpuError::Runtime { during, message: error.to_string() });
+        }
+        Ok((recorded, Span { wall, device: stopwatch.read(self)? }))
+    }
+}
+
 impl Stopwatch {
     /// Record the first timestamp: before every later command of `encoder`.
     pub fn start(&self, encoder: &mut wgpu::CommandEncoder) {

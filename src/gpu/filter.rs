@@ -128,20 +128,9 @@ impl SceneBuffers {
         }
         let pipelines = gpu.prepass_pipelines(pipeline, buffers.width, buffers.height)?;
         let _turn = gpu.gl_turn();
-        let scope = gpu.device().push_error_scope(wgpu::ErrorFilter::Validation);
-        let stopwatch = gpu.stopwatch();
-        let start = Instant::now();
-        let mut encoder = gpu.device().create_command_encoder(&Default::default());
-        stopwatch.start(&mut encoder);
-        buffers.record_prepass(gpu, &mut encoder, pipelines)?;
-        stopwatch.stop(&mut encoder);
-        gpu.queue().submit([encoder.finish()]);
-        gpu.wait("running the pre-pass")?;
-        let wall = start.elapsed();
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Runtime { during: "running the pre-pass", message: error.to_string() });
-        }
-        buffers.prepass_dispatch = Some(Span { wall, device: stopwatch.read(gpu)? });
+        let ((), span) =
+            gpu.timed_submission("running the pre-pass", |encoder| buffers.record_prepass(gpu, encoder, pipelines))?;
+        buffers.prepass_dispatch = Some(span);
         Ok(buffers)
     }
 

@@ -5,7 +5,6 @@
 //! is its reference.
 
 use std::sync::OnceLock;
-use std::time::Instant;
 
 use super::filter::{rows_per_dispatch, uniform_bytes};
 use super::{Gpu, GpuError, Span};
@@ -42,20 +41,7 @@ impl Gpu {
         width: u32,
         height: u32,
     ) -> Result<(wgpu::Buffer, Span), GpuError> {
-        let scope = self.device().push_error_scope(wgpu::ErrorFilter::Validation);
-        let stopwatch = self.stopwatch();
-        let start = Instant::now();
-        let mut encoder = self.device().create_command_encoder(&Default::default());
-        stopwatch.start(&mut encoder);
-        let guide = self.record_guide(&mut encoder, color, width, height)?;
-        stopwatch.stop(&mut encoder);
-        self.queue().submit([encoder.finish()]);
-        self.wait("blurring the guide")?;
-        let wall = start.elapsed();
-        if let Some(error) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Runtime { during: "blurring the guide", message: error.to_string() });
-        }
-        Ok((guide, Span { wall, device: stopwatch.read(self)? }))
+        self.timed_submission("blurring the guide", |encoder| self.record_guide(encoder, color, width, height))
     }
 
     /// Record the guide of `color` into `encoder`; callers hold the GL turn
