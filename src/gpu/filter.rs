@@ -298,14 +298,9 @@ impl SceneBuffers {
             return Ok(());
         }
         if input == Input::Feature(Feature::Guide) {
-            // Made from the colour on the device, once.
-            // Its kernel samples the colour, as the form's first pass does: one texture for both.
-            let mut encoder = gpu.device().create_command_encoder(&Default::default());
-            let views = self.sampled_views(gpu, &mut encoder, &[Role::Color], 0)?;
-            gpu.queue().submit([encoder.finish()]);
-            let (guide, dispatch) = gpu.guide(&views[&Role::Color], self.width, self.height)?;
-            self.guide_dispatch = Some(dispatch);
-            self.inputs.insert(input, guide);
+            // Made from the colour on the device, once, in a submission of its own.
+            let ((), span) = gpu.timed_submission("blurring the guide", |encoder| self.record_guide(gpu, encoder))?;
+            self.guide_dispatch = Some(span);
             return Ok(());
         }
         const CHECKED: &str = "check_inputs found every input the kernel binds";
@@ -461,9 +456,7 @@ impl Gpu {
         if records_guide {
             let (part, recording) = (self.stopwatch(), Instant::now());
             part.start(&mut encoder);
-            let views = buffers.sampled_views(self, &mut encoder, &[Role::Color], 0)?;
-            let made = self.record_guide(&mut encoder, &views[&Role::Color], buffers.width, buffers.height)?;
-            buffers.inputs.insert(guide, made);
+            buffers.record_guide(self, &mut encoder)?;
             part.stop(&mut encoder);
             parts.push((Part::Guide, recording.elapsed(), part));
         }

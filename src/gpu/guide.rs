@@ -6,10 +6,11 @@
 
 use std::sync::OnceLock;
 
-use super::filter::{rows_per_dispatch, uniform_bytes};
-use super::{Gpu, GpuError, Span};
+use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
+use super::{Gpu, GpuError};
 use crate::jit::interface::Element;
-use crate::jit::{self, KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
+use crate::jit::{self, Input, KernelKind, Params, Role, ValidatedKernel, WORKGROUP};
+use crate::lang::Feature;
 use crate::pipeline::GUIDE_STENCIL;
 
 /// The guide's kernel: one à-trous pass of the constant weight, nothing multiplied back.
@@ -30,18 +31,6 @@ impl Gpu {
             self.blit_pipeline(Element::Vec4F32)?;
         }
         Ok(())
-    }
-
-    /// The guide of `color` (the colour's texture, `width` × `height`), left
-    /// on the device, and how long its dispatch took: its own submission,
-    /// waited for. Callers hold the GL turn.
-    pub(super) fn guide(
-        &self,
-        color: &wgpu::TextureView,
-        width: u32,
-        height: u32,
-    ) -> Result<(wgpu::Buffer, Span), GpuError> {
-        self.timed_submission("blurring the guide", |encoder| self.record_guide(encoder, color, width, height))
     }
 
     /// Record the guide of `color` into `encoder`; callers hold the GL turn
@@ -85,5 +74,17 @@ impl Gpu {
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), band.min(height - row).div_ceil(WORKGROUP[1]), 1);
         }
         Ok(guide)
+    }
+}
+
+impl SceneBuffers {
+    /// Record the guide of these buffers' colour into `encoder` and keep it
+    /// as their `guide` input: its kernel samples the colour, as the form's
+    /// first pass does, so both read one texture. Callers hold the GL turn.
+    pub(super) fn record_guide(&mut self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) -> Result<(), GpuError> {
+        let views = self.sampled_views(gpu, encoder, &[Role::Color], 0)?;
+        let guide = gpu.record_guide(encoder, &views[&Role::Color], self.width, self.height)?;
+        self.inputs.insert(Input::Feature(Feature::Guide), guide);
+        Ok(())
     }
 }
