@@ -9,7 +9,7 @@ use std::collections::BTreeSet;
 use anyhow::{bail, Result};
 
 use crate::corpus;
-use crate::gpu::{Filtered, Gpu, SceneBuffers};
+use crate::gpu::{Filtered, Gpu, SceneBuffers, TemporalState};
 use crate::jit;
 use crate::lang::{Expr, Feature, ScalarVar};
 use crate::pipeline::FilterPipeline;
@@ -42,6 +42,11 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
     "bilateral",
 ];
 
+/// The shipped temporal filters a sequence gets when none is asked for,
+/// best first (docs/BENCHMARKS.md, "Sequences"); the first whose inputs the
+/// frames have is taken.
+pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["svgf"];
+
 /// Shipped filters with a variant for renders whose light is sparse, and
 /// that variant: the same inputs, the weight's pixel term widened from pass
 /// to pass (and for `@evolvedAtrous64Plane`, one à-trous pass more). A chosen filter (never one asked for) gives way
@@ -69,12 +74,16 @@ pub const DEFAULT_RADIUS: u32 = 5;
 pub struct Provided {
     pub features: BTreeSet<Feature>,
     pub variances: BTreeSet<ScalarVar>,
+    /// Motion vectors to the frame before (a sequence's frames), which a temporal stage reprojects by.
+    pub motion: bool,
+    /// Whether the render is a frame of a sequence (the choice then prefers temporal filters).
+    pub sequence: bool,
 }
 
 impl Provided {
     /// From the stored features a render has (colour, pixel and gradients are derived).
     pub fn new(stored: BTreeSet<Feature>, variances: BTreeSet<ScalarVar>) -> Self {
-        Provided { features: crate::scene::with_derived(stored), variances }
+        Provided { features: crate::scene::with_derived(stored), variances, motion: false, sequence: false }
     }
 }
 
@@ -106,8 +115,27 @@ impl Choice {
 
     /// The best shipped filter (`SHIPPED_BY_QUALITY`) whose inputs `provided` has.
     pub fn best_for(provided: &Provided) -> Result<Choice> {
+        Self::best_of(SHIPPED_BY_QUALITY, provided)
+    }
+
+    /// The best shipped temporal filter (`SHIPPED_TEMPORAL_BY_QUALITY`) whose
+    /// inputs a sequence's frames (`provided`) have; without motion vectors,
+    /// the best filter of single renders, frame by frame.
+    pub fn best_temporal_for(provided: &Provided) -> Result<Choice> {
+        match Self::best_of(SHIPPED_TEMPORAL_BY_QUALITY, provided) {
+            Ok(choice) => Ok(choice),
+            Err(temporal) => {
+                let choice = Self::best_for(provided)?;
+                let because = choice.chosen_because.unwrap_or_default();
+                Ok(Choice { chosen_because: Some(format!("{because}, frame by frame ({temporal})")), ..choice })
+            }
+        }
+    }
+
+    /// The first of `names` (shipped filters, best first) whose inputs `provided` has.
+    fn best_of(names: &[&str], provided: &Provided) -> Result<Choice> {
         let mut passed_over = Vec::new();
-        for name in SHIPPED_BY_QUALITY {
+        for name in names {
             let choice = Choice::asked(&format!("@{name}"), None, None)?;
             let missing = choice.missing(provided);
             if missing.is_empty() {
@@ -151,7 +179,8 @@ impl Choice {
         })
     }
 
-    /// The filter asked for, or else the best shipped one for what the render provides.
+    /// The filter asked for, or else the best shipped one for what the
+    /// render provides (for a sequence's frames, the best temporal one).
     pub fn asked_or_best(
         filter: Option<&str>,
         pipeline: Option<FilterPipeline>,
@@ -161,7 +190,8 @@ impl Choice {
         match filter {
             Some(filter) => Choice::asked(filter, pipeline, radius),
             None => {
-                let best = Choice::best_for(provided)?;
+                let best =
+                    if provided.sequence { Choice::best_temporal_for(provided)? } else { Choice::best_for(provided)? };
                 Ok(Choice {
                     pipeline: pipeline.unwrap_or(best.pipeline),
                     radius: radius.unwrap_or(best.radius),
@@ -178,14 +208,20 @@ impl Choice {
             features: &provided.features,
             variances: &provided.variances,
             measured: self.pipeline.outliers.is_some(),
+            accumulated: self.pipeline.is_temporal(),
             albedo: provided.features.contains(&Feature::Texture),
+            motion: provided.motion,
         };
         Needs::of_filter(&self.expr, &self.pipeline).missing(holds).iter().map(|m| m.to_string()).collect()
     }
 
     /// What a scene must hold for this filter (its reference too, for errors).
     pub fn request(&self) -> Request {
-        let mut request = Request { albedo: self.pipeline.demodulate, ..Request::for_expr(&self.expr) };
+        let mut request = Request {
+            albedo: self.pipeline.demodulate,
+            motion: self.pipeline.is_temporal(),
+            ..Request::for_expr(&self.expr)
+        };
         request.features.extend(self.pipeline.features());
         request
     }
@@ -254,10 +290,61 @@ pub fn shipped() -> Result<Vec<Shipped>> {
 }
 
 /// `scene` filtered on `gpu` with `kernel` (the choice's, [`Choice::compile`]):
-/// the pre-pass, then the form, in one submission, read back.
+/// the pre-pass, then the form, in one submission, read back. A temporal
+/// filter's single frame is the first of its sequence.
 pub fn filter(gpu: &Gpu, choice: &Choice, kernel: &jit::ValidatedKernel, scene: &Scene) -> Result<Filtered> {
     let mut buffers = SceneBuffers::for_frame(gpu, scene, &choice.pipeline)?;
     Ok(gpu.filter(kernel, &mut buffers, scene, choice.radius)?)
+}
+
+/// A frame of a sequence, filtered.
+pub struct FilteredFrame {
+    pub filtered: Filtered,
+    /// The temporal stage's part of the frame's time, where its pipeline has one.
+    pub temporal: Option<crate::gpu::Span>,
+}
+
+/// A sequence filtered frame by frame on one device: the filter's kernel,
+/// and the temporal state its pipeline carries from each frame to the next
+/// (none for a filter without a temporal stage, which filters each frame alone).
+pub struct SequenceFilter<'g> {
+    gpu: &'g Gpu,
+    choice: Choice,
+    kernel: jit::ValidatedKernel,
+    state: TemporalState,
+}
+
+impl<'g> SequenceFilter<'g> {
+    /// Compile `choice`'s kernel; the first frame starts the sequence.
+    pub fn new(gpu: &'g Gpu, choice: Choice) -> Result<Self> {
+        let kernel = choice.compile()?;
+        Ok(SequenceFilter { gpu, choice, kernel, state: TemporalState::new() })
+    }
+
+    /// The next frame, filtered, in one submission; its history is kept for the frame after.
+    pub fn frame(&mut self, scene: &Scene) -> Result<FilteredFrame> {
+        let mut buffers = SceneBuffers::for_frame(self.gpu, scene, &self.choice.pipeline)?;
+        let filtered = self.gpu.filter_frame(&self.kernel, &mut buffers, scene, self.choice.radius, &mut self.state)?;
+        Ok(FilteredFrame { filtered, temporal: buffers.temporal_time() })
+    }
+
+    /// Forget the history: the next frame starts a sequence (a cut).
+    pub fn reset(&mut self) {
+        self.state.reset();
+    }
+
+    /// Frames blended since the sequence started (or was reset).
+    pub fn frames(&self) -> u32 {
+        self.state.frames()
+    }
+
+    pub fn choice(&self) -> &Choice {
+        &self.choice
+    }
+
+    pub fn kernel(&self) -> &jit::ValidatedKernel {
+        &self.kernel
+    }
 }
 
 #[cfg(test)]

@@ -278,6 +278,9 @@ fn content(input: Input) -> String {
                 ScalarVar::LocalMean | ScalarVar::LocalStd | ScalarVar::ClampedShare => {
                     return format!("the pre-pass's `local` texture, which holds `{v}` (not normalised)")
                 }
+                ScalarVar::HistoryLength | ScalarVar::TemporalVariance => {
+                    return format!("the temporal stage's `{v}` (not normalised)")
+                }
             };
             format!("per-pixel sample variance of the {of}, mean over channels")
         }
@@ -726,7 +729,14 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     | Role::PixelFlags
                     | Role::Input(_)
                     | Role::Total
-                    | Role::Surface,
+                    | Role::Surface
+                    | Role::Motion
+                    | Role::Geometry
+                    | Role::PreviousGeometry
+                    | Role::History
+                    | Role::Moments
+                    | Role::MomentsOut
+                    | Role::Accumulated,
                     _,
                 )
                 | (Role::Modulation, Stages::Guide) => {

@@ -65,6 +65,41 @@ pub fn errors<A: Copy + Into<f64>, B: Copy + Into<f64>>(
     }
 }
 
+/// How an output changes from one frame to the next where its reference
+/// does not: a denoiser's flicker. Of two consecutive frames of an output
+/// (`previous`, `image`) and of their references.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Temporal {
+    /// F: the mean over pixels and channels of |(o_t − o_{t−1}) − (r_t − r_{t−1})|.
+    pub flicker: f64,
+    /// The mean over pixels of Σ_rgb ((o_t − o_{t−1}) − (r_t − r_{t−1}))² / (r_t² + ε),
+    /// relMSE's form (equation 3.5) for the change between frames.
+    pub relmse: f64,
+}
+
+/// [`Temporal`] of frame t against frame t − 1, all four images of one size.
+pub fn temporal<A: Copy + Into<f64>, B: Copy + Into<f64>>(
+    (previous, image): (&[[A; 3]], &[[A; 3]]),
+    (previous_reference, reference): (&[[B; 3]], &[[B; 3]]),
+) -> Temporal {
+    assert!(
+        [previous.len(), previous_reference.len(), reference.len()].iter().all(|n| *n == image.len()),
+        "frames of equal size"
+    );
+    let (mut absolute, mut relative) = (0.0f64, 0.0f64);
+    for p in 0..image.len() {
+        for q in 0..3 {
+            let change = image[p][q].into() - previous[p][q].into();
+            let (r, r0): (f64, f64) = (reference[p][q].into(), previous_reference[p][q].into());
+            let e = change - (r - r0);
+            absolute += e.abs();
+            relative += e * e / (r * r + RELMSE_EPSILON);
+        }
+    }
+    let n = image.len().max(1) as f64;
+    Temporal { flicker: absolute / (3.0 * n), relmse: relative / n }
+}
+
 /// Mean luminance (`pipeline::luminance`, the outlier rule's) of an image.
 pub fn mean_luminance<A: Copy + Into<f64>>(image: &[[A; 3]]) -> f64 {
     let sum: f64 = image.iter().map(|c| crate::pipeline::luminance([c[0].into(), c[1].into(), c[2].into()])).sum();
@@ -137,6 +172,20 @@ mod tests {
         assert_eq!(e.relmse_half_spp, Some(100.0));
         assert_eq!(e.mse, 0.5);
         assert_eq!(e.light, None, "a black reference has no light to keep");
+    }
+
+    #[test]
+    fn flicker_counts_change_the_reference_does_not_have() {
+        let (r0, r1) = ([[0.0f32; 3], [1.0; 3]], [[0.0f32; 3], [2.0; 3]]);
+        // Following the reference's change exactly is no flicker, whatever the offset.
+        let follows = ([[0.5f32; 3], [1.5; 3]], [[0.5f32; 3], [2.5; 3]]);
+        let t = temporal((&follows.0, &follows.1), (&r0, &r1));
+        assert_eq!((t.flicker, t.relmse), (0.0, 0.0));
+        // A still output where the reference brightens by 1 in one of two pixels: F is 1 in half the channels.
+        let still = ([[0.0f32; 3], [1.0; 3]], [[0.0f32; 3], [1.0; 3]]);
+        let t = temporal((&still.0, &still.1), (&r0, &r1));
+        assert!((t.flicker - 0.5).abs() < 1e-12, "{t:?}");
+        assert!((t.relmse - 3.0 / (4.0 + RELMSE_EPSILON) / 2.0).abs() < 1e-12, "{t:?}");
     }
 
     #[test]

@@ -1,5 +1,5 @@
 //! The filter pipeline around an evolved weight:
-//! `outliers → demodulate → form → remodulate` (docs/SEMANTICS.md, "The pipeline").
+//! `outliers → demodulate → temporal → form → remodulate` (docs/SEMANTICS.md, "The pipeline").
 //!
 //! The thesis filters once over a (2r+1)² window. On real renders three
 //! things around the weight matter as much as the weight: fireflies are
@@ -162,14 +162,6 @@ pub const SURFACE_KEEP_LIGHT_FLOOR: f64 = 3.0;
 /// normals, filterjit's normalised feature, an engine's scaled texture) gives
 /// the same shares; a zero normal has no direction and agrees with none.
 pub fn surface_normal_term(a: [f64; 3], b: [f64; 3]) -> f64 {
-    let direction = |v: [f64; 3]| {
-        let length2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
-        if length2 > 0.0 {
-            v.map(|c| c / length2.sqrt())
-        } else {
-            [0.0; 3]
-        }
-    };
     let (a, b) = (direction(a), direction(b));
     let dot = a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
     (-(1.0 - dot).max(0.0) / SURFACE_KEEP_NORMAL_SIGMA).exp()
@@ -205,6 +197,87 @@ pub fn spread_share(x: i64, d: i64, step: i64, n: i64) -> f64 {
     let inside: f64 =
         (-half..=half).filter(|e| (0..n).contains(&(x + e * step))).map(|e| KEEP_STENCIL.weight(e as i32)).sum();
     KEEP_STENCIL.weight(d as i32) / inside
+}
+
+/// The temporal stage (`temporal=A`, docs/SEMANTICS.md, "The temporal
+/// stage"): ahead of the form, each frame's colour (as the pre-pass left it)
+/// is blended into a history reprojected from the frame before by the motion
+/// vectors, where the surface is the same one (depth and normal agree), with
+/// the luminance's first two moments beside it (SVGF, Schied et al. 2017).
+/// The form filters the blend and may read the history's length and the
+/// variance of its luminance (`historyLength`, `temporalVariance`); the
+/// image after `feedback` passes of the form is the next frame's history.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Temporal {
+    /// α_min: a frame's share of the blend is max(α_min, 1/n) after n frames
+    /// of history, so that the first frames are averaged evenly and later
+    /// ones forget at rate α_min.
+    pub alpha: f32,
+    /// The passes of the form whose output becomes the history (0: the blend
+    /// itself; SVGF feeds back its first pass's).
+    pub feedback: u32,
+    /// γ of the history's clamp, if any: each channel of the reprojected
+    /// history is clamped to the current frame's 3×3 mean ± γ standard
+    /// deviations, so that a history the frame disagrees with (a moving
+    /// shadow, a reflection) fades instead of ghosting.
+    pub clamp: Option<f32>,
+}
+
+impl Temporal {
+    /// A frame's share of the blend after `n` frames of history (n ≥ 1; 1: no history).
+    pub fn share(self, n: f64) -> f64 {
+        (self.alpha as f64).max(1.0 / n)
+    }
+}
+
+/// The largest relative depth difference |z' − z| / z at which a history
+/// sample is taken to see the same surface as the pixel.
+pub const TEMPORAL_DEPTH_TOLERANCE: f64 = 0.1;
+
+/// The smallest cosine between the normals' directions at which a history
+/// sample is taken to see the same surface (about 26°).
+pub const TEMPORAL_NORMAL_COSINE: f64 = 0.9;
+
+/// A bilinear footprint whose consistent taps hold less than this share of
+/// its weight is not taken: the wider search looks instead.
+pub const TEMPORAL_MIN_FOOTPRINT: f64 = 1e-3;
+
+/// The history's length is counted up to this many frames.
+pub const TEMPORAL_MAX_HISTORY: f64 = 255.0;
+
+/// Below this history length the variance comes from the frame's own
+/// neighbourhood (SVGF's spatial estimate) instead of the moments.
+pub const TEMPORAL_SHORT_HISTORY: f64 = 4.0;
+
+/// The spatial variance estimate's neighbourhood: (2R+1)² pixels.
+pub const TEMPORAL_VARIANCE_RADIUS: i32 = 3;
+
+/// The largest α_min: a history that forgets faster than this is no history.
+pub const TEMPORAL_MAX_ALPHA: f32 = 1.0;
+
+/// Whether a history sample with normal `n` and depth `z` sees the surface a
+/// pixel with normal `at_n` and depth `at_z` sees: depths within
+/// [`TEMPORAL_DEPTH_TOLERANCE`] of the pixel's and normals' directions within
+/// [`TEMPORAL_NORMAL_COSINE`], where a zero normal (no surface: the sky) only
+/// matches another. `n` and `at_n` are directions (unit or zero).
+pub fn same_surface(n: [f64; 3], z: f64, at_n: [f64; 3], at_z: f64) -> bool {
+    let has = |v: [f64; 3]| v.iter().any(|c| *c != 0.0);
+    let normals = match (has(n), has(at_n)) {
+        (true, true) => n[0] * at_n[0] + n[1] * at_n[1] + n[2] * at_n[2] >= TEMPORAL_NORMAL_COSINE,
+        (false, false) => true,
+        _ => false,
+    };
+    normals && (z - at_z).abs() <= TEMPORAL_DEPTH_TOLERANCE * at_z
+}
+
+/// A normal's direction: the unit vector, or zero for a zero normal.
+pub fn direction(v: [f64; 3]) -> [f64; 3] {
+    let length2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if length2 > 0.0 {
+        v.map(|c| c / length2.sqrt())
+    } else {
+        [0.0; 3]
+    }
 }
 
 /// `planefit=R`'s largest radius.
@@ -266,6 +339,8 @@ impl PlaneFit {
 pub struct FilterPipeline {
     pub outliers: Option<Outliers>,
     pub demodulate: bool,
+    /// The temporal stage, for sequences: `temporal=A` after the pre-pass.
+    pub temporal: Option<Temporal>,
     pub form: Form,
     /// `planefit=R` after the form, if any.
     pub planefit: Option<PlaneFit>,
@@ -281,17 +356,27 @@ impl Default for FilterPipeline {
 impl FilterPipeline {
     /// The thesis's filter: one window pass, no pre-pass.
     pub const WINDOW: FilterPipeline =
-        FilterPipeline { outliers: None, demodulate: false, form: Form::Window, planefit: None };
+        FilterPipeline { outliers: None, demodulate: false, temporal: None, form: Form::Window, planefit: None };
 
     /// The features the pipeline's own stages read (besides the colour and
-    /// the albedo `demodulate` divides by): the normal, for `keep=surface`
-    /// and `planefit`.
+    /// the albedo `demodulate` divides by): the normal, for `keep=surface`,
+    /// `planefit` and the temporal stage, and the depth for the latter (which
+    /// also reads the motion vectors, no feature).
     pub fn features(&self) -> std::collections::BTreeSet<crate::lang::Feature> {
-        if self.keep() == Some(Keep::Surface) || self.planefit.is_some() {
-            [crate::lang::Feature::Normal].into()
-        } else {
-            Default::default()
+        use crate::lang::Feature;
+        let mut features = std::collections::BTreeSet::new();
+        if self.keep() == Some(Keep::Surface) || self.planefit.is_some() || self.temporal.is_some() {
+            features.insert(Feature::Normal);
         }
+        if self.temporal.is_some() {
+            features.insert(Feature::Depth);
+        }
+        features
+    }
+
+    /// Whether the pipeline carries state from frame to frame (a temporal stage).
+    pub fn is_temporal(&self) -> bool {
+        self.temporal.is_some()
     }
 
     /// The kind of `keep` the pipeline has, if any.
@@ -338,6 +423,30 @@ impl FilterPipeline {
     pub fn step(level: u32) -> u32 {
         1 << level
     }
+
+    /// The most passes of the form whose output can be the temporal
+    /// stage's history: every pass, unless the last multiplies the albedo
+    /// back (a demodulating pipeline's window, or its à-trous form where no
+    /// `planefit` does it instead).
+    pub fn most_feedback(&self) -> u32 {
+        let last_remodulates = self.demodulate && (self.planefit.is_none() || !self.is_atrous());
+        if last_remodulates {
+            self.passes() - 1
+        } else {
+            self.passes()
+        }
+    }
+
+    /// The variance the à-trous form carries through its passes, of those a
+    /// weight reading `variables` reads (SVGF's rule: each pass's output has
+    /// Σ w² v_j / (Σ w)²): `temporalVariance` where it reads it, else
+    /// `colorVariance`; the other, if read, stays the frame's.
+    pub fn carried_variance(
+        variables: &std::collections::BTreeSet<crate::lang::ScalarVar>,
+    ) -> Option<crate::lang::ScalarVar> {
+        use crate::lang::ScalarVar;
+        [ScalarVar::TemporalVariance, ScalarVar::ColorVariance].into_iter().find(|v| variables.contains(v))
+    }
 }
 
 /// Text that is not a pipeline.
@@ -355,6 +464,8 @@ impl FromStr for FilterPipeline {
         let error = |message: String| PipelineError { text: text.to_string(), message };
         let mut pipeline = FilterPipeline::WINDOW;
         let mut form_seen = false;
+        // `feedback=K` as written, checked against the form once it is known.
+        let mut feedback: Option<u32> = None;
         for stage in text.split(',').map(str::trim) {
             let (name, value) = match stage.split_once('=') {
                 Some((n, v)) => (n.trim(), Some(v.trim())),
@@ -386,20 +497,20 @@ impl FromStr for FilterPipeline {
                     if !(k.is_finite() && k >= 0.0) {
                         return Err(error(format!("outliers={v}: k must be finite and at least 0")));
                     }
-                    if pipeline.outliers.is_some() || pipeline.demodulate {
+                    if pipeline.outliers.is_some() || pipeline.demodulate || pipeline.temporal.is_some() {
                         return Err(error("`outliers` is the first stage, and appears once".into()));
                     }
                     pipeline.outliers = Some(Outliers { k, trim: false, keep: None });
                 }
                 ("trim", None) => match &mut pipeline.outliers {
-                    Some(outliers) if !outliers.trim && outliers.keep.is_none() && !pipeline.demodulate => {
+                    Some(outliers) if !outliers.trim && outliers.keep.is_none() && !pipeline.demodulate && pipeline.temporal.is_none() => {
                         outliers.trim = true
                     }
                     Some(_) => return Err(error("`trim` comes once, right after `outliers=K`".into())),
                     None => return Err(error("`trim` changes the rule of `outliers=K`: write it after outliers=K".into())),
                 },
                 ("keep", None | Some("surface")) => match &mut pipeline.outliers {
-                    Some(outliers) if outliers.keep.is_none() && !pipeline.demodulate => {
+                    Some(outliers) if outliers.keep.is_none() && !pipeline.demodulate && pipeline.temporal.is_none() => {
                         outliers.keep = Some(if value.is_some() { Keep::Surface } else { Keep::Even })
                     }
                     Some(_) => return Err(error("`keep` comes once, right after `outliers=K` (and `trim`)".into())),
@@ -410,10 +521,61 @@ impl FromStr for FilterPipeline {
                 ("keep", Some(v)) => {
                     return Err(error(format!("keep={v}: write `keep` (evenly) or `keep=surface`")))
                 }
+                ("temporal", Some(v)) => {
+                    let alpha: f32 =
+                        v.parse().map_err(|_| error(format!("temporal={v}: the blend's α_min must be a number")))?;
+                    if !(alpha > 0.0 && alpha <= TEMPORAL_MAX_ALPHA) {
+                        return Err(error(format!(
+                            "temporal={v}: α_min must be above 0 and at most {TEMPORAL_MAX_ALPHA}"
+                        )));
+                    }
+                    if pipeline.temporal.is_some() {
+                        return Err(error("`temporal` appears once".into()));
+                    }
+                    pipeline.temporal = Some(Temporal { alpha, feedback: 0, clamp: None });
+                }
+                ("temporal", None) => {
+                    return Err(error("`temporal` needs its α_min, the least share of a frame: temporal=A".into()))
+                }
+                ("feedback", Some(v)) => {
+                    let passes: u32 =
+                        v.parse().map_err(|_| error(format!("feedback={v}: the passes must be a whole number")))?;
+                    match pipeline.temporal {
+                        Some(_) if feedback.is_none() => feedback = Some(passes),
+                        Some(_) => return Err(error("`feedback` appears once".into())),
+                        None => {
+                            return Err(error(
+                                "`feedback=K` says which pass the temporal stage keeps: write it after temporal=A"
+                                    .into(),
+                            ))
+                        }
+                    }
+                }
+                ("clamp", Some(v)) => {
+                    let gamma: f32 = v.parse().map_err(|_| error(format!("clamp={v}: γ must be a number")))?;
+                    if !(gamma.is_finite() && gamma > 0.0) {
+                        return Err(error(format!("clamp={v}: γ must be finite and above 0")));
+                    }
+                    match &mut pipeline.temporal {
+                        Some(temporal) if temporal.clamp.is_none() => temporal.clamp = Some(gamma),
+                        Some(_) => return Err(error("`clamp` appears once".into())),
+                        None => {
+                            return Err(error(
+                                "`clamp=G` clamps the temporal stage's history: write it after temporal=A".into(),
+                            ))
+                        }
+                    }
+                }
+                ("feedback" | "clamp", None) => {
+                    return Err(error(format!("`{name}` needs its value: {name}=N")));
+                }
                 ("outliers", None) => return Err(error("`outliers` needs its strength: outliers=K".into())),
                 ("demodulate", None) => {
                     if pipeline.demodulate {
                         return Err(error("`demodulate` appears twice".into()));
+                    }
+                    if pipeline.temporal.is_some() {
+                        return Err(error("`demodulate` comes before `temporal`: the history is demodulated".into()));
                     }
                     pipeline.demodulate = true;
                 }
@@ -436,13 +598,27 @@ impl FromStr for FilterPipeline {
                 }
                 (other, _) => {
                     return Err(error(format!(
-                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, window, atrous=N, atrous3x3=N, planefit=R"
+                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, temporal=A, feedback=K, clamp=G, window, atrous=N, atrous3x3=N, planefit=R"
                     )))
                 }
             }
         }
         if !form_seen {
             return Err(error("no form: end with `window`, `atrous=N` or `atrous3x3=N`".into()));
+        }
+        let most = pipeline.most_feedback();
+        if let Some(temporal) = &mut pipeline.temporal {
+            temporal.feedback = match feedback {
+                Some(k) if k > most => {
+                    return Err(error(format!(
+                        "feedback={k}: the history is a demodulated image after at most {most} passes of this form{}",
+                        if most < pipeline.passes() { " (its last pass multiplies the albedo back)" } else { "" }
+                    )))
+                }
+                Some(k) => k,
+                // SVGF's: the first pass's output.
+                None => most.min(1),
+            };
         }
         Ok(pipeline)
     }
@@ -464,6 +640,12 @@ impl fmt::Display for FilterPipeline {
         }
         if self.demodulate {
             write!(f, "demodulate,")?;
+        }
+        if let Some(Temporal { alpha, feedback, clamp }) = self.temporal {
+            write!(f, "temporal={alpha},feedback={feedback},")?;
+            if let Some(gamma) = clamp {
+                write!(f, "clamp={gamma},")?;
+            }
         }
         match self.form {
             Form::Window => write!(f, "window")?,
@@ -519,6 +701,9 @@ mod tests {
             "outliers=2.5,trim,keep=surface,demodulate,atrous=4",
             "outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3",
             "window,planefit=1",
+            "outliers=2,demodulate,temporal=0.2,feedback=1,atrous=4",
+            "demodulate,temporal=0.1,feedback=0,clamp=2,atrous3x3=3,planefit=3",
+            "temporal=0.05,feedback=1,window",
         ] {
             let p: FilterPipeline = text.parse().unwrap();
             assert_eq!(p.to_string(), text);
@@ -549,10 +734,46 @@ mod tests {
             ("atrous=4,planefit=0", "from 1 to"),
             ("atrous=4,planefit=3,planefit=3", "once"),
             ("atrous=4,planefit=3,demodulate", "only `planefit=R`"),
+            ("temporal,atrous=4", "temporal=A"),
+            ("temporal=0,atrous=4", "above 0"),
+            ("temporal=0.2,demodulate,atrous=4", "before `temporal`"),
+            ("temporal=0.2,outliers=2,atrous=4", "first stage"),
+            ("feedback=1,atrous=4", "after temporal=A"),
+            ("clamp=2,atrous=4", "after temporal=A"),
+            ("temporal=0.2,clamp=0,atrous=4", "above 0"),
+            ("demodulate,temporal=0.2,feedback=4,atrous=4", "at most 3 passes"),
+            ("temporal=0.2,temporal=0.1,atrous=4", "once"),
+            ("temporal=0.2,atrous=4,feedback=1", "only `planefit=R`"),
         ] {
             let e = text.parse::<FilterPipeline>().unwrap_err().to_string();
             assert!(e.contains(needle), "{text}: {e}");
         }
+    }
+
+    #[test]
+    fn feedback_defaults_to_the_first_pass_where_the_form_allows() {
+        let default = |text: &str| text.parse::<FilterPipeline>().unwrap().temporal.unwrap().feedback;
+        assert_eq!(default("demodulate,temporal=0.2,atrous=4"), 1);
+        // A window that multiplies the albedo back leaves no demodulated pass: the blend is the history.
+        assert_eq!(default("demodulate,temporal=0.2,window"), 0);
+        assert_eq!(default("demodulate,temporal=0.2,window,planefit=2"), 0);
+        assert_eq!(default("demodulate,temporal=0.2,atrous=2,planefit=2"), 1);
+        assert_eq!(default("temporal=0.2,window"), 1);
+        let p: FilterPipeline = "demodulate,temporal=0.2,atrous=4".parse().unwrap();
+        assert_eq!(p.to_string(), "demodulate,temporal=0.2,feedback=1,atrous=4");
+        assert!(p.features().contains(&crate::lang::Feature::Depth) && p.is_temporal());
+    }
+
+    #[test]
+    fn the_same_surface_test_reads_directions_and_relative_depth() {
+        let up = [0.0, 0.0, 1.0];
+        assert!(same_surface(up, 1.05, up, 1.0));
+        assert!(!same_surface(up, 1.2, up, 1.0));
+        assert!(!same_surface([1.0, 0.0, 0.0], 1.0, up, 1.0));
+        // No surface matches no surface only.
+        assert!(same_surface([0.0; 3], 0.0, [0.0; 3], 0.0));
+        assert!(!same_surface([0.0; 3], 0.0, up, 0.0));
+        assert_eq!(direction([0.0, 3.0, 4.0]), [0.0, 0.6, 0.8]);
     }
 
     #[test]

@@ -25,3 +25,32 @@ pub fn write_png(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> 
     }
     crate::io::write_bytes_atomically(path, &bytes)
 }
+
+/// Write `frames` (each `width`×`height` linear RGB, tone-mapped as
+/// [`write_png`]) as one animated PNG that loops, `fps` frames a second,
+/// atomically: a sequence's preview, which browsers play.
+pub fn write_animated_png(
+    path: &Path,
+    width: usize,
+    height: usize,
+    frames: &[Vec<[f32; 3]>],
+    fps: u16,
+) -> Result<(), crate::io::WriteError> {
+    let encode =
+        |e: png::EncodingError| crate::io::WriteError::Encode { path: path.to_path_buf(), message: e.to_string() };
+    let mut bytes = Vec::new();
+    {
+        let mut encoder = png::Encoder::new(&mut bytes, width as u32, height as u32);
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_animated(frames.len().max(1) as u32, 0).map_err(encode)?;
+        encoder.set_frame_delay(1, fps.max(1)).map_err(encode)?;
+        let mut writer = encoder.write_header().map_err(encode)?;
+        for frame in frames {
+            let pixels: Vec<u8> = frame.iter().flat_map(|c| c.map(tone_map)).collect();
+            writer.write_image_data(&pixels).map_err(encode)?;
+        }
+        writer.finish().map_err(encode)?;
+    }
+    crate::io::write_bytes_atomically(path, &bytes)
+}

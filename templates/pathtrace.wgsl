@@ -5,6 +5,12 @@
 //
 // Path depth follows Mitsuba's convention: max_depth counts path segments, so
 // 1 sees emitters only and 2 is direct illumination.
+//
+// A frame of a sequence (with_motion) also writes each sample's motion
+// vector as Blender's Vector pass does (docs/SCENES.md, "Sequences"): where
+// its first hit was in the frame before (the hit point less its shape's step,
+// seen through the frame before's camera; a miss, its direction) minus where
+// it is, in pixels, x right and y up.
 
 struct Prim {
     // x: kind (0 parallelogram, 1 sphere), y: material, z: emitter flag, w: unused
@@ -19,6 +25,8 @@ struct Prim {
     n: vec4<f32>,
     // emitted radiance (one-sided for parallelograms, outward for spheres)
     emission: vec4<f32>,
+    // how far the shape moved since the frame before (a sequence's moving shape)
+    step: vec4<f32>,
 }
 
 struct Material {
@@ -41,7 +49,8 @@ struct Params {
     light_count: u32,
     prim_count: u32,
     row_offset: u32,
-    _pad0: u32,
+    // 1: write motion vectors against the frame before's camera (prev_*)
+    with_motion: u32,
     _pad1: u32,
     environment: vec4<f32>,
     // camera: position; forward, right, up scaled by the half-extent of the image plane
@@ -49,6 +58,11 @@ struct Params {
     cam_forward: vec4<f32>,
     cam_right: vec4<f32>,
     cam_up: vec4<f32>,
+    // the frame before's camera, likewise
+    prev_pos: vec4<f32>,
+    prev_forward: vec4<f32>,
+    prev_right: vec4<f32>,
+    prev_up: vec4<f32>,
 }
 
 @group(0) @binding(0) var<storage, read> params: Params;
@@ -58,8 +72,9 @@ struct Params {
 @group(0) @binding(4) var<storage, read_write> sums: array<f32>;
 
 // Floats per pixel in `sums`: colour, albedo, position, normal, secondary albedo
-// (3 each, sum then sum of squares), depth, visibility (1 each, likewise).
-const STRIDE: u32 = 34u;
+// (3 each), depth, visibility, motion x and y (1 each): 19 sums, then their squares.
+const VALUES: u32 = 19u;
+const STRIDE: u32 = 38u;
 const PI: f32 = 3.14159265358979;
 const INF: f32 = 1e30;
 const EPS: f32 = 1e-4;
@@ -339,6 +354,9 @@ struct Sample {
     secondary: vec3<f32>,
     depth: f32,
     visibility: f32,
+    // the first hit in the frame before (hit: whether there was one)
+    previous: vec3<f32>,
+    hit: bool,
 }
 
 fn surface_albedo(hit: Hit) -> vec3<f32> {
@@ -387,6 +405,8 @@ fn trace(o_in: vec3<f32>, d_in: vec3<f32>) -> Sample {
             s.position = hit.p;
             s.normal = hit.n;
             s.depth = hit.t;
+            s.previous = hit.p - prim.step.xyz;
+            s.hit = true;
             let r = reflect(d, n);
             let second = intersect(p, r);
             if (second.prim != 0xffffffffu) {
@@ -470,7 +490,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let pixel = y * params.width + x;
-    var acc: array<f32, 34>;
+    var acc: array<f32, 38>;
     for (var k = 0u; k < STRIDE; k++) {
         acc[k] = 0.0;
     }
@@ -481,17 +501,37 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let py = 1.0 - (f32(y) + rand()) / f32(params.height) * 2.0;
         let d = normalize(params.cam_forward.xyz + px * params.cam_right.xyz + py * params.cam_up.xyz);
         let s = trace(params.cam_pos.xyz, d);
-        var values = array<f32, 17>(
+        var motion = vec2<f32>(0.0);
+        if (params.with_motion != 0u) {
+            // Where the sample is on the image, and where its surface was in the frame before, in pixels.
+            let here = vec2<f32>((px + 1.0) * 0.5 * f32(params.width), (1.0 - py) * 0.5 * f32(params.height));
+            var toward = d;
+            if (s.hit) {
+                toward = s.previous - params.prev_pos.xyz;
+            }
+            let z = dot(toward, params.prev_forward.xyz);
+            if (z > 0.0) {
+                let qx = dot(toward, params.prev_right.xyz) / (dot(params.prev_right.xyz, params.prev_right.xyz) * z);
+                let qy = dot(toward, params.prev_up.xyz) / (dot(params.prev_up.xyz, params.prev_up.xyz) * z);
+                let there = vec2<f32>((qx + 1.0) * 0.5 * f32(params.width), (1.0 - qy) * 0.5 * f32(params.height));
+                // Blender's convention: the frame before minus this one, y up.
+                motion = vec2<f32>(there.x - here.x, here.y - there.y);
+            } else {
+                // Behind the camera before: far outside any image, no history.
+                motion = vec2<f32>(1e7, 1e7);
+            }
+        }
+        var values = array<f32, 19>(
             s.color.x, s.color.y, s.color.z,
             s.albedo.x, s.albedo.y, s.albedo.z,
             s.position.x, s.position.y, s.position.z,
             s.normal.x, s.normal.y, s.normal.z,
             s.secondary.x, s.secondary.y, s.secondary.z,
-            s.depth, s.visibility,
+            s.depth, s.visibility, motion.x, motion.y,
         );
-        for (var c = 0u; c < 17u; c++) {
+        for (var c = 0u; c < VALUES; c++) {
             acc[c] += values[c];
-            acc[17u + c] += values[c] * values[c];
+            acc[VALUES + c] += values[c] * values[c];
         }
     }
     for (var k = 0u; k < STRIDE; k++) {

@@ -127,3 +127,57 @@ fn a_blender_file_with_other_layers_or_passes_is_named_in_the_error() {
     let (ok, stderr) = filter(&["--expr", "@bilateral"], &dark);
     assert!(!ok && stderr.contains(dark.to_str().unwrap()) && stderr.contains("Combined.R"), "{stderr}");
 }
+
+/// Today's Blender renders a short sequence whose camera climbs as it
+/// slides (`render_cycles.py -- colonnade-climb`, 3 frames at 48², 16 spp:
+/// seconds): its Vector pass, read as filterjit reads it (x right, y up),
+/// moves the frame before's albedo onto the frame's, and read with y down
+/// does not; and the sequence filters end to end with no flag. Runs where
+/// `blender` is on PATH; CI installs it and requires it.
+#[test]
+fn blenders_vector_pass_reads_y_up_on_a_sequence_rendered_today() {
+    let found = Command::new("blender").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !found {
+        assert!(
+            std::env::var_os("CI").is_none() && std::env::var_os("FILTERJIT_REQUIRE_BLENDER").is_none(),
+            "blender is required in CI (.ci/run installs it) and not found"
+        );
+        eprintln!(
+            "\n*** SKIPPED blenders_vector_pass_reads_y_up_on_a_sequence_rendered_today: no blender on PATH ***\n"
+        );
+        return;
+    }
+    let dir = temp_dir("blender", "sequence");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/blender/render_cycles.py");
+    let noisy = dir.join("noisy");
+    let o = Command::new("blender")
+        .args(["-b", "--factory-startup", "-noaudio", "-P"])
+        .arg(&script)
+        .arg("--")
+        .arg("colonnade-climb")
+        .arg(&noisy)
+        .args(["16", "7", "48", "3"])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    let sequence = filterjit::scene::Sequence::find(&noisy).unwrap();
+    assert_eq!(sequence.frames.len(), 3);
+    let request = filterjit::scene::Request { motion: true, albedo: true, ..Default::default() };
+    let scenes: Vec<_> = (0..3).map(|k| sequence.load(k, &request).unwrap()).collect();
+    for pair in scenes.windows(2) {
+        let (a0, a1) = (pair[0].albedo.as_ref().unwrap(), pair[1].albedo.as_ref().unwrap());
+        let moved = crate::temporal::moved_difference((a0, a1), &pair[1], [1.0, 1.0]);
+        let down = crate::temporal::moved_difference((a0, a1), &pair[1], [1.0, -1.0]);
+        let still = crate::temporal::moved_difference((a0, a1), &pair[1], [0.0, 0.0]);
+        eprintln!("{}: moved {moved:.4}, with y down {down:.4}, still {still:.4}", pair[1].name);
+        assert!(
+            moved < 0.8 * down && moved < 0.8 * still,
+            "{}: moved {moved}, y down {down}, still {still}",
+            pair[1].name
+        );
+    }
+    let out = dir.join("out");
+    let o = filterjit(&["filter", noisy.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("frame_0003.exr").is_file() && out.join("animation.png").is_file());
+}

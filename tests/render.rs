@@ -138,3 +138,57 @@ fn a_built_in_training_scene_has_a_black_noisy_median_under_a_lit_reference() {
     assert!(reference.median_over_mean > 0.3, "reference {reference:?}");
     assert!(noisy.top_percent_share > 2.0 * reference.top_percent_share, "{noisy:?} against {reference:?}");
 }
+
+/// Every built-in sequence renders (at a tiny size) into a folder of frame
+/// datasets that `scene::Sequence` reads in order, each with motion vectors;
+/// and the vectors mean what Blender's do: on the dolly, whose motion is
+/// both sideways and vertical, moving the frame before's reference by them
+/// (y up) lines it up with the frame's, and moving it with y down does not.
+#[test]
+fn built_in_sequences_render_with_motion_vectors_in_blenders_convention() {
+    let gpu = gpu();
+    for (name, _) in render::BUILTIN_SEQUENCES {
+        // The dolly's motion is a pixel a frame at 64²: large enough to tell the vectors' signs.
+        let side = if *name == "seq-dolly-room" { 64 } else { 24 };
+        let settings = RenderSettings { width: side, height: side, spp: 4, reference_spp: 8, seed: 5 };
+        let d = render::builtin(name).unwrap().unwrap();
+        let frames = d.animation.expect("a sequence").frames as usize;
+        let dir = temp_dir(name);
+        render::render_sequence(&gpu, &d, &settings, &dir, &mut |_, _| {}).unwrap();
+        assert!(dir.join(render::SEQUENCE_META).is_file(), "{name}: marked complete");
+        let sequence = scene::Sequence::find(&dir).unwrap();
+        assert_eq!(sequence.frames.len(), frames, "{name}");
+        let request = Request {
+            motion: true,
+            reference: true,
+            albedo: true,
+            features: [Feature::Normal, Feature::Depth].into(),
+            ..Default::default()
+        };
+        assert_eq!(sequence.check(&request).unwrap(), (side as usize, side as usize), "{name}");
+        let scenes: Vec<Scene> = (0..frames).map(|k| sequence.load(k, &request).unwrap()).collect();
+        // Each frame its own noise.
+        assert_ne!(scenes[0].color, scenes[1].color, "{name}");
+        if *name == "seq-dolly-room" {
+            // The albedo: the textures' edges, without the light's noise.
+            for pair in scenes.windows(2) {
+                let (r0, r1) = (pair[0].albedo.as_ref().unwrap(), pair[1].albedo.as_ref().unwrap());
+                let moved = crate::temporal::moved_difference((r0, r1), &pair[1], [1.0, 1.0]);
+                let still = crate::temporal::moved_difference((r0, r1), &pair[1], [0.0, 0.0]);
+                let down = crate::temporal::moved_difference((r0, r1), &pair[1], [1.0, -1.0]);
+                assert!(
+                    moved < 0.8 * still && moved < 0.8 * down,
+                    "{}: moved {moved}, still {still}, y down {down}",
+                    pair[1].name
+                );
+            }
+        }
+        // A still camera and scene but for the moving shape: zero motion where nothing moved.
+        if *name == "seq-moving-ball" {
+            let motion = scenes[3].motion.as_ref().unwrap();
+            let still = motion.vectors.iter().filter(|v| v[0].abs() < 1e-4 && v[1].abs() < 1e-4).count();
+            assert!(still > motion.vectors.len() / 2, "{name}: most pixels see nothing move ({still})");
+            assert!(motion.vectors.iter().any(|v| v[0] < -0.5), "{name}: the ball was to the left the frame before");
+        }
+    }
+}

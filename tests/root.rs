@@ -19,3 +19,4 @@ mod scenes;
 mod simplify;
 mod snapshots;
 mod stability;
+mod temporal;

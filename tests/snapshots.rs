@@ -54,6 +54,14 @@ fn pipeline_kernels_match_snapshots() {
         insta::assert_snapshot!("pipeline__planefit", jit::planefit_wgsl(None));
         insta::assert_snapshot!("pipeline__planefit_terms", jit::planefit_terms_wgsl());
         insta::assert_snapshot!("export__planefit", jit::planefit_wgsl(Some(jit::OutputFormat::Rgba32float)));
+        insta::assert_snapshot!("pipeline__temporal", jit::temporal_wgsl(None));
+        insta::assert_snapshot!("export__temporal", jit::temporal_wgsl(Some(jit::OutputFormat::Rgba32float)));
+        // An à-trous pass carrying the temporal stage's variance from pass to pass (SVGF's rule).
+        let svgf = corpus::resolve_with_pipeline("@svgf").unwrap();
+        let temporal_shape = jit::Shape::of(&svgf.pipeline.expect("shipped with its pipeline"));
+        let kernel = jit::compile_shaped(&svgf.expr, KernelKind::Filter, LowerOptions::ALL, temporal_shape).unwrap();
+        assert!(kernel.wgsl().contains("buf_variance_out"), "the temporal variance is carried");
+        insta::assert_snapshot!("pipeline__svgf.atrous.filter", kernel.wgsl());
         for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying), ("guided", &guided)] {
             for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
                 let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();

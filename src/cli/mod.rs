@@ -8,6 +8,7 @@ mod hints;
 
 pub(crate) use hints::flag_for;
 mod report;
+mod sequence;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -238,6 +239,12 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                 let d = render::builtin(name).expect("listed")?;
                 println!("{name:<16} {:<6} {}", format!("{:?}", d.split).to_lowercase(), d.summary);
             }
+            println!("sequences (frames rendered with motion vectors; `filter` on one runs the temporal stage):");
+            for (name, _) in render::BUILTIN_SEQUENCES {
+                let d = render::builtin(name).expect("listed")?;
+                let frames = d.animation.map_or(0, |a| a.frames);
+                println!("{name:<16} {:<6} {frames} frames: {}", format!("{:?}", d.split).to_lowercase(), d.summary);
+            }
             Ok(())
         }
         Command::Scenes { size, spp, scenes, .. } => scene_stats(env, size, spp, scenes),
@@ -305,12 +312,18 @@ pub(crate) fn filter(
     cpu_check: bool,
     pipeline: Option<filterjit::pipeline::FilterPipeline>,
 ) -> Result<()> {
+    if scene::is_sequence(scene_path) {
+        if cpu_check {
+            bail!("--cpu-check compares one render with the CPU reference; filter one frame of the sequence for it");
+        }
+        return sequence::filter_sequence(env, expr, radius, scene_path, output, read, pipeline);
+    }
     let choice = match expr {
         Some(expr) => Choice::asked(expr, pipeline, radius)?,
         None => {
             let (features, variances) = scene::provides(scene_path, read.view_layer.as_deref())
                 .with_context(|| format!("reading scene {}", scene_path.display()))?;
-            Choice::asked_or_best(None, pipeline, radius, &Provided { features, variances })?
+            Choice::asked_or_best(None, pipeline, radius, &Provided::new(features, variances))?
         }
     };
     let ReadScene { reference, spp, absent, view_layer } = read;
@@ -454,6 +467,10 @@ pub(crate) fn render(
         bar.set_position(done);
     };
     let dir = match output {
+        Some(dir) if d.animation.is_some() => {
+            render::render_sequence(&gpu, &d, &settings, dir, &mut progress)?;
+            dir.to_path_buf()
+        }
         Some(dir) => {
             let rendered = render::render(&gpu, &d, &settings, &mut progress)?;
             rendered.write(dir, &d, &settings)?;
@@ -462,6 +479,17 @@ pub(crate) fn render(
         None => render::cached(&gpu, &env.cache, &d, &settings, &mut progress)?,
     };
     bar.finish_and_clear();
+    if let Some(animation) = d.animation {
+        println!(
+            "scene     {} ({:?}, a sequence of {} frames) on {}",
+            d.name,
+            d.split,
+            animation.frames,
+            gpu.describe()
+        );
+        println!("wrote     {} (frame_0001 … frame_{:04}, each a dataset)", dir.display(), animation.frames);
+        return Ok(());
+    }
     let meta: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join(scene::META_FILE))?)?;
     println!("scene     {} ({:?}) on {}", d.name, d.split, gpu.describe());
     println!(

@@ -141,7 +141,9 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         features: &features,
         variances: &variances,
         measured: config.pipeline.outliers.is_some(),
+        accumulated: config.pipeline.is_temporal(),
         albedo: true,
+        motion: true,
     };
     if let Some(missing) = Needs::of(&seed_expr, false).missing(holds).into_iter().next() {
         return Err(TerminalError::SeedReads(missing.to_string()).into());

@@ -187,6 +187,7 @@ mod tests {
         let atrous = FilterPipeline {
             outliers: Some(Outliers { k: 2.0, trim: false, keep: None }),
             demodulate: true,
+            temporal: None,
             form: Form::Atrous { passes: 5, stencil: Default::default() },
             planefit: None,
         };
@@ -268,6 +269,7 @@ mod tests {
         let surface = FilterPipeline {
             outliers: Some(Outliers { k: 2.0, trim: false, keep: Some(Keep::Surface) }),
             demodulate: true,
+            temporal: None,
             form: Form::Atrous { passes: 4, stencil: Default::default() },
             planefit: None,
         };

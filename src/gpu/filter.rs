@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 use wgpu::util::DeviceExt;
 
 use super::prepass::{PrepassInputs, PrepassPipelines};
+use super::temporal::{FrameMotion, TemporalState};
 use super::{Gpu, GpuError, PipelineTiming, Span};
 use crate::jit::interface::Element;
 use crate::jit::{AtrousParams, Input, Params, PassRole, Role, Shape, ValidatedKernel, WORKGROUP};
@@ -43,6 +44,13 @@ pub struct SceneBuffers {
     pub(super) guide_dispatch: Option<Span>,
     /// Textures of these images, for kernels that sample them.
     pub(super) sampled: super::sampled::Sampled,
+    /// A temporal pipeline's frame: its motion vectors and surface, uploaded.
+    pub(super) motion: Option<FrameMotion>,
+    /// Whether the temporal stage is still to run: the first filter on these
+    /// buffers records it (with the state it is given) into its submission.
+    pub(super) temporal_pending: bool,
+    /// How long the temporal stage's dispatch took, once it ran.
+    pub(super) temporal_dispatch: Option<Span>,
 }
 
 /// Intermediate images of the à-trous passes; they never leave the device.
@@ -55,13 +63,18 @@ impl SceneBuffers {
     /// The buffers of pass `level`'s dispatch, by role: what it reads (the
     /// previous pass's image and variance, or the scene's for pass 0) and
     /// what it writes.
-    pub(super) fn pass_resource(&self, role: Role, level: u32) -> Option<wgpu::BindingResource<'_>> {
+    pub(super) fn pass_resource(
+        &self,
+        role: Role,
+        level: u32,
+        carried: Option<ScalarVar>,
+    ) -> Option<wgpu::BindingResource<'_>> {
         let scratch = self.scratch.as_ref();
         let (read, write) = ((level as usize + 1) % 2, level as usize % 2);
         Some(match role {
             Role::Color if level > 0 => scratch?.images[read].as_entire_binding(),
             Role::Color => self.color.as_entire_binding(),
-            Role::Input(Input::Variance(ScalarVar::ColorVariance)) if level > 0 => {
+            Role::Input(Input::Variance(v)) if level > 0 && carried == Some(v) => {
                 scratch?.variances[read].as_entire_binding()
             }
             // The guide stays the frame's: from the second pass on the kernel
@@ -169,6 +182,24 @@ impl SceneBuffers {
         };
         let color = upload("color", &scene.color);
         let (width, height) = (scene.width as u32, scene.height as u32);
+        let motion = match (pipeline.is_temporal(), &scene.motion) {
+            (false, _) => None,
+            (true, Some(motion)) => {
+                let vectors: Vec<[f32; 4]> = motion.vectors.iter().map(|v| [v[0], v[1], 0.0, 0.0]).collect();
+                let buffer = |label, data: &[[f32; 4]]| {
+                    gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some(label),
+                        contents: bytemuck::cast_slice(data),
+                        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                    })
+                };
+                Some(FrameMotion { vectors: buffer("motion", &vectors), surface: buffer("surface", &motion.surface) })
+            }
+            (true, None) => {
+                let missing = MissingInput { scene: scene.name.clone(), missing: Missing::Motion };
+                return Err(GpuError::MissingInput(missing));
+            }
+        };
         if pipeline.planefit.is_some() {
             // `planefit` reads the normals after the form: a scene without them fails here, before any work.
             scene.required_feature(Feature::Normal)?;
@@ -224,7 +255,17 @@ impl SceneBuffers {
             prepass_dispatch: None,
             guide_dispatch: None,
             sampled: Default::default(),
+            temporal_pending: motion.is_some(),
+            motion,
+            temporal_dispatch: None,
         })
+    }
+
+    /// Make `color` the colour the form filters (the pre-pass's or the
+    /// temporal stage's output), forgetting any texture of the one before.
+    pub(super) fn replace_color(&mut self, color: wgpu::Buffer) {
+        self.color = color;
+        self.sampled.forget(Role::Color);
     }
 
     /// Record the pending pre-pass into `encoder`; its outputs become these
@@ -233,7 +274,7 @@ impl SceneBuffers {
         &mut self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
-        pipelines: PrepassPipelines<'_>,
+        pipelines: PrepassPipelines,
     ) -> Result<(), GpuError> {
         let inputs = self.pending.take().expect("a pre-pass is pending");
         let prepared = gpu.record_prepass(encoder, pipelines, &self.pipeline, &inputs)?;
@@ -243,7 +284,7 @@ impl SceneBuffers {
                 self.inputs.insert(Input::Variance(v), buffer);
             }
         }
-        self.color = prepared.color;
+        self.replace_color(prepared.color);
         self.modulation = self.pipeline.demodulate.then_some(prepared.modulation);
         Ok(())
     }
@@ -272,11 +313,17 @@ impl SceneBuffers {
         self.guide_dispatch
     }
 
+    /// Time of the temporal stage's dispatch, once the first filter on these
+    /// buffers ran it (in that filter's submission), or `None` without one.
+    pub fn temporal_time(&self) -> Option<Span> {
+        self.temporal_dispatch
+    }
+
     /// Every input of `kernel` that `scene` lacks, checked before any is bound
     /// (`scene::Needs`, the one rule): a data error naming scene and input.
     pub(super) fn check_inputs(&self, kernel: &ValidatedKernel, scene: &Scene) -> Result<(), GpuError> {
         for expr in &kernel.source().exprs {
-            crate::scene::Needs::of(expr, false).check(scene, self.pipeline.outliers.is_some())?;
+            crate::scene::Needs::of(expr, false).check(scene, &self.pipeline)?;
         }
         Ok(())
     }
@@ -328,6 +375,7 @@ impl SceneBuffers {
 /// A stage a frame's first filter records before the form ([`SceneBuffers::for_frame`]).
 enum Part {
     Prepass,
+    Temporal,
     Guide,
 }
 
@@ -367,12 +415,29 @@ impl Gpu {
         scene: &Scene,
         radius: u32,
     ) -> Result<Filtered, GpuError> {
+        self.filter_frame(kernel, buffers, scene, radius, &mut TemporalState::new())
+    }
+
+    /// [`Gpu::filter`] on a frame of a sequence: a temporal pipeline's first
+    /// filter on `buffers` blends the frame into `state`'s history and, once
+    /// the frame is done, leaves in `state` what the next frame blends into
+    /// (a fresh state: the frame starts the sequence). Later filters on the
+    /// same buffers filter the same blend and leave `state` alone.
+    pub fn filter_frame(
+        &self,
+        kernel: &ValidatedKernel,
+        buffers: &mut SceneBuffers,
+        scene: &Scene,
+        radius: u32,
+        state: &mut TemporalState,
+    ) -> Result<Filtered, GpuError> {
         super::check_radius(kernel, radius)?;
         buffers.check_shape(kernel)?;
         buffers.check_inputs(kernel, scene)?;
         let (first, mut timing) = self.pipeline_for(kernel, PassRole::First)?;
         let atrous = kernel.source().shape.atrous;
         let passes = if atrous { buffers.pipeline.passes() } else { 1 };
+        let carried = kernel.source().interface.carried_variance();
         // Made before the clock starts, like the first pass's (and outside the GL turn, which creation takes).
         let later = if passes > 1 {
             let (later, made) = self.pipeline_for(kernel, PassRole::Later)?;
@@ -387,10 +452,17 @@ impl Gpu {
             Some(_) => Some(self.prepass_pipelines(&buffers.pipeline, buffers.width, buffers.height)?),
             None => None,
         };
+        let temporal = buffers.pipeline.temporal.filter(|_| buffers.temporal_pending);
+        if temporal.is_some() {
+            self.built_in(crate::jit::BuiltIn::Temporal, 0)?;
+            self.blit_pipeline(Element::Vec4F32)?;
+        }
         let guide = Input::Feature(Feature::Guide);
-        // Made in this submission: a frame's first filter on buffers from `for_frame`.
-        let records_guide =
-            buffers.one_submission && kernel.source().layout.reads_guide() && !buffers.inputs.contains_key(&guide);
+        // Made in this submission: a frame's first filter on buffers from
+        // `for_frame`, or after the temporal stage, whose blend it blurs.
+        let records_guide = (buffers.one_submission || temporal.is_some())
+            && kernel.source().layout.reads_guide()
+            && !buffers.inputs.contains_key(&guide);
         let planefit = buffers.pipeline.planefit;
         if planefit.is_some() {
             self.planefit_pipeline(!buffers.pipeline.is_atrous())?;
@@ -404,6 +476,7 @@ impl Gpu {
         for (_, input) in kernel.source().interface.inputs() {
             // Uploads stay outside the frame's time; what the pre-pass and the guide make is recorded below.
             let made_here = (matches!(input, Input::Variance(v) if v.from_prepass()) && prepass.is_some())
+                || (matches!(input, Input::Variance(v) if v.from_temporal()) && temporal.is_some())
                 || (records_guide && input == guide);
             if !made_here {
                 buffers.ensure(self, scene, input)?;
@@ -444,7 +517,7 @@ impl Gpu {
         // each dispatch short for watchdogs; they need no wait between them.
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         stopwatch.start(&mut encoder);
-        // A frame's pre-pass and guide, each timed on the device's clock where it has one.
+        // A frame's pre-pass, temporal stage and guide, each timed on the device's clock where it has one.
         let mut parts = Vec::new();
         if let Some(pipelines) = prepass {
             let (part, recording) = (self.stopwatch(), Instant::now());
@@ -453,6 +526,17 @@ impl Gpu {
             part.stop(&mut encoder);
             parts.push((Part::Prepass, recording.elapsed(), part));
         }
+        let mut recorded = match temporal {
+            Some(stage) => {
+                let (part, recording) = (self.stopwatch(), Instant::now());
+                part.start(&mut encoder);
+                let recorded = self.record_temporal(&mut encoder, buffers, state, stage)?;
+                part.stop(&mut encoder);
+                parts.push((Part::Temporal, recording.elapsed(), part));
+                Some(recorded)
+            }
+            None => None,
+        };
         if records_guide {
             let (part, recording) = (self.stopwatch(), Instant::now());
             part.start(&mut encoder);
@@ -466,7 +550,7 @@ impl Gpu {
             let views = if sampled.is_empty() {
                 HashMap::new()
             } else {
-                buffers.sampled_views(self, &mut encoder, &sampled, level)?
+                buffers.sampled_views(self, &mut encoder, &sampled, level, carried)?
             };
             let mut row = 0;
             while row < buffers.height {
@@ -484,13 +568,13 @@ impl Gpu {
                     Role::Params => params.as_entire_binding(),
                     // The filtered image: the last pass's goes to `out`, the others to the ping-pong images.
                     Role::Output if atrous && level + 1 < passes => {
-                        buffers.pass_resource(Role::Image, level).expect("à-trous buffers")
+                        buffers.pass_resource(Role::Image, level, carried).expect("à-trous buffers")
                     }
                     Role::Output => out.as_entire_binding(),
                     Role::Flags => flags.as_entire_binding(),
                     Role::Reference | Role::Image => unreachable!("filter kernels bind no {role:?}"),
                     role if views.contains_key(&role) => wgpu::BindingResource::TextureView(&views[&role]),
-                    role => buffers.pass_resource(role, level).expect("inputs are uploaded before binding"),
+                    role => buffers.pass_resource(role, level, carried).expect("inputs are uploaded before binding"),
                 });
                 {
                     let mut pass = encoder
@@ -501,6 +585,14 @@ impl Gpu {
                 }
                 dispatches += 1;
                 row += rows;
+            }
+            // The pass the temporal stage feeds back: its image is the next frame's history.
+            if let Some(recorded) = recorded.as_mut().filter(|r| r.feedback == level + 1) {
+                let image = match &buffers.scratch {
+                    Some(scratch) if level + 1 < passes => &scratch.images[level as usize % 2],
+                    _ => &out,
+                };
+                self.record_feedback(&mut encoder, recorded, image, pixels);
             }
         }
         // `planefit` after the form: one dispatch over the last pass's whole image.
@@ -523,12 +615,17 @@ impl Gpu {
             let span = Some(Span { wall: recording, device: stopwatch.read(self)? });
             match part {
                 Part::Prepass => buffers.prepass_dispatch = span,
+                Part::Temporal => buffers.temporal_dispatch = span,
                 Part::Guide => buffers.guide_dispatch = span,
             }
         }
 
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during: "filtering", message: error.to_string() });
+        }
+        if let Some(recorded) = recorded {
+            buffers.temporal_pending = false;
+            recorded.commit(state, buffers.width, buffers.height);
         }
         let bytes = self.read(&staging)?;
         let color: Vec<[f32; 4]> = bytemuck::pod_collect_to_vec(&bytes[..(pixels * 16) as usize]);

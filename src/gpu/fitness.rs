@@ -4,14 +4,14 @@
 //! per workgroup; only the partial sums come back.
 
 use std::collections::HashMap;
-use std::sync::OnceLock;
+use std::sync::Arc;
 
 use wgpu::util::DeviceExt;
 
 use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::{own_params, Element};
-use crate::jit::{Input, KernelKind, Params, ReduceParams, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
+use crate::jit::{BuiltIn, Input, KernelKind, Params, ReduceParams, Role, ValidatedKernel, WORKGROUP};
 use crate::lang::Feature;
 use crate::pipeline::FilterPipeline;
 use crate::scene::Scene;
@@ -154,10 +154,8 @@ enum Pass {
 }
 
 impl Gpu {
-    fn reduce_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        let validate = || crate::jit::reduce_module().map_err(|e| e.to_string());
-        self.built_in(&self.reduce, &MODULE, "<fitness reduction>", validate, crate::jit::reduce_wgsl)
+    fn reduce_pipeline(&self) -> Result<Arc<Pipeline>, GpuError> {
+        self.built_in(BuiltIn::Reduce, 0)
     }
 
     /// Create the pipelines of `kernels` on up to `threads` threads (cache hits are free).
@@ -319,13 +317,14 @@ impl Gpu {
         let mut first_member = 0usize;
         for (k, (kernel, pipeline)) in kernels.iter().zip(&pipelines).enumerate() {
             let scene_count = scenes.len();
+            let carried = kernel.source().interface.carried_variance();
             for (s, fs) in scenes.iter_mut().enumerate() {
                 let (terms, pixel_flags, _) = fs.terms.as_ref().expect("terms are made before dispatching");
                 // The textures a pass samples, blitted as its first band is recorded.
                 let (mut views, mut views_level) = (HashMap::new(), None);
                 for (params, level, rows) in bands[s].iter().take(if run == Pass::Prime { 1 } else { usize::MAX }) {
                     if !sampled[k].is_empty() && views_level != Some(*level) {
-                        views = fs.buffers.sampled_views(self, &mut encoder, &sampled[k], *level)?;
+                        views = fs.buffers.sampled_views(self, &mut encoder, &sampled[k], *level, carried)?;
                         views_level = Some(*level);
                     }
                     let buffers = &fs.buffers;
@@ -335,7 +334,9 @@ impl Gpu {
                         Role::Flags => pixel_flags.as_entire_binding(),
                         Role::Reference => fs.reference.as_entire_binding(),
                         role if views.contains_key(&role) => wgpu::BindingResource::TextureView(&views[&role]),
-                        role => buffers.pass_resource(role, *level).expect("inputs are uploaded before binding"),
+                        role => {
+                            buffers.pass_resource(role, *level, carried).expect("inputs are uploaded before binding")
+                        }
                     });
                     let groups = match run {
                         Pass::Prime => (1, 1),
@@ -348,7 +349,7 @@ impl Gpu {
                 if let (Some(fit), Pass::Full) = (fs.buffers.pipeline.planefit, run) {
                     assert_eq!(members[k], 1, "an à-trous fitness kernel scores one member");
                     let last = fs.buffers.pipeline.passes() - 1;
-                    let image = fs.buffers.pass_resource(Role::Image, last).expect("an à-trous form's images");
+                    let image = fs.buffers.pass_resource(Role::Image, last, None).expect("an à-trous form's images");
                     self.planefit_terms(&mut encoder, &fs.buffers, fit, image, &fs.reference, terms)?;
                     pending += 1;
                 }
@@ -360,7 +361,7 @@ impl Gpu {
                         wgpu::BindingResource::Buffer(wgpu::BufferBinding { buffer, offset, size })
                     };
                     let bind_group = self.bind_in_slot_order(
-                        reduce,
+                        &reduce,
                         reduce_interface
                             .bindings
                             .iter()

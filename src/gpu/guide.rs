@@ -82,7 +82,7 @@ impl SceneBuffers {
     /// as their `guide` input: its kernel samples the colour, as the form's
     /// first pass does, so both read one texture. Callers hold the GL turn.
     pub(super) fn record_guide(&mut self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder) -> Result<(), GpuError> {
-        let views = self.sampled_views(gpu, encoder, &[Role::Color], 0)?;
+        let views = self.sampled_views(gpu, encoder, &[Role::Color], 0, None)?;
         let guide = gpu.record_guide(encoder, &views[&Role::Color], self.width, self.height)?;
         self.inputs.insert(Input::Feature(Feature::Guide), guide);
         Ok(())

@@ -10,21 +10,24 @@ mod planefit;
 mod prepass;
 mod raw;
 mod sampled;
+mod temporal;
 mod trace;
 
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
+pub use crate::jit::builtin::PATHTRACE_WGSL;
 pub use clock::Span;
 pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
 pub use fitness::{FitnessScene, Region, SceneError as FitnessError};
 pub use raw::{RawBuffer, RawKernel};
-pub use trace::{TraceBand, TraceInputs, TraceScene, PATHTRACE_WGSL};
+pub use temporal::TemporalState;
+pub use trace::{TraceBand, TraceInputs, TraceScene};
 
 use crate::jit::interface::{Resource, TexelFormat};
 use crate::jit::{
-    Access, BindingInterface, KernelKey, OutputFormat, PassRole, Role, Slot, ValidatedKernel, ValidatedModule,
+    Access, BindingInterface, BuiltIn, KernelKey, OutputFormat, PassRole, Role, Slot, ValidatedKernel, ValidatedModule,
 };
 
 #[derive(Debug, thiserror::Error)]
@@ -94,17 +97,9 @@ pub struct Gpu {
     limits: wgpu::Limits,
     /// Kernels' pipelines, one per role where the kernel specialises its passes.
     pipelines: Mutex<HashMap<(KernelKey, PassRole), Arc<Pipeline>>>,
-    tracer: OnceLock<Pipeline>,
-    prepass: OnceLock<Pipeline>,
-    /// The spreads' pipelines by stage ([`crate::jit::SPREAD_STAGE`]).
-    spread: Specialised,
-    spread_surface: Specialised,
-    /// planefit's pipelines by [`crate::jit::PLANEFIT_REMODULATED`].
-    planefit: Specialised,
-    planefit_terms: OnceLock<Pipeline>,
-    blit_vec4: OnceLock<Pipeline>,
-    blit_scalar: OnceLock<Pipeline>,
-    reduce: OnceLock<Pipeline>,
+    /// The built-in kernels' pipelines ([`Gpu::built_in`]), one per value of
+    /// the constant a kernel overrides (0 for the others).
+    built_ins: Mutex<HashMap<(BuiltIn, u32), Arc<Pipeline>>>,
     /// Whether kernels keep wgpu's run-time checks ([`Gpu::set_kernel_runtime_checks`]).
     kernel_checks: std::sync::atomic::AtomicBool,
     /// wgpu's GL backend shares one context per device and panics when a
@@ -115,9 +110,6 @@ pub struct Gpu {
     /// Timestamps on the device's clock not in use ([`Gpu::stopwatch`]).
     stopwatches: Mutex<Vec<clock::Timestamps>>,
 }
-
-/// A built-in kernel's pipelines, one per value of its pipeline-overridable constant.
-type Specialised = Mutex<HashMap<u32, Arc<Pipeline>>>;
 
 /// Timings of getting a pipeline.
 #[derive(Clone, Copy, Debug, Default)]
@@ -164,15 +156,7 @@ impl Gpu {
             info,
             limits,
             pipelines: Mutex::new(HashMap::new()),
-            tracer: OnceLock::new(),
-            prepass: OnceLock::new(),
-            spread: Specialised::default(),
-            spread_surface: Specialised::default(),
-            planefit: Specialised::default(),
-            planefit_terms: OnceLock::new(),
-            blit_vec4: OnceLock::new(),
-            blit_scalar: OnceLock::new(),
-            reduce: OnceLock::new(),
+            built_ins: Mutex::new(HashMap::new()),
             kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,
             stopwatches: Mutex::new(Vec::new()),
@@ -286,54 +270,30 @@ impl Gpu {
         Ok((pipeline, PipelineTiming { create, cache_hit: false }))
     }
 
-    /// The pipeline of a built-in kernel (`name`, e.g. `<pre-pass>`): its
-    /// module validated once per process in `module`, its pipeline created
-    /// once per device in `cell`; `wgsl` renders its text for the error when
-    /// the driver refuses it.
-    pub(crate) fn built_in<'a>(
-        &'a self,
-        cell: &'a OnceLock<Pipeline>,
-        module: &'static OnceLock<Result<ValidatedModule, String>>,
-        name: &str,
-        validate: impl FnOnce() -> Result<ValidatedModule, String>,
-        wgsl: impl FnOnce() -> String,
-    ) -> Result<&'a Pipeline, GpuError> {
-        if let Some(p) = cell.get() {
-            return Ok(p);
-        }
-        let validated = built_in_module(module, name, validate)?;
-        let label = format!("filterjit {}", name.trim_matches(|c| c == '<' || c == '>'));
-        let pipeline = self.create_pipeline(validated, &label).map_err(|message| GpuError::Pipeline {
-            expression: name.into(),
-            message,
-            wgsl: wgsl(),
-        })?;
-        Ok(cell.get_or_init(|| pipeline))
-    }
-
-    /// The pipeline of a built-in kernel (as [`Gpu::built_in`]) with its
-    /// pipeline-overridable constant `constant` set to `value`: one per value
-    /// and device, in `cell`.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn built_in_specialised(
-        &self,
-        cell: &Specialised,
-        module: &'static OnceLock<Result<ValidatedModule, String>>,
-        name: &str,
-        validate: impl FnOnce() -> Result<ValidatedModule, String>,
-        wgsl: impl FnOnce() -> String,
-        constant: &str,
-        value: u32,
-    ) -> Result<Arc<Pipeline>, GpuError> {
-        if let Some(p) = cell.lock().expect("pipeline cache lock").get(&value) {
+    /// The pipeline of a built-in kernel, with its pipeline-overridable
+    /// constant (if it has one, [`BuiltIn::overridable`]) set to `value`:
+    /// got or made here, and only here. Its module is validated once per
+    /// process, its pipeline made once per device and value; a kernel that
+    /// does not validate, or that the driver refuses, is an error carrying
+    /// its WGSL. Callers make the pipelines a frame needs before their GL
+    /// turn, since creating one takes the turn itself.
+    pub(crate) fn built_in(&self, kernel: BuiltIn, value: u32) -> Result<Arc<Pipeline>, GpuError> {
+        let value = if kernel.overridable().is_some() { value } else { 0 };
+        if let Some(p) = self.built_ins.lock().expect("pipeline cache lock").get(&(kernel, value)) {
             return Ok(p.clone());
         }
-        let validated = built_in_module(module, name, validate)?;
-        let label = format!("filterjit {} {constant}={value}", name.trim_matches(|c| c == '<' || c == '>'));
-        let pipeline = self
-            .create_pipeline_with(validated, &label, RuntimeChecks::Full, &[(constant, value as f64)])
-            .map_err(|message| GpuError::Pipeline { expression: name.into(), message, wgsl: wgsl() })?;
-        Ok(cell.lock().expect("pipeline cache lock").entry(value).or_insert_with(|| Arc::new(pipeline)).clone())
+        let failed =
+            |message: String| GpuError::Pipeline { expression: kernel.name().into(), message, wgsl: kernel.wgsl() };
+        let validated = built_in_module(kernel).map_err(|message| failed(message.to_string()))?;
+        let name = kernel.name().trim_matches(|c| c == '<' || c == '>');
+        let (label, constants) = match kernel.overridable() {
+            Some(constant) => (format!("filterjit {name} {constant}={value}"), vec![(constant, value as f64)]),
+            None => (format!("filterjit {name}"), Vec::new()),
+        };
+        let pipeline =
+            self.create_pipeline_with(&validated, &label, RuntimeChecks::Full, &constants).map_err(failed)?;
+        let mut cache = self.built_ins.lock().expect("pipeline cache lock");
+        Ok(cache.entry((kernel, value)).or_insert_with(|| Arc::new(pipeline)).clone())
     }
 
     /// A compute pipeline (entry point `main`) from a validated module, with
@@ -481,20 +441,21 @@ pub struct Pipeline {
     slots: Vec<u32>,
 }
 
-/// The bind-group layout entry of one slot.
-/// A built-in kernel's module (`name`, e.g. `<pre-pass>`), validated once per process in `module`.
-fn built_in_module<'m>(
-    module: &'m OnceLock<Result<ValidatedModule, String>>,
-    name: &str,
-    validate: impl FnOnce() -> Result<ValidatedModule, String>,
-) -> Result<&'m ValidatedModule, GpuError> {
-    module.get_or_init(validate).as_ref().map_err(|message| GpuError::Pipeline {
-        expression: name.into(),
-        message: message.clone(),
-        wgsl: String::new(),
-    })
+/// A built-in kernel's module, validated once per process (the validation
+/// error's text, which holds the WGSL, where it fails).
+fn built_in_module(kernel: BuiltIn) -> Result<Arc<ValidatedModule>, Arc<str>> {
+    type Modules = Mutex<HashMap<BuiltIn, Result<Arc<ValidatedModule>, Arc<str>>>>;
+    static MODULES: OnceLock<Modules> = OnceLock::new();
+    let modules = MODULES.get_or_init(Default::default);
+    if let Some(module) = modules.lock().expect("module cache lock").get(&kernel) {
+        return module.clone();
+    }
+    // Validated outside the lock: naga takes a while, and other kernels need not wait.
+    let module = kernel.module().map(Arc::new).map_err(|e| Arc::from(e.to_string()));
+    modules.lock().expect("module cache lock").entry(kernel).or_insert(module).clone()
 }
 
+/// The bind-group layout entry of one slot.
 fn layout_entry(slot: &Slot) -> wgpu::BindGroupLayoutEntry {
     let buffer = |ty| wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None };
     let ty = match slot.access {

@@ -1,12 +1,12 @@
 //! `planefit` on the device (`jit::planefit`): one pipeline per device, one
 //! dispatch after the form's last pass; `cpu::planefit` is its reference.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use super::filter::SceneBuffers;
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::Element;
-use crate::jit::{BindingInterface, Input, PlaneFitParams, Role, ValidatedModule, PLANEFIT_REMODULATED, WORKGROUP};
+use crate::jit::{BindingInterface, BuiltIn, Input, PlaneFitParams, Role, WORKGROUP};
 use crate::lang::Feature;
 use crate::pipeline::PlaneFit;
 
@@ -15,18 +15,12 @@ impl Gpu {
     /// trous) multiply the modulation back. Callers make it before their GL
     /// turn, since creating a pipeline takes the turn itself and turns never nest.
     pub(super) fn planefit_pipeline(&self, remodulated: bool) -> Result<Arc<Pipeline>, GpuError> {
-        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        let validate = || crate::jit::planefit_module(None).map_err(|e| e.to_string());
-        let wgsl = || crate::jit::planefit_wgsl(None);
-        let value = u32::from(remodulated);
-        self.built_in_specialised(&self.planefit, &MODULE, "<planefit>", validate, wgsl, PLANEFIT_REMODULATED, value)
+        self.built_in(BuiltIn::PlaneFit, u32::from(remodulated))
     }
 
     /// The fitness kernel's pipeline (made before the GL turn, as above).
-    pub(super) fn planefit_terms_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        let validate = || crate::jit::planefit_terms_module().map_err(|e| e.to_string());
-        self.built_in(&self.planefit_terms, &MODULE, "<planefit terms>", validate, crate::jit::planefit_terms_wgsl)
+    pub(super) fn planefit_terms_pipeline(&self) -> Result<Arc<Pipeline>, GpuError> {
+        self.built_in(BuiltIn::PlaneFitTerms, 0)
     }
 
     /// Record into `encoder` the fitness kernel: `fit` of the form's last
@@ -52,7 +46,7 @@ impl Gpu {
             modulation: modulation.as_entire_binding(),
             output: terms,
         };
-        self.record_planefit(encoder, kernel, &interface, buffers, fit, images, Some(reference));
+        self.record_planefit(encoder, &kernel, &interface, buffers, fit, images, Some(reference));
         Ok(())
     }
 
@@ -81,7 +75,7 @@ impl Gpu {
         let colour = self.blitted(encoder, image, Element::Vec4F32, size)?.create_view(&Default::default());
         let normal = Role::Input(Input::Feature(Feature::Normal));
         let roles: &[Role] = if buffers.modulation.is_some() { &[normal, Role::Modulation] } else { &[normal] };
-        let views = buffers.sampled_views(self, encoder, roles, 0)?;
+        let views = buffers.sampled_views(self, encoder, roles, 0, None)?;
         // Without demodulation the modulation is not read: the image stands in.
         let modulation = views.get(&Role::Modulation).unwrap_or(&colour);
         let images = Images {

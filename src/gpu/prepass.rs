@@ -2,43 +2,18 @@
 //! `jit::spread`, with `keep=surface` its surface kernel): one pipeline each
 //! per device, run once per scene when its buffers are prepared.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::Element;
 use crate::jit::{
-    written_before, BindingInterface, Input, PrepassParams, Role, SpreadParams, SpreadSource, SpreadTarget,
-    ValidatedModule, SPREAD_STAGE, WORKGROUP,
+    written_before, BindingInterface, BuiltIn, Input, PrepassParams, Role, SpreadParams, SpreadSource, SpreadTarget,
+    WORKGROUP,
 };
 use crate::lang::ScalarVar;
 use crate::pipeline::{FilterPipeline, Keep};
 
 impl Gpu {
-    fn prepass_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        let validate = || crate::jit::prepass_module(None).map_err(|e| e.to_string());
-        self.built_in(&self.prepass, &MODULE, "<pre-pass>", validate, || crate::jit::prepass_wgsl(None))
-    }
-
-    /// The pipeline of `keep`'s spread kernel for the dispatches of `stage`.
-    fn spread_pipeline(&self, keep: Keep, stage: u32) -> Result<Arc<Pipeline>, GpuError> {
-        static EVEN: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        static SURFACE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        match keep {
-            Keep::Even => {
-                let validate = || crate::jit::spread_module(None).map_err(|e| e.to_string());
-                let wgsl = || crate::jit::spread_wgsl(None);
-                self.built_in_specialised(&self.spread, &EVEN, "<spread>", validate, wgsl, SPREAD_STAGE, stage)
-            }
-            Keep::Surface => {
-                let validate = || crate::jit::spread_surface_module(None).map_err(|e| e.to_string());
-                let wgsl = || crate::jit::spread_surface_wgsl(None);
-                let name = "<surface spread>";
-                self.built_in_specialised(&self.spread_surface, &SURFACE, name, validate, wgsl, SPREAD_STAGE, stage)
-            }
-        }
-    }
-
     /// Every pipeline `pipeline`'s pre-pass dispatches on a `width` ×
     /// `height` image, made now: before a GL turn, since creation takes it.
     pub(super) fn prepass_pipelines(
@@ -46,15 +21,15 @@ impl Gpu {
         pipeline: &FilterPipeline,
         width: u32,
         height: u32,
-    ) -> Result<PrepassPipelines<'_>, GpuError> {
-        let kernel = self.prepass_pipeline()?;
+    ) -> Result<PrepassPipelines, GpuError> {
+        let kernel = self.built_in(BuiltIn::Prepass, 0)?;
         self.blit_pipeline(Element::Vec4F32)?;
         let spread = match pipeline.keep() {
             Some(keep) => {
                 let sequence = SpreadParams::sequence(keep, width, height);
                 let pipelines = sequence
                     .iter()
-                    .map(|d| self.spread_pipeline(keep, d.params.stage))
+                    .map(|d| self.built_in(BuiltIn::Spread(keep), d.params.stage))
                     .collect::<Result<Vec<_>, _>>()?;
                 Some((keep, sequence, pipelines))
             }
@@ -71,7 +46,7 @@ impl Gpu {
     pub(super) fn record_prepass(
         &self,
         encoder: &mut wgpu::CommandEncoder,
-        pipelines: PrepassPipelines<'_>,
+        pipelines: PrepassPipelines,
         pipeline: &FilterPipeline,
         inputs: &PrepassInputs,
     ) -> Result<Prepared, GpuError> {
@@ -115,7 +90,7 @@ impl Gpu {
         };
         let interface = BindingInterface::prepass(None);
         let bind_group = self.bind_in_slot_order(
-            kernel,
+            &kernel,
             interface
                 .bindings
                 .iter()
@@ -241,8 +216,8 @@ pub(super) struct Prepared {
 }
 
 /// The pipelines a pre-pass dispatches ([`Gpu::prepass_pipelines`]).
-pub(super) struct PrepassPipelines<'a> {
-    kernel: &'a Pipeline,
+pub(super) struct PrepassPipelines {
+    kernel: Arc<Pipeline>,
     /// `keep`'s spread: its dispatches and a pipeline for each.
     spread: Option<(Keep, Vec<crate::jit::SpreadDispatch>, Vec<Arc<Pipeline>>)>,
 }

@@ -6,12 +6,12 @@
 //! the pass images before each pass that reads them.
 
 use std::collections::HashMap;
-use std::sync::OnceLock;
+use std::sync::Arc;
 
 use super::filter::SceneBuffers;
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::{Element, Resource};
-use crate::jit::{BindingInterface, BlitParams, Input, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
+use crate::jit::{BindingInterface, BlitParams, BuiltIn, Input, Role, ValidatedKernel, WORKGROUP};
 use crate::lang::ScalarVar;
 
 /// Textures of a scene's images for the kernels that sample them.
@@ -24,18 +24,19 @@ pub(super) struct Sampled {
     variances: [Option<wgpu::Texture>; 2],
 }
 
+impl Sampled {
+    /// Drop the texture of the scene's image bound to `role` (replaced on the device).
+    pub(super) fn forget(&mut self, role: Role) {
+        self.scene.remove(&role);
+    }
+}
+
 impl Gpu {
     /// The blit's pipeline for images of `element`s. Callers make both before
     /// their GL turn, since creating a pipeline takes the turn itself.
-    pub(super) fn blit_pipeline(&self, element: Element) -> Result<&Pipeline, GpuError> {
-        static VEC4: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        static SCALAR: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        let (cell, module) = match element {
-            Element::F32 => (&self.blit_scalar, &SCALAR),
-            _ => (&self.blit_vec4, &VEC4),
-        };
-        let validate = || crate::jit::blit_module(element).map_err(|e| e.to_string());
-        self.built_in(cell, module, "<blit>", validate, || crate::jit::blit_wgsl(element))
+    pub(super) fn blit_pipeline(&self, element: Element) -> Result<Arc<Pipeline>, GpuError> {
+        let element = if element == Element::F32 { Element::F32 } else { Element::Vec4F32 };
+        self.built_in(BuiltIn::Blit(element), 0)
     }
 
     /// Record into `encoder` the blit of `source` (`element`s) into `target`:
@@ -78,7 +79,7 @@ impl Gpu {
         let params = BlitParams { width, height, _pad: [0; 2] };
         let uniform = self.params_buffer(interface.params(), "blit params", bytemuck::bytes_of(&params));
         let view = target.create_view(&Default::default());
-        let bind_group = self.bind_group(pipeline, &interface, |role| match role {
+        let bind_group = self.bind_group(&pipeline, &interface, |role| match role {
             Role::Params => uniform.as_entire_binding(),
             Role::Color => source.as_entire_binding(),
             Role::Output => wgpu::BindingResource::TextureView(&view),
@@ -152,13 +153,14 @@ impl SceneBuffers {
         encoder: &mut wgpu::CommandEncoder,
         roles: &[Role],
         level: u32,
+        carried: Option<ScalarVar>,
     ) -> Result<HashMap<Role, wgpu::TextureView>, GpuError> {
         let size = (self.width, self.height);
         let read = (level as usize + 1) % 2;
         let mut views = HashMap::new();
         for &role in roles {
-            let carried = Role::Input(Input::Variance(ScalarVar::ColorVariance));
-            let pass_image = level > 0 && (role == Role::Color || role == carried);
+            let carried = carried.map(|v| Role::Input(Input::Variance(v)));
+            let pass_image = level > 0 && (role == Role::Color || Some(role) == carried);
             let texture = if pass_image {
                 let scratch = self.scratch.as_ref().expect("an à-trous form has pass images");
                 let (source, slot, element) = if role == Role::Color {

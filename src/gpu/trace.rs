@@ -1,16 +1,13 @@
 //! The path tracer on the device: `templates/pathtrace.wgsl`, validated by
 //! naga, one pipeline per device; dispatches return per-pixel sums.
 
-use std::sync::OnceLock;
+use std::sync::Arc;
 
 use wgpu::util::DeviceExt;
 
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::own_params;
-use crate::jit::ValidatedModule;
-
-/// The path tracer's source.
-pub const PATHTRACE_WGSL: &str = include_str!("../../templates/pathtrace.wgsl");
+use crate::jit::BuiltIn;
 
 /// A scene's buffers as the tracer reads them, laid out by the renderer
 /// (`render::packed`): the device knows their bindings, not their format.
@@ -42,10 +39,8 @@ pub struct TraceScene {
 }
 
 impl Gpu {
-    fn trace_pipeline(&self) -> Result<&Pipeline, GpuError> {
-        static MODULE: OnceLock<Result<ValidatedModule, String>> = OnceLock::new();
-        let validate = || crate::jit::validate_module(PATHTRACE_WGSL, "<path tracer>").map_err(|e| e.to_string());
-        self.built_in(&self.tracer, &MODULE, "<path tracer>", validate, String::new)
+    fn trace_pipeline(&self) -> Result<Arc<Pipeline>, GpuError> {
+        self.built_in(BuiltIn::PathTracer, 0)
     }
 
     /// Upload a scene's tracer buffers.
@@ -93,7 +88,7 @@ impl Gpu {
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         // pathtrace.wgsl declares params, prims, materials, lights, sums in this order.
         let resources = [&uniform, &scene.prims, &scene.materials, &scene.lights, &sums];
-        let bind_group = self.bind_in_slot_order(pipeline, resources.iter().map(|b| b.as_entire_binding()).collect());
+        let bind_group = self.bind_in_slot_order(&pipeline, resources.iter().map(|b| b.as_entire_binding()).collect());
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         {
             let mut pass =

@@ -47,6 +47,22 @@ pub enum Role {
     /// The surface spread's per-pixel (normal's direction, clamped luminance),
     /// which its first dispatch writes and every later one's taps read.
     Surface,
+    /// A frame's motion vectors to the frame before (the temporal stage).
+    Motion,
+    /// A frame's surface: the normal's direction and the depth (the temporal stage).
+    Geometry,
+    /// The frame before's surface, which the history's taps are tested against.
+    PreviousGeometry,
+    /// The temporal stage's history: the colour the frame before kept.
+    History,
+    /// The history's moments (m1, m2, r, n), read.
+    Moments,
+    /// The moments the temporal stage keeps for the next frame, written.
+    MomentsOut,
+    /// What the temporal stage accumulated, packed (x `historyLength`, y
+    /// `temporalVariance`): the exported stage writes one texture, as the
+    /// pre-pass its `Local`.
+    Accumulated,
 }
 
 /// Texel format of a storage texture an exported shader writes.
@@ -277,7 +293,7 @@ impl BindingInterface {
         if shape.remodulate {
             roles.push((Role::Modulation, read(Element::Vec4F32), format!("{prefix}modulation")));
         }
-        if shape.atrous && layout.inputs.contains(&Input::Variance(ScalarVar::ColorVariance)) {
+        if shape.atrous && layout.carried_variance().is_some() {
             roles.push(match textures {
                 true => (Role::VarianceOut, Resource::StorageTexture(TexelFormat::R32float), "tex_variance_out".into()),
                 false => (Role::VarianceOut, written(Element::F32), "buf_variance_out".into()),
@@ -531,6 +547,66 @@ impl BindingInterface {
         BindingInterface { kind, bindings, uniform: image_uniform(fields), uniform_bytes: 16 }
     }
 
+    /// The interface of the temporal stage (`jit::temporal`): the uniform
+    /// `TemporalParams`; the frame's colour (as the pre-pass left it), its
+    /// surface and motion vectors, the history's colour and moments and the
+    /// frame before's surface, all sampled; then what it writes: the blend
+    /// the form filters, the moments kept for the next frame, and
+    /// `historyLength` and `temporalVariance` (filterjit's storage buffers,
+    /// `None`), or exported (`Some`), storage textures: the blend and the
+    /// moments `rgba32float` whatever the output format (the history is
+    /// blended again every frame: half floats would round it away), and the
+    /// two measures packed into one (`Accumulated`).
+    pub fn temporal(textures: Option<OutputFormat>) -> BindingInterface {
+        let read = [
+            (Role::Color, "color"),
+            (Role::Geometry, "geometry"),
+            (Role::Motion, "motion"),
+            (Role::History, "history"),
+            (Role::Moments, "moments"),
+            (Role::PreviousGeometry, "previous_geometry"),
+        ]
+        .map(|(role, name)| (role, Resource::SampledTexture, format!("tex_{name}")));
+        let (kind, params, written): (_, _, Vec<(Role, Resource, String)>) = match textures {
+            None => {
+                let buffer = |element| Resource::Storage { element, writable: true };
+                let measures = ScalarVar::FROM_TEMPORAL.map(|v| {
+                    (
+                        Role::Input(Input::Variance(v)),
+                        buffer(Element::F32),
+                        format!("buf_{}", v.name().to_ascii_lowercase()),
+                    )
+                });
+                let images = [
+                    (Role::Output, buffer(Element::Vec4F32), "buf_out".to_string()),
+                    (Role::MomentsOut, buffer(Element::Vec4F32), "buf_moments_out".to_string()),
+                ];
+                (KernelKind::Filter, own_params(), images.into_iter().chain(measures).collect())
+            }
+            Some(format) => {
+                let texture = Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float));
+                let images = [
+                    (Role::Output, texture, "tex_out".to_string()),
+                    (Role::MomentsOut, texture, "tex_moments_out".to_string()),
+                    (Role::Accumulated, texture, "tex_accumulated".to_string()),
+                ];
+                (KernelKind::Export(format), Resource::Uniform, images.into_iter().collect())
+            }
+        };
+        let bindings = dense(std::iter::once((Role::Params, params, "params".to_string())).chain(read).chain(written));
+        let uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("alpha", "f32", 8, "alpha_min: a frame's share of the blend is max(alpha_min, 1/n)"),
+            field("gamma", "f32", 12, "the history's clamp: within the frame's 3x3 mean +- gamma std; 0: no clamp"),
+            field("history", "u32", 16, "1 where the history textures hold the frame before's; 0 for a first frame"),
+            field("_pad0", "u32", 20, "unused"),
+            field("_pad1", "u32", 24, "unused"),
+            field("_pad2", "u32", 28, "unused"),
+        ];
+        BindingInterface { kind, bindings, uniform, uniform_bytes: 32 }
+    }
+
     /// The interface of the fitness reduction (`jit::reduce`): the uniform
     /// `ReduceParams`, a member's per-pixel terms and flags, and the
     /// per-workgroup partial sums and flags it writes (`Output`, `Flags`).
@@ -550,6 +626,20 @@ impl BindingInterface {
         let uniform =
             image_uniform([("member", "which member's terms: from member * width * height"), ("_pad", "unused")]);
         BindingInterface { kind: KernelKind::Fitness, bindings, uniform, uniform_bytes: 16 }
+    }
+
+    /// The variance an à-trous kernel carries from pass to pass (one that
+    /// writes `VarianceOut`), if any: `KernelLayout::carried_variance`'s.
+    pub fn carried_variance(&self) -> Option<ScalarVar> {
+        self.binding(Role::VarianceOut)?;
+        let variances = self
+            .inputs()
+            .filter_map(|(_, input)| match input {
+                Input::Variance(v) => Some(v),
+                Input::Feature(_) => None,
+            })
+            .collect();
+        crate::pipeline::FilterPipeline::carried_variance(&variances)
     }
 
     /// Whether the kernel reads its colour (and its other images) as sampled textures.

@@ -114,6 +114,20 @@ impl KernelLayout {
         self.inputs.iter().map(|i| i.describe()).collect::<Vec<_>>().join(",")
     }
 
+    /// The variance an à-trous form of this kernel carries through its
+    /// passes (`FilterPipeline::carried_variance`), if it reads one.
+    pub fn carried_variance(&self) -> Option<ScalarVar> {
+        let variances = self
+            .inputs
+            .iter()
+            .filter_map(|i| match i {
+                Input::Variance(v) => Some(*v),
+                Input::Feature(_) => None,
+            })
+            .collect();
+        crate::pipeline::FilterPipeline::carried_variance(&variances)
+    }
+
     /// Whether the kernel binds the first pass's `guide`, which the device
     /// and an exported pipeline make in a dispatch of their own.
     pub fn reads_guide(&self) -> bool {

@@ -156,8 +156,8 @@ fn lower_members(
         .iter()
         .flat_map(|m| m.helpers.iter().cloned())
         .chain(kind.template_helpers().iter().map(|h| h.to_string()));
-    let carried = Input::Variance(ScalarVar::ColorVariance);
-    let carry_variance = shape.atrous && layout.inputs.contains(&carried);
+    let carried = layout.carried_variance().filter(|_| shape.atrous);
+    let carry_variance = carried.is_some();
     let first_pass_override = loads.specialises_passes() && shape.atrous && layout.reads_guide();
     let tile_radius = tile.as_ref().map(|t| t.radius);
     let context = KernelContext {
@@ -194,8 +194,8 @@ fn lower_members(
         carry_variance,
         centre_color: loads.centre_image(Role::Color),
         centre_modulation: shape.remodulate.then(|| loads.centre_image(Role::Modulation)),
-        neighbour_variance: carry_variance.then(|| loads.carried_variance_at_neighbour()),
-        centre_variance: carry_variance.then(|| var_ident(ScalarVar::ColorVariance)),
+        neighbour_variance: carried.map(|v| loads.carried_variance_at_neighbour(v)),
+        centre_variance: carried.map(var_ident),
         atrous_half: shape.stencil.half_width(),
         stencil: shape.stencil.weights().iter().copied().map(wgsl_f32).collect(),
         members,
@@ -437,7 +437,7 @@ impl<'a> Loads<'a> {
                     ["x", "y", "z"][ScalarVar::FROM_PREPASS.iter().position(|w| *w == v).expect("measured")];
                 format!("{}.{component}", texel(i.ident(Role::Input(input)), ("x", "y")))
             }
-            Loads::Textures(i) if v == ScalarVar::ColorVariance && i.binding(Role::VarianceOut).is_some() => {
+            Loads::Textures(i) if i.carried_variance() == Some(v) => {
                 let texel = texel(i.ident(Role::Input(input)), ("x", "y"));
                 format!("fj_carried({texel}.x, {})", scale_of(i, input))
             }
@@ -448,11 +448,11 @@ impl<'a> Loads<'a> {
         }
     }
 
-    /// The colour variance carried from the last à-trous pass at neighbour j:
+    /// The variance `v` carried from the last à-trous pass at neighbour j:
     /// already normalised in filterjit's buffers; in an exported shader the
     /// frame's (normalised here) in the first pass, the carried one after.
-    fn carried_variance_at_neighbour(&self) -> String {
-        let input = Input::Variance(ScalarVar::ColorVariance);
+    fn carried_variance_at_neighbour(&self, v: ScalarVar) -> String {
+        let input = Input::Variance(v);
         match self {
             Loads::Buffers(i) => format!("{}[j]", i.ident(Role::Input(input))),
             Loads::OwnTextures(i) => format!("{}.x", texel(i.ident(Role::Input(input)), ("xj", "yj"))),

@@ -2,6 +2,7 @@
 //! Nothing here talks to wgpu; [`crate::gpu`] turns a [`ValidatedKernel`] into a pipeline.
 
 pub mod blit;
+pub mod builtin;
 mod context;
 pub mod helpers;
 pub mod interface;
@@ -12,9 +13,11 @@ pub mod planefit;
 pub mod prepass;
 pub mod reduce;
 pub mod spread;
+pub mod temporal;
 pub mod validate;
 
 pub use blit::{blit_module, blit_wgsl, BlitParams};
+pub use builtin::BuiltIn;
 pub use helpers::Helper;
 pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot};
 pub use kernel::{
@@ -31,6 +34,7 @@ pub use spread::{
     spread_interface, spread_kernel, spread_module, spread_surface_module, spread_surface_wgsl, spread_wgsl,
     written_before, SpreadDispatch, SpreadParams, SpreadSource, SpreadStage, SpreadTarget, SurfaceStage, SPREAD_STAGE,
 };
+pub use temporal::{temporal_module, temporal_wgsl, TemporalParams};
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 
 /// Lower and validate in one step.

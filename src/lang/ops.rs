@@ -118,7 +118,10 @@ name_table! {
     /// variances; `level`, the à-trous pass (0 in the window form); and what
     /// the outlier pre-pass measured (docs/SEMANTICS.md, "The pipeline"): the
     /// mean and standard deviation of the luminance around i, and the share
-    /// of i's luminance the clamp removed. Only the variances are stored.
+    /// of i's luminance the clamp removed; and what the temporal stage
+    /// accumulated (docs/SEMANTICS.md, "The temporal stage"): the frames in
+    /// i's history and the variance of its accumulated luminance. Only the
+    /// variances are stored.
     pub enum ScalarVar {
         WpVariance => "wpVariance",
         NVariance => "nVariance",
@@ -131,6 +134,8 @@ name_table! {
         LocalMean => "localMean",
         LocalStd => "localStd",
         ClampedShare => "clampedShare",
+        HistoryLength => "historyLength",
+        TemporalVariance => "temporalVariance",
     }
 }
 
@@ -326,13 +331,14 @@ impl ScalarVar {
             ScalarVar::DiVariance => Some(Feature::DirectIllumination),
             ScalarVar::ColorVariance | ScalarVar::Level => None,
             ScalarVar::LocalMean | ScalarVar::LocalStd | ScalarVar::ClampedShare => None,
+            ScalarVar::HistoryLength | ScalarVar::TemporalVariance => None,
         }
     }
 
     /// Whether a scene stores it: the variances; `level` comes from the
-    /// form's uniform and the rest from the outlier pre-pass.
+    /// form's uniform, the rest from the outlier pre-pass and the temporal stage.
     pub fn is_stored(self) -> bool {
-        !matches!(self, ScalarVar::Level) && !self.from_prepass()
+        !matches!(self, ScalarVar::Level) && !self.from_prepass() && !self.from_temporal()
     }
 
     /// Whether a kernel reads it from a per-pixel buffer (everything but `level`).
@@ -347,6 +353,20 @@ impl ScalarVar {
 
     /// The terminals the outlier pre-pass supplies.
     pub const FROM_PREPASS: [ScalarVar; 3] = [ScalarVar::LocalMean, ScalarVar::LocalStd, ScalarVar::ClampedShare];
+
+    /// Whether the temporal stage supplies it (`temporal=A` in the pipeline).
+    pub fn from_temporal(self) -> bool {
+        matches!(self, ScalarVar::HistoryLength | ScalarVar::TemporalVariance)
+    }
+
+    /// The terminals the temporal stage supplies.
+    pub const FROM_TEMPORAL: [ScalarVar; 2] = [ScalarVar::HistoryLength, ScalarVar::TemporalVariance];
+
+    /// Whether the pipeline makes it rather than the scene storing it: the
+    /// outlier pre-pass's and the temporal stage's measures.
+    pub fn from_pipeline(self) -> bool {
+        self.from_prepass() || self.from_temporal()
+    }
 }
 
 /// The thesis's constants (Figure 3.2); any other literal may be written too.

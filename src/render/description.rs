@@ -33,6 +33,20 @@ struct SceneFile {
     max_depth: u32,
     materials: BTreeMap<String, MaterialDef>,
     shapes: Vec<Spanned<ShapeDef>>,
+    /// An animation: the scene is a sequence of frames (docs/SCENES.md, "Sequences").
+    sequence: Option<SequenceDef>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SequenceDef {
+    frames: u32,
+    /// How far the camera's position moves a frame.
+    #[serde(default)]
+    camera: [f32; 3],
+    /// How far the camera's look-at point moves a frame.
+    #[serde(default)]
+    look_at: [f32; 3],
 }
 
 fn default_max_depth() -> u32 {
@@ -107,12 +121,18 @@ enum ShapeDef {
         to_world: [[f32; 4]; 3],
         material: String,
         emission: Option<[f32; 3]>,
+        /// How far the shape moves a frame, in a sequence.
+        #[serde(default)]
+        step: [f32; 3],
     },
     /// Mitsuba's cube: [-1,1]³ mapped by `to_world`; faces point outwards.
     Cube {
         to_world: [[f32; 4]; 3],
         material: String,
         emission: Option<[f32; 3]>,
+        /// How far the shape moves a frame, in a sequence.
+        #[serde(default)]
+        step: [f32; 3],
     },
     /// A parallelogram from a corner and two edges; the normal is u × v.
     Quad {
@@ -121,12 +141,18 @@ enum ShapeDef {
         v: [f32; 3],
         material: String,
         emission: Option<[f32; 3]>,
+        /// How far the shape moves a frame, in a sequence.
+        #[serde(default)]
+        step: [f32; 3],
     },
     Sphere {
         center: [f32; 3],
         radius: f32,
         material: String,
         emission: Option<[f32; 3]>,
+        /// How far the shape moves a frame, in a sequence.
+        #[serde(default)]
+        step: [f32; 3],
     },
 }
 
@@ -162,6 +188,17 @@ pub struct Primitive {
     pub geometry: Geometry,
     pub material: usize,
     pub emission: Option<[f32; 3]>,
+    /// How far it moves a frame (a sequence's moving object or light).
+    pub step: [f32; 3],
+}
+
+/// A scene's animation: each frame moves the camera and the moving shapes
+/// by their steps (docs/SCENES.md, "Sequences").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Animation {
+    pub frames: u32,
+    pub camera_step: [f32; 3],
+    pub look_at_step: [f32; 3],
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -183,6 +220,10 @@ pub struct Description {
     pub max_depth: u32,
     pub materials: Vec<Material>,
     pub primitives: Vec<Primitive>,
+    /// The animation, where the scene is a sequence.
+    pub animation: Option<Animation>,
+    /// The frame of the animation this description is at (0: as written).
+    pub frame: u32,
     /// The file's text, for the dataset cache key.
     pub source: String,
 }
@@ -225,12 +266,18 @@ impl Description {
         let mut primitives = Vec::new();
         for spanned in &parsed.shapes {
             let (shape, at) = (spanned.get_ref(), spanned.span().start);
-            let (material_ref, emission) = match shape {
-                ShapeDef::Rectangle { material, emission, .. }
-                | ShapeDef::Cube { material, emission, .. }
-                | ShapeDef::Quad { material, emission, .. }
-                | ShapeDef::Sphere { material, emission, .. } => (material, *emission),
+            let (material_ref, emission, step) = match shape {
+                ShapeDef::Rectangle { material, emission, step, .. }
+                | ShapeDef::Cube { material, emission, step, .. }
+                | ShapeDef::Quad { material, emission, step, .. }
+                | ShapeDef::Sphere { material, emission, step, .. } => (material, *emission, *step),
             };
+            if step.iter().any(|c| !c.is_finite()) {
+                return Err(invalid(at, "step must be finite".into()));
+            }
+            if step != [0.0; 3] && parsed.sequence.is_none() {
+                return Err(invalid(at, "a shape moves (`step`) only in a sequence: add a [sequence] table".into()));
+            }
             let material = names.iter().position(|n| *n == material_ref).ok_or_else(|| {
                 invalid(
                     at,
@@ -252,12 +299,25 @@ impl Description {
                         return Err(invalid(at, format!("sphere radius must be positive, is {radius}")));
                     }
                 }
-                primitives.push(Primitive { geometry, material, emission });
+                primitives.push(Primitive { geometry, material, emission, step });
             }
         }
         if parsed.camera.fov.is_nan() || parsed.camera.fov <= 0.0 || parsed.camera.fov >= 180.0 {
             return Err(invalid(0, format!("camera fov must be in (0, 180) degrees, is {}", parsed.camera.fov)));
         }
+        let animation = match &parsed.sequence {
+            None => None,
+            Some(s) => {
+                let at = text.find("[sequence]").unwrap_or(0);
+                if !(2..=MAX_FRAMES).contains(&s.frames) {
+                    return Err(invalid(at, format!("a sequence has 2 to {MAX_FRAMES} frames, not {}", s.frames)));
+                }
+                if s.camera.iter().chain(&s.look_at).any(|c| !c.is_finite()) {
+                    return Err(invalid(at, "the camera's steps must be finite".into()));
+                }
+                Some(Animation { frames: s.frames, camera_step: s.camera, look_at_step: s.look_at })
+            }
+        };
         Ok(Description {
             name: name.to_string(),
             split: parsed.split,
@@ -272,10 +332,48 @@ impl Description {
             max_depth: parsed.max_depth.max(1),
             materials,
             primitives,
+            animation,
+            frame: 0,
             source: text.to_string(),
         })
     }
+
+    /// This scene at frame `k` of its animation: the camera and every moving
+    /// shape advanced by k steps. A still scene is the same at every frame.
+    pub fn at_frame(&self, k: u32) -> Description {
+        let Some(animation) = self.animation else { return self.clone() };
+        let moved = |p: [f32; 3], step: [f32; 3]| std::array::from_fn(|i| p[i] + k as f32 * step[i]);
+        let mut d = self.clone();
+        d.frame = k;
+        d.camera.position = moved(self.camera.position, animation.camera_step);
+        d.camera.look_at = moved(self.camera.look_at, animation.look_at_step);
+        for p in &mut d.primitives {
+            p.geometry = match p.geometry {
+                Geometry::Parallelogram { origin, u, v } => {
+                    Geometry::Parallelogram { origin: moved(origin, p.step), u, v }
+                }
+                Geometry::Sphere { center, radius } => Geometry::Sphere { center: moved(center, p.step), radius },
+            };
+        }
+        d
+    }
 }
+
+impl Description {
+    /// The frame before this one's camera, the one its motion vectors
+    /// point into: a frame before the first is extrapolated back.
+    pub fn at_frame_before(&self) -> Description {
+        let Some(animation) = self.animation else { return self.clone() };
+        let back = |p: [f32; 3], step: [f32; 3]| std::array::from_fn(|i| p[i] - step[i]);
+        let mut d = self.clone();
+        d.camera.position = back(self.camera.position, animation.camera_step);
+        d.camera.look_at = back(self.camera.look_at, animation.look_at_step);
+        d
+    }
+}
+
+/// The most frames a scene's sequence may have.
+pub const MAX_FRAMES: u32 = 10_000;
 
 fn material(def: &MaterialDef) -> Material {
     let (kind, albedo, parameter, texture) = match def {
@@ -351,7 +449,9 @@ mod tests {
     #[test]
     fn cube_faces_point_outwards() {
         let identity = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]];
-        for g in geometries(&ShapeDef::Cube { to_world: identity, material: "m".into(), emission: None }) {
+        for g in
+            geometries(&ShapeDef::Cube { to_world: identity, material: "m".into(), emission: None, step: [0.0; 3] })
+        {
             let Geometry::Parallelogram { origin, u, v } = g else { panic!() };
             let centre =
                 [origin[0] + (u[0] + v[0]) / 2.0, origin[1] + (u[1] + v[1]) / 2.0, origin[2] + (u[2] + v[2]) / 2.0];

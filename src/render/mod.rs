@@ -48,12 +48,33 @@ pub const BUILTIN: &[(&str, &str)] = &[
     ("skylight-slot", include_str!("../../scenes/skylight-slot.toml")),
 ];
 
-/// A built-in scene by name.
+/// The sequences shipped inside the binary (`scenes/seq-*.toml`): scenes
+/// with a `[sequence]`, rendered frame by frame with motion vectors
+/// (docs/SCENES.md, "Sequences"); the temporal stage trains and is scored on them.
+pub const BUILTIN_SEQUENCES: &[(&str, &str)] = &[
+    ("seq-pan-pillars", include_str!("../../scenes/seq-pan-pillars.toml")),
+    ("seq-dolly-room", include_str!("../../scenes/seq-dolly-room.toml")),
+    ("seq-moving-ball", include_str!("../../scenes/seq-moving-ball.toml")),
+    ("seq-moving-light", include_str!("../../scenes/seq-moving-light.toml")),
+    ("seq-orbit-desk", include_str!("../../scenes/seq-orbit-desk.toml")),
+];
+
+/// A built-in scene (a still or a sequence) by name.
 pub fn builtin(name: &str) -> Option<Result<Description, DescriptionError>> {
     BUILTIN
         .iter()
+        .chain(BUILTIN_SEQUENCES)
         .find(|(n, _)| *n == name)
         .map(|(n, text)| Description::parse(n, text, Path::new(&format!("scenes/{n}.toml"))))
+}
+
+/// Every built-in sequence of a split.
+pub fn builtin_sequences(split: Split) -> Vec<Description> {
+    BUILTIN_SEQUENCES
+        .iter()
+        .map(|(n, _)| builtin(n).expect("listed").expect("built-in sequences parse"))
+        .filter(|d| d.split == split)
+        .collect()
 }
 
 /// Every built-in scene of a split.
@@ -80,7 +101,7 @@ pub fn describe(arg: &str) -> Result<Description, DescriptionError> {
                 std::io::ErrorKind::NotFound,
                 format!(
                     "no such scene file, and no built-in scene of that name (built-in: {})",
-                    BUILTIN.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                    BUILTIN.iter().chain(BUILTIN_SEQUENCES).map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
                 ),
             ),
         }),
@@ -160,6 +181,11 @@ pub fn render(
     let packed = packed::pack(d);
     let scene = gpu.upload_trace_scene(&packed.inputs());
     let (pos, forward, right, up) = packed::camera(d, settings.width, settings.height);
+    // A sequence's frame: motion vectors against the frame before's camera.
+    let (prev_pos, prev_forward, prev_right, prev_up) = match d.animation {
+        Some(_) => packed::camera(&d.at_frame_before(), settings.width, settings.height),
+        None => (pos, forward, right, up),
+    };
     let base = TraceParams {
         width: settings.width,
         height: settings.height,
@@ -171,12 +197,17 @@ pub fn render(
         light_count: packed.lights.len() as u32,
         prim_count: packed.prims.len() as u32,
         row_offset: 0,
-        pad: [0; 2],
+        with_motion: d.animation.is_some() as u32,
+        pad: 0,
         environment: [d.environment[0], d.environment[1], d.environment[2], 0.0],
         cam_pos: pos,
         cam_forward: forward,
         cam_right: right,
         cam_up: up,
+        prev_pos,
+        prev_forward,
+        prev_right,
+        prev_up,
     };
     let pixels = settings.width as u64 * settings.height as u64;
     let total = pixels * (settings.spp as u64 + settings.reference_spp as u64);
@@ -321,6 +352,11 @@ impl Rendered {
         }
         channels.push(("Z", mean(15)));
         channels.push(("DirectVisibility", mean(16)));
+        if d.animation.is_some() {
+            // Blender's Vector pass: where each pixel's surface was in the frame before minus where it is, y up.
+            channels.push(("Vector.X", mean(17)));
+            channels.push(("Vector.Y", mean(18)));
+        }
         for (k, name) in ["Variance.R", "Variance.G", "Variance.B"].iter().enumerate() {
             channels.push((name, variance(k)));
         }
@@ -338,6 +374,7 @@ impl Rendered {
             .map_err(|e| werr(&reference_path, e.to_string()))?;
         let meta = serde_json::json!({
             "scene": d.name,
+            "frame": d.animation.map(|_| d.frame + 1),
             "split": d.split,
             "description": d.summary,
             "spp": settings.spp,
@@ -355,6 +392,51 @@ impl Rendered {
         Ok(())
     }
 }
+
+/// The name of frame `k` (from 0) of a sequence, as Blender numbers its frames: `frame_0001`.
+pub fn frame_name(k: u32) -> String {
+    format!("frame_{:04}", k + 1)
+}
+
+/// Render every frame of a sequence (`d` with an animation) into `dir`:
+/// `frame_0001/`, … each a dataset with its reference, each frame with its
+/// own noise; `sequence.json` last (its presence marks a complete sequence).
+pub fn render_sequence(
+    gpu: &Gpu,
+    d: &Description,
+    settings: &RenderSettings,
+    dir: &Path,
+    progress: Progress<'_>,
+) -> Result<(), RenderError> {
+    let animation = d
+        .animation
+        .ok_or_else(|| RenderError::Settings(format!("scene `{}` has no [sequence]: it is a still", d.name)))?;
+    let frames = animation.frames;
+    for k in 0..frames {
+        let frame = d.at_frame(k);
+        // Each frame its own noise, as Cycles' animated seed gives.
+        let frame_settings = RenderSettings { seed: settings.seed.wrapping_add(k.wrapping_mul(7919)), ..*settings };
+        let mut frame_progress = |done: u64, total: u64| progress(k as u64 * total + done, frames as u64 * total);
+        let rendered = render(gpu, &frame, &frame_settings, &mut frame_progress)?;
+        rendered.write(&dir.join(frame_name(k)), &frame, &frame_settings)?;
+    }
+    let meta = serde_json::json!({
+        "scene": d.name,
+        "frames": frames,
+        "spp": settings.spp,
+        "reference_spp": settings.reference_spp,
+        "width": settings.width,
+        "height": settings.height,
+        "seed": settings.seed,
+        "renderer_version": RENDERER_VERSION,
+    });
+    let path = dir.join(SEQUENCE_META);
+    crate::io::write_bytes_atomically(&path, serde_json::to_string_pretty(&meta).expect("json").as_bytes())?;
+    Ok(())
+}
+
+/// The file whose presence marks a rendered sequence complete.
+pub const SEQUENCE_META: &str = "sequence.json";
 
 /// The cache directory of a scene rendered with some settings: keyed by the
 /// description's text, the settings and the renderer version.
@@ -378,10 +460,11 @@ pub fn cached(
     progress: Progress<'_>,
 ) -> Result<PathBuf, RenderError> {
     let dir = cache_dir(root, d, settings);
-    if dir.join(crate::scene::META_FILE).is_file() {
+    // A sequence is complete once its `sequence.json` is there, a still once its `meta.json` is.
+    let marker = if d.animation.is_some() { SEQUENCE_META } else { crate::scene::META_FILE };
+    if dir.join(marker).is_file() {
         return Ok(dir);
     }
-    let rendered = render(gpu, d, settings, progress)?;
     // Render into a private directory, then move it into place in one step.
     let tmp = dir.with_extension(format!("tmp-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&tmp);
@@ -389,10 +472,13 @@ pub fn cached(
         std::fs::create_dir_all(parent)
             .map_err(|e| RenderError::Write { path: parent.into(), message: e.to_string() })?;
     }
-    rendered.write(&tmp, d, settings)?;
+    match d.animation {
+        Some(_) => render_sequence(gpu, d, settings, &tmp, progress)?,
+        None => render(gpu, d, settings, progress)?.write(&tmp, d, settings)?,
+    }
     if let Err(e) = std::fs::rename(&tmp, &dir) {
         let _ = std::fs::remove_dir_all(&tmp);
-        if !dir.join(crate::scene::META_FILE).is_file() {
+        if !dir.join(marker).is_file() {
             return Err(RenderError::Write { path: dir, message: e.to_string() });
         }
     }

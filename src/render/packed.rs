@@ -3,11 +3,12 @@
 
 use super::description::{Description, Geometry};
 
-/// f32 sums per pixel a trace dispatch returns: 17 values (colour, albedo,
-/// position, normal, secondary albedo, depth, visibility), then their squares.
-pub const SUMS_PER_PIXEL: usize = 34;
+/// f32 sums per pixel a trace dispatch returns: 19 values (colour, albedo,
+/// position, normal, secondary albedo, depth, visibility, motion x and y),
+/// then their squares.
+pub const SUMS_PER_PIXEL: usize = 38;
 /// Values per sample, in the order above.
-pub const VALUES_PER_SAMPLE: usize = 17;
+pub const VALUES_PER_SAMPLE: usize = 19;
 
 #[repr(C)]
 #[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
@@ -18,6 +19,8 @@ pub struct GpuPrim {
     pub v: [f32; 4],
     pub n: [f32; 4],
     pub emission: [f32; 4],
+    /// How far the shape moved since the frame before.
+    pub step: [f32; 4],
 }
 
 #[repr(C)]
@@ -41,12 +44,18 @@ pub struct TraceParams {
     pub light_count: u32,
     pub prim_count: u32,
     pub row_offset: u32,
-    pub pad: [u32; 2],
+    /// 1: write motion vectors against the frame before's camera.
+    pub with_motion: u32,
+    pub pad: u32,
     pub environment: [f32; 4],
     pub cam_pos: [f32; 4],
     pub cam_forward: [f32; 4],
     pub cam_right: [f32; 4],
     pub cam_up: [f32; 4],
+    pub prev_pos: [f32; 4],
+    pub prev_forward: [f32; 4],
+    pub prev_right: [f32; 4],
+    pub prev_up: [f32; 4],
 }
 
 pub struct PackedScene {
@@ -99,6 +108,7 @@ pub fn pack(d: &Description) -> PackedScene {
                     v: four(v, 0.0),
                     n: four(scale(n, 1.0 / area), 1.0 / area),
                     emission: four(emission, 0.0),
+                    step: four(p.step, 0.0),
                 }
             }
             Geometry::Sphere { center, radius } => {
@@ -110,6 +120,7 @@ pub fn pack(d: &Description) -> PackedScene {
                     v: [0.0; 4],
                     n: [0.0, 0.0, 0.0, 1.0 / area],
                     emission: four(emission, 0.0),
+                    step: four(p.step, 0.0),
                 }
             }
         };

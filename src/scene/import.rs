@@ -63,10 +63,12 @@ impl Layout {
         }
     }
 
-    /// The reference image's colour channels.
+    /// The reference image's colour channels: the renderer's, or a plain
+    /// RGB image (a reference saved apart, as Blender's File Output node or
+    /// an image editor writes it).
     pub fn reference_color(self) -> Alternatives {
         match self {
-            Layout::Blender => &[&["Combined.R", "Combined.G", "Combined.B"]],
+            Layout::Blender => &[&["Combined.R", "Combined.G", "Combined.B"], &["R", "G", "B"]],
             _ => self.color(),
         }
     }
@@ -122,6 +124,28 @@ impl Layout {
             // Camera-space depth (the Z pass), or the denoiser's.
             (Layout::Blender, Feature::Depth) => &[&["Depth.Z"], &["Denoising Depth.Z"]],
             _ => &[],
+        }
+    }
+
+    /// The motion vectors' channels (X, Y: the frame before's position minus
+    /// this one's, in pixels, y up, as Blender's Vector pass).
+    pub fn motion(self) -> Alternatives {
+        match self {
+            Layout::Blender | Layout::Pbrt => &[&["Vector.X", "Vector.Y"]],
+            Layout::Mitsuba | Layout::MitsubaMoment => &[],
+        }
+    }
+
+    /// The normal the temporal stage's surface test reads: the primary
+    /// hit's, which Blender's Normal pass holds (its Denoising Normal
+    /// follows mirrors to what they show).
+    pub fn surface_normal(self) -> Alternatives {
+        match self {
+            Layout::Blender => &[
+                &["Normal.X", "Normal.Y", "Normal.Z"],
+                &["Denoising Normal.X", "Denoising Normal.Y", "Denoising Normal.Z"],
+            ],
+            _ => self.feature(Feature::Normal),
         }
     }
 

@@ -10,7 +10,7 @@ use std::ops::Range;
 use std::path::Path;
 
 use super::import::{pick, Channels, Layout};
-use super::{exr_io, locate, preprocess, Absent, Images, Origin, Request, Scene, SceneError};
+use super::{exr_io, locate, preprocess, Absent, Images, Motion, Origin, Request, Scene, SceneError};
 use crate::lang::{Feature, FeatureSource, ScalarVar};
 use crate::semantics::COLOR_LIMIT;
 
@@ -55,6 +55,19 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
         Some(meta) => read_meta(meta)?,
         None => (None, None),
     };
+    // Blender's Vector pass (and filterjit's own) has y up; image rows go down.
+    let motion = match (&plan.motion, &plan.surface) {
+        (Some(vectors), Some((normal, depth))) => {
+            let (normal, depth) = (gathered(normal), gathered(depth));
+            let mut depth: Vec<[f32; 3]> = depth;
+            layout.clean(Feature::Depth, &mut depth);
+            Some(Motion {
+                vectors: gathered(vectors).iter().map(|v| [v[0], -v[1]]).collect(),
+                surface: normal.iter().zip(&depth).map(|(n, z)| Motion::surface_of(*n, z[0])).collect(),
+            })
+        }
+        _ => None,
+    };
     Ok(Images {
         name: meta_name.unwrap_or_else(|| files.name.clone()),
         width,
@@ -74,6 +87,7 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
         provided: layout.stored_features(channels),
         variances,
         reference,
+        motion,
     })
 }
 
@@ -82,8 +96,19 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
 /// variances normalised, and inputs the request names but the images lack
 /// refused or read as zero (`request.absent`). `request.spp` overrides the images'.
 pub fn prepare(images: Images, request: &Request) -> Result<Scene, SceneError> {
-    let Images { name, width, height, spp, origin, color, features: stored, provided, mut variances, reference } =
-        images;
+    let Images {
+        name,
+        width,
+        height,
+        spp,
+        origin,
+        color,
+        features: stored,
+        provided,
+        mut variances,
+        reference,
+        motion,
+    } = images;
     let mut preparer = Preparer { request, name: &name, origin: &origin, provided: &provided, notes: Vec::new() };
     let color = preparer.sanitized("noisy colour", color, COLOR_LIMIT);
     let albedo = match request.albedo {
@@ -92,6 +117,11 @@ pub fn prepare(images: Images, request: &Request) -> Result<Scene, SceneError> {
             Some(albedo) => Some(preparer.sanitized("albedo", albedo.clone(), f32::MAX)),
             None => return Err(SceneError::MissingAlbedo { scene: name.clone(), origin: origin.clone() }),
         },
+    };
+    let motion = match (request.motion, motion) {
+        (false, _) => None,
+        (true, Some(motion)) => Some(preparer.motion(motion)),
+        (true, None) => return Err(SceneError::MissingMotion { scene: name.clone(), origin: origin.clone() }),
     };
     let features = preparer.features(stored, width, height)?;
     let mut prepared = BTreeMap::new();
@@ -127,6 +157,7 @@ pub fn prepare(images: Images, request: &Request) -> Result<Scene, SceneError> {
         features,
         variances: prepared,
         albedo,
+        motion,
         notes,
     })
 }
@@ -142,6 +173,10 @@ struct NoisyPlan {
     variances: BTreeMap<ScalarVar, Range<usize>>,
     /// Variances the layout keeps in `variance.exr`: their channel alternatives.
     separate_variances: BTreeMap<ScalarVar, &'static [&'static [&'static str]]>,
+    /// The motion vectors, where the request asks for them and the image has them.
+    motion: Option<Range<usize>>,
+    /// The raw normal and depth of the temporal stage's surface test, likewise.
+    surface: Option<(Range<usize>, Range<usize>)>,
 }
 
 impl NoisyPlan {
@@ -178,7 +213,15 @@ impl NoisyPlan {
                 variances.insert(v, range);
             }
         }
-        Ok(NoisyPlan { names, color, features, variances, separate_variances })
+        let (motion, surface) = match request.motion {
+            false => (None, None),
+            true => {
+                let motion = plan(layout.motion());
+                let surface = plan(layout.surface_normal()).zip(plan(layout.feature(Feature::Depth)));
+                (motion, surface)
+            }
+        };
+        Ok(NoisyPlan { names, color, features, variances, separate_variances, motion, surface })
     }
 }
 
@@ -265,6 +308,34 @@ impl Preparer<'_> {
                 Ok(())
             }
         }
+    }
+
+    /// The temporal stage's inputs, sanitised: a non-finite motion vector
+    /// points outside the image (that pixel starts a new history), a
+    /// non-finite normal or depth is no surface.
+    fn motion(&mut self, mut motion: Motion) -> Motion {
+        let mut bad = 0;
+        for v in &mut motion.vectors {
+            if !(v[0].is_finite() && v[1].is_finite()) {
+                *v = [NO_HISTORY, NO_HISTORY];
+                bad += 1;
+            }
+            *v = v.map(|c| c.clamp(-NO_HISTORY, NO_HISTORY));
+        }
+        if bad > 0 {
+            self.notes.push(format!("motion vectors: {bad} non-finite vectors; those pixels start a new history"));
+        }
+        let mut bad = 0;
+        for s in &mut motion.surface {
+            if s.iter().any(|c| !c.is_finite()) {
+                *s = [0.0; 4];
+                bad += 1;
+            }
+        }
+        if bad > 0 {
+            self.notes.push(format!("normal or depth: {bad} non-finite values read as no surface"));
+        }
+        motion
     }
 
     /// The requested features: stored ones normalised, gradients by Sobel of
@@ -355,6 +426,10 @@ fn check_size(file: &Path, size: (usize, usize), noisy: &Path, expected: (usize,
     }
     Ok(())
 }
+
+/// A motion vector component that points outside any image: where a vector
+/// was not finite, the pixel has no history to take.
+const NO_HISTORY: f32 = 1e7;
 
 /// Samples per pixel and scene name from Mitsuba's `meta.json` (`noisy.spp`,
 /// `scene`) or filterjit's (`spp`, `scene`).

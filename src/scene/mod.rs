@@ -6,9 +6,11 @@ pub mod import;
 mod load;
 mod needs;
 pub mod preprocess;
+pub mod sequence;
 
 pub use load::{load, prepare};
 pub use needs::{Holds, Missing, MissingInput, Needs};
+pub use sequence::{is_sequence, Sequence};
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -41,6 +43,14 @@ pub enum SceneError {
     MissingAlbedo { scene: String, origin: Origin },
     #[error("{}: image is {}x{}, but the noisy image {} is {}x{}", file.display(), size.0, size.1, noisy.display(), expected.0, expected.1)]
     SizeMismatch { file: PathBuf, size: (usize, usize), noisy: PathBuf, expected: (usize, usize) },
+    #[error(
+        "scene `{scene}` has no motion vectors ({origin}), which the temporal stage reprojects the frame before \
+         by: render with Blender's Vector pass (View Layer Properties > Passes > Data > Vector, motion blur off) or \
+         write `Vector.X`, `Vector.Y` channels (docs/SCENES.md)"
+    )]
+    MissingMotion { scene: String, origin: Origin },
+    #[error("{}: {message}", path.display())]
+    Sequence { path: PathBuf, message: String },
     #[error("{}: no noisy image here (expected {} or an .exr file)", path.display(), NOISY_FILE)]
     NotAScene { path: PathBuf },
     #[error("{}: image is empty", file.display())]
@@ -97,6 +107,9 @@ pub struct Request {
     pub albedo: bool,
     /// The view layer of a Blender multilayer file, where it has several.
     pub view_layer: Option<String>,
+    /// Load the motion vectors and the raw surface (normal, depth) the
+    /// temporal stage reads ([`Motion`]): a frame of a sequence.
+    pub motion: bool,
 }
 
 impl Request {
@@ -154,6 +167,9 @@ pub struct Images {
     /// Per-pixel scalar variances (a colour variance is the mean over its channels).
     pub variances: BTreeMap<ScalarVar, Vec<f32>>,
     pub reference: Option<Vec<[f32; 3]>>,
+    /// What the temporal stage reads ([`Motion`]), where the source has
+    /// motion vectors (and the request asked for them).
+    pub motion: Option<Motion>,
 }
 
 /// A loaded scene. Features are normalised and zero-padded to 3 components.
@@ -172,8 +188,33 @@ pub struct Scene {
     pub variances: BTreeMap<ScalarVar, Vec<f32>>,
     /// The raw albedo (sanitised, not normalised), when the request asked for it.
     pub albedo: Option<Vec<[f32; 3]>>,
+    /// What the temporal stage reads, when the request asked for it.
+    pub motion: Option<Motion>,
     /// What loading did that a user should know: sanitised values, scales, absent features read as zero.
     pub notes: Vec<String>,
+}
+
+/// What the temporal stage reads of a frame besides its colour
+/// (docs/SEMANTICS.md, "The temporal stage"), as the renderer wrote it, not
+/// normalised: features are normalised frame by frame, and the history's
+/// test compares one frame's surface with the next's.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Motion {
+    /// Where the surface seen at a pixel was in the frame before, relative to
+    /// the pixel: (dx, dy) in pixels, x right and y down (Blender's Vector
+    /// pass X and −Y; docs/SCENES.md).
+    pub vectors: Vec<[f32; 2]>,
+    /// Each pixel's surface: the normal's direction (unit, or zero where
+    /// nothing was hit) and the depth (0 where nothing was hit).
+    pub surface: Vec<[f32; 4]>,
+}
+
+impl Motion {
+    /// The surface of a pixel from its raw normal and depth.
+    pub fn surface_of(normal: [f32; 3], depth: f32) -> [f32; 4] {
+        let d = crate::pipeline::direction(normal.map(f64::from));
+        [d[0] as f32, d[1] as f32, d[2] as f32, depth.max(0.0)]
+    }
 }
 
 impl Scene {
@@ -195,6 +236,7 @@ impl Scene {
             features: BTreeMap::new(),
             variances: BTreeMap::new(),
             albedo: None,
+            motion: None,
             notes: Vec::new(),
         }
     }
@@ -229,6 +271,10 @@ impl Scene {
         out.features = self.features.iter().map(|(f, v)| (*f, tiled(v, (w, h), (tw, th)))).collect();
         out.variances = self.variances.iter().map(|(k, v)| (*k, tiled(v, (w, h), (tw, th)))).collect();
         out.albedo = self.albedo.as_ref().map(|a| tiled(a, (w, h), (tw, th)));
+        out.motion = self.motion.as_ref().map(|m| Motion {
+            vectors: tiled(&m.vectors, (w, h), (tw, th)),
+            surface: tiled(&m.surface, (w, h), (tw, th)),
+        });
         out
     }
 
@@ -252,6 +298,10 @@ impl Scene {
             features: self.features.iter().map(|(f, v)| (*f, cut(v))).collect(),
             variances: self.variances.iter().map(|(k, v)| (*k, rows(v, self.width, x, y, width, height))).collect(),
             albedo: self.albedo.as_deref().map(cut),
+            motion: self.motion.as_ref().map(|m| Motion {
+                vectors: rows(&m.vectors, self.width, x, y, width, height),
+                surface: rows(&m.surface, self.width, x, y, width, height),
+            }),
             notes: Vec::new(),
         }
     }
@@ -323,6 +373,15 @@ pub fn with_derived(stored: BTreeSet<Feature>) -> BTreeSet<Feature> {
         }
     }
     features
+}
+
+/// Whether a render on disk has motion vectors (the temporal stage's input),
+/// from its channel names alone.
+pub fn has_motion(path: &Path, view_layer: Option<&str>) -> Result<bool, SceneError> {
+    let files = locate(path, &Request::default())?;
+    let (names, _, _) = exr_io::channel_names(&files.noisy)?;
+    let view = import::Channels::of(&files.noisy, names, view_layer)?;
+    Ok(pick(view.layout().motion(), &view.names).is_some())
 }
 
 /// The features and variances a scene on disk provides, from its channel

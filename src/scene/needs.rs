@@ -15,8 +15,12 @@ pub enum Missing {
     Variance(ScalarVar),
     /// What the outlier pre-pass measures: only a pipeline with outliers has it.
     Measured(ScalarVar),
+    /// What the temporal stage accumulates: only a pipeline with `temporal=A` has it.
+    Accumulated(ScalarVar),
     /// The albedo demodulation divides by.
     Albedo,
+    /// The motion vectors the temporal stage reprojects the history by.
+    Motion,
 }
 
 impl Missing {
@@ -24,8 +28,9 @@ impl Missing {
     pub fn name(self) -> &'static str {
         match self {
             Missing::Feature(feature) => feature.name(),
-            Missing::Variance(v) | Missing::Measured(v) => v.name(),
+            Missing::Variance(v) | Missing::Measured(v) | Missing::Accumulated(v) => v.name(),
             Missing::Albedo => Feature::Texture.name(),
+            Missing::Motion => "motion vectors",
         }
     }
 
@@ -33,7 +38,14 @@ impl Missing {
     fn note(self) -> Option<&'static str> {
         match self {
             Missing::Measured(_) => Some("what the outlier pre-pass measures: a pipeline with `outliers=k` has it"),
+            Missing::Accumulated(_) => {
+                Some("what the temporal stage accumulates over a sequence: a pipeline with `temporal=A` has it")
+            }
             Missing::Albedo => Some("the albedo `demodulate` divides by"),
+            Missing::Motion => Some(
+                "the temporal stage reprojects the frame before by them: Blender's Vector pass, or `Vector.X`/`Vector.Y` \
+                 channels (docs/SCENES.md)",
+            ),
             Missing::Feature(_) | Missing::Variance(_) => None,
         }
     }
@@ -74,8 +86,12 @@ pub struct Needs {
     pub variances: BTreeSet<ScalarVar>,
     /// What the outlier pre-pass measures.
     pub measured: BTreeSet<ScalarVar>,
+    /// What the temporal stage accumulates.
+    pub accumulated: BTreeSet<ScalarVar>,
     /// The albedo, where the pipeline demodulates.
     pub albedo: bool,
+    /// The motion vectors, where the pipeline has a temporal stage.
+    pub motion: bool,
 }
 
 /// What a render holds, as [`Needs::missing`] compares it.
@@ -86,7 +102,11 @@ pub struct Holds<'a> {
     /// Whether the outlier pre-pass's measures are there (a pipeline with
     /// outliers); without, only those among `variances` are.
     pub measured: bool,
+    /// Whether the temporal stage's measures are there (a temporal
+    /// pipeline); without, only those among `variances` are.
+    pub accumulated: bool,
     pub albedo: bool,
+    pub motion: bool,
 }
 
 impl Needs {
@@ -95,18 +115,22 @@ impl Needs {
         let variables = expr.bound_variables();
         Needs {
             features: expr.features().into_iter().filter(|f| f.needs_data()).collect(),
-            variances: variables.iter().copied().filter(|v| !v.from_prepass()).collect(),
-            measured: variables.into_iter().filter(|v| v.from_prepass()).collect(),
+            variances: variables.iter().copied().filter(|v| !v.from_pipeline()).collect(),
+            measured: variables.iter().copied().filter(|v| v.from_prepass()).collect(),
+            accumulated: variables.into_iter().filter(|v| v.from_temporal()).collect(),
             albedo: demodulate,
+            motion: false,
         }
     }
 
     /// What `expr` reads in `pipeline`: its own needs, the albedo where the
     /// pipeline demodulates, and what the pipeline's stages read themselves
-    /// (the normal, for `keep=surface`).
+    /// (the normal, for `keep=surface`; the normal, depth and motion vectors
+    /// for the temporal stage).
     pub fn of_filter(expr: &Expr, pipeline: &crate::pipeline::FilterPipeline) -> Needs {
         let mut needs = Needs::of(expr, pipeline.demodulate);
         needs.features.extend(pipeline.features());
+        needs.motion = pipeline.is_temporal();
         needs
     }
 
@@ -117,23 +141,35 @@ impl Needs {
         if !holds.measured {
             out.extend(self.measured.difference(holds.variances).map(|v| Missing::Measured(*v)));
         }
+        if !holds.accumulated {
+            out.extend(self.accumulated.difference(holds.variances).map(|v| Missing::Accumulated(*v)));
+        }
         if self.albedo && !holds.albedo && !out.contains(&Missing::Feature(Feature::Texture)) {
             out.push(Missing::Albedo);
+        }
+        if self.motion && !holds.motion {
+            out.push(Missing::Motion);
         }
         out
     }
 
-    /// The first input `scene` lacks, as a data error. `outliers`: whether
-    /// the filter's pipeline measures what the outlier pre-pass measures
-    /// (without, a scene may hold them among its variances, as the CPU
-    /// reference's pre-pass and test scenes do).
-    pub fn check(&self, scene: &Scene, outliers: bool) -> Result<(), MissingInput> {
+    /// The first input `scene` lacks, as a data error. `pipeline`: the
+    /// filter's, whose stages may make what the outlier pre-pass and the
+    /// temporal stage measure (without them, a scene may hold those among
+    /// its variances, as the CPU reference's stages and test scenes do).
+    pub fn check(&self, scene: &Scene, pipeline: &crate::pipeline::FilterPipeline) -> Result<(), MissingInput> {
         let features: BTreeSet<Feature> =
             Feature::ALL.iter().copied().filter(|f| scene.feature(*f).is_some()).collect();
         let variances: BTreeSet<ScalarVar> =
             ScalarVar::ALL.iter().copied().filter(|v| scene.variance(*v).is_some()).collect();
-        let holds =
-            Holds { features: &features, variances: &variances, measured: outliers, albedo: scene.albedo.is_some() };
+        let holds = Holds {
+            features: &features,
+            variances: &variances,
+            measured: pipeline.outliers.is_some(),
+            accumulated: pipeline.is_temporal(),
+            albedo: scene.albedo.is_some(),
+            motion: scene.motion.is_some(),
+        };
         match self.missing(holds).into_iter().next() {
             None => Ok(()),
             Some(missing) => Err(MissingInput { scene: scene.name.clone(), missing }),
@@ -152,7 +188,14 @@ mod tests {
         let needs = Needs::of(&e, true);
         assert!(!needs.features.contains(&Feature::Pixel), "the pixel position is no input");
         let (none, none_v) = (BTreeSet::new(), BTreeSet::new());
-        let holds = Holds { features: &none, variances: &none_v, measured: false, albedo: false };
+        let holds = Holds {
+            features: &none,
+            variances: &none_v,
+            measured: false,
+            accumulated: false,
+            albedo: false,
+            motion: false,
+        };
         assert_eq!(
             needs.missing(holds),
             [
@@ -164,7 +207,14 @@ mod tests {
         );
         let normal = BTreeSet::from([Feature::Normal]);
         let colour = BTreeSet::from([ScalarVar::ColorVariance]);
-        let all = Holds { features: &normal, variances: &colour, measured: true, albedo: true };
+        let all = Holds {
+            features: &normal,
+            variances: &colour,
+            measured: true,
+            accumulated: true,
+            albedo: true,
+            motion: true,
+        };
         assert!(needs.missing(all).is_empty());
     }
 }

@@ -1,6 +1,8 @@
 //! The CPU reference: the same filter as the GPU kernels, evaluated in f64
 //! with the semantics of [`crate::semantics`]. Slow and simple on purpose.
 
+pub mod temporal;
+
 use crate::lang::{Expr, Feature, ScalarVar};
 use crate::pipeline::{self, FilterPipeline, Form, Keep};
 use crate::scene::Scene;
@@ -70,7 +72,7 @@ fn eval(expr: &Expr, px: &Pixels<'_>, flags: &mut u32) -> f64 {
 /// Check that the scene has every input of `expr` (what a pre-pass measured
 /// is among its variances once `prepass` has run).
 pub fn check_inputs(expr: &Expr, scene: &Scene) -> Result<(), MissingInput> {
-    crate::scene::Needs::of(expr, false).check(scene, false)
+    crate::scene::Needs::of(expr, false).check(scene, &FilterPipeline::WINDOW)
 }
 
 /// Filter `scene` with weight expression `expr` over a (2r+1)² window.
@@ -85,7 +87,7 @@ pub fn filter(expr: &Expr, scene: &Scene, radius: u32) -> Result<CpuFiltered, Mi
     };
     let r = radius as i64;
     let offsets: Vec<(i64, i64, f64)> = (-r..=r).flat_map(|dy| (-r..=r).map(move |dx| (dx, dy, 1.0))).collect();
-    Ok(pass(expr, scene, &offsets, 0, false).0)
+    Ok(pass(expr, scene, &offsets, 0, None).0)
 }
 
 fn reads_guide(expr: &Expr) -> bool {
@@ -131,20 +133,20 @@ fn with_guide(scene: &Scene) -> Scene {
 }
 
 /// One pass over `offsets` (dx, dy, stencil weight): every pixel's weighted
-/// mean of its neighbours inside the image, and with `carry_variance` the
-/// colour variance of that mean, Σ w² v_j / (Σ w)² (SVGF's rule).
+/// mean of its neighbours inside the image, and with `carry` the variance of
+/// that mean, Σ w² v_j / (Σ w)² (SVGF's rule), of the variance it names.
 fn pass(
     expr: &Expr,
     scene: &Scene,
     offsets: &[(i64, i64, f64)],
     level: u32,
-    carry_variance: bool,
+    carry: Option<ScalarVar>,
 ) -> (CpuFiltered, Vec<f64>) {
     let (w, h) = (scene.width as i64, scene.height as i64);
-    let variance = carry_variance.then(|| scene.variance(ScalarVar::ColorVariance).expect("checked before filtering"));
+    let variance = carry.map(|v| scene.variance(v).expect("checked before filtering"));
     let mut color = Vec::with_capacity(scene.pixels());
     let mut flags = Vec::with_capacity(scene.pixels());
-    let mut carried = Vec::with_capacity(if carry_variance { scene.pixels() } else { 0 });
+    let mut carried = Vec::with_capacity(if carry.is_some() { scene.pixels() } else { 0 });
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
@@ -389,6 +391,20 @@ pub fn filter_pipeline(
     pipeline: &FilterPipeline,
     radius: u32,
 ) -> Result<CpuFiltered, MissingInput> {
+    Ok(filter_frame(expr, scene, pipeline, radius, None)?.0)
+}
+
+/// [`filter_pipeline`] on a frame of a sequence: a temporal stage blends
+/// the frame into `history` (what the frame before kept; none for the
+/// first) and the frame's own history for the next comes back beside the
+/// result (`None` without a temporal stage).
+pub fn filter_frame(
+    expr: &Expr,
+    scene: &Scene,
+    pipeline: &FilterPipeline,
+    radius: u32,
+    history: Option<&temporal::History>,
+) -> Result<(CpuFiltered, Option<temporal::History>), MissingInput> {
     let prepared = prepass(scene, pipeline)?;
     let mut working = scene.clone();
     working.color = prepared.color;
@@ -398,14 +414,41 @@ pub fn filter_pipeline(
             working.variances.insert(v, values);
         }
     }
+    // The temporal stage: the form filters the blend, and may read what it accumulated.
+    let accumulated = match pipeline.temporal {
+        Some(stage) => {
+            let motion = scene
+                .motion
+                .as_ref()
+                .ok_or_else(|| MissingInput { scene: scene.name.clone(), missing: crate::scene::Missing::Motion })?;
+            let accumulated = temporal::accumulate(stage, &working.color, motion, scene.width, scene.height, history);
+            working.color = accumulated.color.clone();
+            working.variances.insert(ScalarVar::HistoryLength, accumulated.length.clone());
+            working.variances.insert(ScalarVar::TemporalVariance, accumulated.variance.clone());
+            Some((stage, motion, accumulated))
+        }
+        None => None,
+    };
+    // The image the next frame's history starts from: the blend, or a pass's output.
+    let feedback_after = accumulated.as_ref().map(|(stage, ..)| stage.feedback);
+    let mut feedback = match &accumulated {
+        Some((_, _, accumulated)) if feedback_after == Some(0) => Some(accumulated.color.clone()),
+        _ => None,
+    };
     check_inputs(expr, &working)?;
     let mut out = match pipeline.form {
-        Form::Window => filter(expr, &working, radius)?,
+        Form::Window => {
+            let out = filter(expr, &working, radius)?;
+            if feedback_after == Some(1) {
+                feedback = Some(out.color.iter().map(|c| c.map(|v| v as f32)).collect());
+            }
+            out
+        }
         Form::Atrous { passes, stencil } => {
             if reads_guide(expr) {
                 working = with_guide(&working);
             }
-            let carry = expr.variables().contains(&ScalarVar::ColorVariance);
+            let carried = FilterPipeline::carried_variance(&expr.variables());
             let mut flags = vec![0u32; scene.pixels()];
             let mut last = None;
             for level in 0..passes {
@@ -418,17 +461,20 @@ pub fn filter_pipeline(
                         })
                     })
                     .collect();
-                let (filtered, variance) = pass(expr, &working, &offsets, level, carry);
+                let (filtered, variance) = pass(expr, &working, &offsets, level, carried);
                 for (a, b) in flags.iter_mut().zip(&filtered.flags) {
                     *a |= b;
                 }
                 working.color = filtered.color.iter().map(|c| c.map(|v| v as f32)).collect();
+                if feedback_after == Some(level + 1) {
+                    feedback = Some(working.color.clone());
+                }
                 if reads_guide(expr) {
                     // From the second pass on the guide is the pass's input, already filtered.
                     working.features.insert(Feature::Guide, working.color.clone());
                 }
-                if carry {
-                    working.variances.insert(ScalarVar::ColorVariance, variance.iter().map(|v| *v as f32).collect());
+                if let Some(v) = carried {
+                    working.variances.insert(v, variance.iter().map(|v| *v as f32).collect());
                 }
                 last = Some(filtered.color);
             }
@@ -446,7 +492,11 @@ pub fn filter_pipeline(
         let normals = scene.required_feature(Feature::Normal)?;
         out.color = planefit(&image, normals, prepared.modulation.as_deref(), scene.width, scene.height, fit);
     }
-    Ok(out)
+    let kept = accumulated.map(|(_, motion, accumulated)| {
+        let feedback = feedback.expect("the feedback pass is among the form's passes (`most_feedback`)");
+        temporal::keep(&accumulated, feedback, motion, scene.width, scene.height)
+    });
+    Ok((out, kept))
 }
 
 /// `planefit=R` on the form's output `image` (docs/SEMANTICS.md, "The

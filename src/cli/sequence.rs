@@ -1,0 +1,320 @@
+//! `filterjit filter SEQ_DIR -o OUT_DIR`: every frame of a sequence filtered
+//! in order, the temporal state carried from frame to frame; each frame's
+//! EXR and PNG, an animated preview and `metrics.json` written; per frame
+//! and for the sequence, relMSE, light, HDR-FLIP, flicker and temporal
+//! relMSE, and the frame's time.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use filterjit::denoise::{Choice, Provided, SequenceFilter};
+use filterjit::environment::Environment;
+use filterjit::pipeline::FilterPipeline;
+use filterjit::scene::{self, Request, Sequence};
+use filterjit::{gpu, metrics, preview};
+use serde::Serialize;
+
+use super::args::ReadScene;
+use super::ms;
+
+/// A frame's linear RGB pixels.
+type Image = Vec<[f32; 3]>;
+
+/// Frames before this one still build their history: the sequence's
+/// "settled" figures start here (the issue's frames 5–12 of twelve).
+pub(crate) const SETTLED_FROM: usize = 4;
+
+/// The longest side of the animated previews, and their most frames.
+const PREVIEW_SIDE: usize = 512;
+const PREVIEW_FRAMES: usize = 240;
+
+/// One frame's figures, as `metrics.json` holds them.
+#[derive(Serialize)]
+struct FrameFigures {
+    name: String,
+    relmse: Option<f64>,
+    noisy_relmse: Option<f64>,
+    light: Option<f64>,
+    /// The noisy input's light: what the filter is given.
+    noisy_light: Option<f64>,
+    hdr_flip: Option<f64>,
+    /// Against the frame before (none for the first).
+    flicker: Option<f64>,
+    temporal_relmse: Option<f64>,
+    wall_ms: f64,
+    device_ms: Option<f64>,
+    temporal_ms: Option<f64>,
+}
+
+/// The sequence's figures: means over its frames, and over the settled ones.
+#[derive(Serialize)]
+struct SequenceFigures {
+    sequence: String,
+    filter: String,
+    pipeline: FilterPipeline,
+    device: String,
+    width: usize,
+    height: usize,
+    frames: Vec<FrameFigures>,
+    relmse: Option<f64>,
+    relmse_settled: Option<f64>,
+    flicker: Option<f64>,
+    flicker_settled: Option<f64>,
+    temporal_relmse: Option<f64>,
+    hdr_flip: Option<f64>,
+    light_min: Option<f64>,
+    light_max: Option<f64>,
+    /// The median of the frames' wall times after the first (which compiles).
+    frame_ms: f64,
+}
+
+pub(crate) fn filter_sequence(
+    env: &Environment,
+    expr: Option<&str>,
+    radius: Option<u32>,
+    dir: &Path,
+    output: &Path,
+    read: ReadScene,
+    pipeline: Option<FilterPipeline>,
+) -> Result<()> {
+    let ReadScene { reference, spp, absent, view_layer } = read;
+    if let Some(reference) = reference {
+        bail!(
+            "--reference {}: a sequence's references are found by frame name (in a `reference/` folder inside or \
+             beside {}), not given one by one",
+            reference.display(),
+            dir.display()
+        );
+    }
+    let sequence = Sequence::find(dir).with_context(|| format!("reading sequence {}", dir.display()))?;
+    let first = &sequence.frames.first().context("the sequence has no frames")?.path;
+    let choice = match expr {
+        Some(expr) => Choice::asked(expr, pipeline, radius)?,
+        None => {
+            let (features, variances) = scene::provides(first, view_layer.as_deref())
+                .with_context(|| format!("reading frame {}", first.display()))?;
+            let motion = scene::has_motion(first, view_layer.as_deref())?;
+            let provided = Provided { motion, sequence: true, ..Provided::new(features, variances) };
+            Choice::asked_or_best(None, pipeline, radius, &provided)?
+        }
+    };
+    if let Some(because) = &choice.chosen_because {
+        eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
+    }
+    let request = Request { spp, absent, view_layer, ..choice.request() };
+    // Every frame's header first: a damaged sequence is refused before anything is written.
+    let (width, height) = sequence.check(&request).with_context(|| format!("checking sequence {}", dir.display()))?;
+    std::fs::create_dir_all(output).with_context(|| format!("creating {}", output.display()))?;
+    filterjit::io::remove_stale_temporaries(output);
+
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let pipeline = choice.pipeline;
+    let described = choice.describe();
+    let mut filter = SequenceFilter::new(&gpu, choice)?;
+    println!(
+        "sequence  {} ({} frames, {width}x{height}) with {described}, pipeline {pipeline}",
+        sequence.name,
+        sequence.frames.len()
+    );
+    println!("device    {}", gpu.describe());
+    println!(
+        "frame     {:<14} {:>10} {:>10} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9}",
+        "", "relMSE", "noisy", "light", "HDR-FLIP", "flicker", "temporal", "ms", "on device"
+    );
+    let mut figures = Vec::new();
+    // The frame before's output and reference, for the change between frames.
+    let mut previous: Option<(Image, Option<Image>)> = None;
+    let mut animation: Vec<Vec<[f32; 3]>> = Vec::new();
+    let mut comparison: Vec<Vec<[f32; 3]>> = Vec::new();
+    for k in 0..sequence.frames.len() {
+        let frame = &sequence.frames[k];
+        let scene = sequence.load(k, &request).with_context(|| format!("loading frame {}", frame.path.display()))?;
+        for note in scene.notes.iter().filter(|n| n.contains("non-finite") || n.contains("absent")) {
+            eprintln!("note: {}: {note}", frame.name);
+        }
+        let start = Instant::now();
+        let done = filter.frame(&scene).with_context(|| format!("filtering frame {}", frame.path.display()))?;
+        let wall = start.elapsed();
+        let filtered = done.filtered;
+        let rgb = filtered.rgb();
+        let exr = output.join(format!("{}.exr", frame.name));
+        scene::exr_io::write_rgb(&exr, width, height, &rgb).with_context(|| format!("writing {}", exr.display()))?;
+        let png = exr.with_extension("png");
+        preview::write_png(&png, width, height, &rgb)
+            .map_err(anyhow::Error::from)
+            .with_context(|| format!("writing {}", png.display()))?;
+
+        let reference = scene.reference.as_deref();
+        let errors = reference.map(|r| metrics::errors(&rgb, r, scene.spp));
+        let noisy = reference.map(|r| metrics::errors(&scene.color, r, scene.spp));
+        let hdr_flip = reference.map(|r| filterjit::flip::hdr_flip(r, &rgb, width, height).mean());
+        let change = match (&previous, reference) {
+            (Some((before, Some(before_reference))), Some(reference)) => {
+                Some(metrics::temporal((before, &rgb), (before_reference, reference)))
+            }
+            _ => None,
+        };
+        let temporal_ms = done.temporal.map(|span| ms(span.device.unwrap_or(span.wall)));
+        let figure = FrameFigures {
+            name: frame.name.clone(),
+            relmse: errors.map(|e| e.relmse),
+            noisy_relmse: noisy.map(|e| e.relmse),
+            light: errors.and_then(|e| e.light),
+            noisy_light: noisy.and_then(|e| e.light),
+            hdr_flip,
+            flicker: change.map(|c| c.flicker),
+            temporal_relmse: change.map(|c| c.relmse),
+            wall_ms: ms(wall),
+            device_ms: filtered.time.device.map(ms),
+            temporal_ms,
+        };
+        let cell = |v: Option<f64>, width: usize, digits: usize| match v {
+            Some(v) => format!("{v:>width$.digits$}"),
+            None => format!("{:>width$}", "-"),
+        };
+        println!(
+            "          {:<14} {} {} {} {} {} {} {:>9.1} {}",
+            figure.name,
+            cell(figure.relmse, 10, 5),
+            cell(figure.noisy_relmse, 10, 4),
+            cell(figure.light, 8, 4),
+            cell(figure.hdr_flip, 9, 4),
+            cell(figure.flicker, 9, 5),
+            cell(figure.temporal_relmse, 10, 5),
+            figure.wall_ms,
+            cell(figure.device_ms, 9, 2),
+        );
+        if let Some(l) = figure.light.filter(|l| (l - 1.0).abs() > metrics::LIGHT_TOLERANCE) {
+            println!(
+                "light     {}: mean luminance {:+.1} % from the reference's (more than {} %)",
+                figure.name,
+                (l - 1.0) * 100.0,
+                metrics::LIGHT_TOLERANCE * 100.0
+            );
+        }
+        if filtered.flagged_pixels() > 0 {
+            println!(
+                "domain    {}: {} pixels had domain errors: {}",
+                figure.name,
+                filtered.flagged_pixels(),
+                filterjit::semantics::flag::describe(filtered.all_flags()).join("; ")
+            );
+        }
+        if k < PREVIEW_FRAMES {
+            let strip: Vec<&[[f32; 3]]> =
+                [Some(scene.color.as_slice()), Some(rgb.as_slice()), reference].into_iter().flatten().collect();
+            comparison.push(side_by_side(&strip, width, height));
+            animation.push(rgb.clone());
+        }
+        figures.push(figure);
+        previous = Some((rgb, scene.reference));
+    }
+
+    let summary = summarise(&sequence, &described, pipeline, gpu.describe(), (width, height), figures);
+    print_summary(&summary);
+    let (side, preview_height) = preview_size(width, height);
+    let shrink = |frames: &[Vec<[f32; 3]>], w: usize| -> Vec<Vec<[f32; 3]>> {
+        frames.iter().map(|f| shrunk(f, w, height, side * w / width.max(1), preview_height)).collect()
+    };
+    let animated = output.join("animation.png");
+    preview::write_animated_png(&animated, side, preview_height, &shrink(&animation, width), 8)?;
+    let strips = comparison.first().map_or(1, |f| f.len() / (width * height));
+    let compared = output.join("comparison.png");
+    preview::write_animated_png(&compared, side * strips, preview_height, &shrink(&comparison, width * strips), 8)?;
+    let json = output.join("metrics.json");
+    filterjit::io::write_bytes_atomically(&json, serde_json::to_string_pretty(&summary)?.as_bytes())?;
+    println!(
+        "wrote     {} frames (EXR and PNG) in {}; {} (the filtered frames), {} (noisy | filtered{}), {}",
+        summary.frames.len(),
+        output.display(),
+        animated.display(),
+        compared.display(),
+        if strips > 2 { " | reference" } else { "" },
+        json.display()
+    );
+    Ok(())
+}
+
+fn summarise(
+    sequence: &Sequence,
+    filter: &str,
+    pipeline: FilterPipeline,
+    device: String,
+    (width, height): (usize, usize),
+    frames: Vec<FrameFigures>,
+) -> SequenceFigures {
+    let mean = |values: Vec<f64>| (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64);
+    let of = |from: usize, pick: &dyn Fn(&FrameFigures) -> Option<f64>| {
+        mean(frames.iter().skip(from).filter_map(pick).collect())
+    };
+    let lights: Vec<f64> = frames.iter().filter_map(|f| f.light).collect();
+    let mut walls: Vec<f64> = frames.iter().skip(1).map(|f| f.wall_ms).collect();
+    if walls.is_empty() {
+        walls = frames.iter().map(|f| f.wall_ms).collect();
+    }
+    walls.sort_by(f64::total_cmp);
+    SequenceFigures {
+        sequence: sequence.name.clone(),
+        filter: filter.to_string(),
+        pipeline,
+        device,
+        width,
+        height,
+        relmse: of(0, &|f| f.relmse),
+        relmse_settled: of(SETTLED_FROM, &|f| f.relmse),
+        flicker: of(0, &|f| f.flicker),
+        flicker_settled: of(SETTLED_FROM, &|f| f.flicker),
+        temporal_relmse: of(0, &|f| f.temporal_relmse),
+        hdr_flip: of(0, &|f| f.hdr_flip),
+        light_min: lights.iter().copied().reduce(f64::min),
+        light_max: lights.iter().copied().reduce(f64::max),
+        frame_ms: walls.get(walls.len() / 2).copied().unwrap_or(0.0),
+        frames,
+    }
+}
+
+fn print_summary(s: &SequenceFigures) {
+    let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.5}"));
+    println!(
+        "sequence  relMSE {} (frames {}–{}: {}) | flicker {} ({}) | temporal relMSE {} | HDR-FLIP {} | light {}–{} | {:.1} ms a frame",
+        f(s.relmse),
+        SETTLED_FROM + 1,
+        s.frames.len(),
+        f(s.relmse_settled),
+        f(s.flicker),
+        f(s.flicker_settled),
+        f(s.temporal_relmse),
+        f(s.hdr_flip),
+        s.light_min.map_or("-".into(), |l| format!("{l:.3}")),
+        s.light_max.map_or("-".into(), |l| format!("{l:.3}")),
+        s.frame_ms
+    );
+    println!("          (relMSE: Σ_rgb (o − r)² / (r² + 0.01); flicker F: mean |(o_t − o_t−1) − (r_t − r_t−1)| over pixels and channels)");
+}
+
+/// Images of one size side by side, left to right.
+fn side_by_side(images: &[&[[f32; 3]]], width: usize, height: usize) -> Vec<[f32; 3]> {
+    (0..height)
+        .flat_map(|y| images.iter().flat_map(move |image| image[y * width..(y + 1) * width].iter().copied()))
+        .collect()
+}
+
+/// The previews' size: the frame's, or smaller so that its longest side is `PREVIEW_SIDE`.
+fn preview_size(width: usize, height: usize) -> (usize, usize) {
+    let longest = width.max(height);
+    if longest <= PREVIEW_SIDE {
+        return (width, height);
+    }
+    ((width * PREVIEW_SIDE / longest).max(1), (height * PREVIEW_SIDE / longest).max(1))
+}
+
+/// `image` (`width`×`height`) at `to_width`×`to_height`, nearest pixel.
+fn shrunk(image: &[[f32; 3]], width: usize, height: usize, to_width: usize, to_height: usize) -> Vec<[f32; 3]> {
+    if (width, height) == (to_width, to_height) {
+        return image.to_vec();
+    }
+    (0..to_height)
+        .flat_map(|y| (0..to_width).map(move |x| image[(y * height / to_height) * width + x * width / to_width]))
+        .collect()
+}

@@ -1,0 +1,352 @@
+//! The temporal stage's reference (docs/SEMANTICS.md, "The temporal
+//! stage"): each frame's colour blended into the history reprojected from
+//! the frame before, with the luminance's moments, the history's length
+//! and the variance of the blend; `templates/temporal.wgsl.tera` computes
+//! the same, formula for formula, in f32. Positions are computed in f32 as
+//! on the device, so that both pick the same taps.
+
+use super::Neumaier;
+use crate::pipeline::{self, Temporal};
+use crate::scene::Motion;
+
+/// What the temporal stage keeps from one frame for the next, stored as
+/// f32 as on the device.
+#[derive(Clone, Debug, PartialEq)]
+pub struct History {
+    pub width: usize,
+    pub height: usize,
+    /// The history's colour: the image `feedback` passes of the form made
+    /// of the last frame (demodulated where the pipeline demodulates).
+    pub color: Vec<[f32; 3]>,
+    /// Per pixel: the luminance's first and second moments, the blend's
+    /// variance factor r (Σ of its squared shares) and the history's length.
+    pub moments: Vec<[f32; 4]>,
+    /// The last frame's surface ([`Motion::surface`]).
+    pub surface: Vec<[f32; 4]>,
+}
+
+/// What the stage makes of one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Accumulated {
+    /// The blend, which the form filters.
+    pub color: Vec<[f32; 3]>,
+    /// The moments the next frame's history keeps ([`History::moments`]).
+    pub moments: Vec<[f32; 4]>,
+    /// `temporalVariance`: the variance of the blend's luminance.
+    pub variance: Vec<f32>,
+    /// `historyLength`: the frames in each pixel's blend, this one included.
+    pub length: Vec<f32>,
+}
+
+/// A pixel's history as the taps it was read from give it.
+struct Taken {
+    color: [f64; 3],
+    moments: [f64; 4],
+}
+
+/// The temporal stage on one frame: `color` (as the pre-pass left it),
+/// `motion` its vectors and surface, `history` what the frame before left
+/// (none for a sequence's first frame).
+pub fn accumulate(
+    temporal: Temporal,
+    color: &[[f32; 3]],
+    motion: &Motion,
+    width: usize,
+    height: usize,
+    history: Option<&History>,
+) -> Accumulated {
+    let luminance: Vec<f64> = color.iter().map(|c| pipeline::luminance(c.map(f64::from))).collect();
+    let (w, h) = (width as i64, height as i64);
+    let mut out = Accumulated {
+        color: Vec::with_capacity(color.len()),
+        moments: Vec::with_capacity(color.len()),
+        variance: Vec::with_capacity(color.len()),
+        length: Vec::with_capacity(color.len()),
+    };
+    for y in 0..h {
+        for x in 0..w {
+            let i = (y * w + x) as usize;
+            let (normal, depth) = surface(motion.surface[i]);
+            let taken = history.and_then(|history| {
+                let same = |xj: i64, yj: i64| {
+                    inside(xj, yj, w, h) && {
+                        let (n, z) = surface(history.surface[(yj * w + xj) as usize]);
+                        pipeline::same_surface(n, z, normal, depth)
+                    }
+                };
+                reproject(history, motion.vectors[i], (x, y), same)
+            });
+            let d = color[i].map(f64::from);
+            let l = luminance[i];
+            let n = (taken.as_ref().map_or(0.0, |t| t.moments[3]) + 1.0).min(pipeline::TEMPORAL_MAX_HISTORY);
+            let a = temporal.share(n);
+            let (blend, m1, m2, r) = match taken {
+                Some(Taken { color: mut past, moments }) => {
+                    if let Some(gamma) = temporal.clamp {
+                        let (mean, deviation) = neighbourhood(color, x, y, w, h);
+                        for k in 0..3 {
+                            let g = gamma as f64 * deviation[k];
+                            past[k] = past[k].clamp(mean[k] - g, mean[k] + g);
+                        }
+                    }
+                    let blend = [0, 1, 2].map(|k| past[k] * (1.0 - a) + d[k] * a);
+                    let m1 = moments[0] * (1.0 - a) + l * a;
+                    let m2 = moments[1] * (1.0 - a) + l * l * a;
+                    let r = moments[2] * (1.0 - a) * (1.0 - a) + a * a;
+                    (blend, m1, m2, r)
+                }
+                None => (d, l, l * l, 1.0),
+            };
+            let sample_variance = if n >= pipeline::TEMPORAL_SHORT_HISTORY {
+                (m2 - m1 * m1).max(0.0)
+            } else {
+                spatial_variance(&luminance, &motion.surface, x, y, w, h)
+            };
+            out.color.push(blend.map(|c| c as f32));
+            out.moments.push([m1 as f32, m2 as f32, r as f32, n as f32]);
+            out.variance.push((sample_variance * r) as f32);
+            out.length.push(n as f32);
+        }
+    }
+    out
+}
+
+/// What the stage keeps of a frame: `accumulated`'s moments, `feedback` (the
+/// image after the pipeline's `feedback` passes) and the frame's surface.
+pub fn keep(
+    accumulated: &Accumulated,
+    feedback: Vec<[f32; 3]>,
+    motion: &Motion,
+    width: usize,
+    height: usize,
+) -> History {
+    History { width, height, color: feedback, moments: accumulated.moments.clone(), surface: motion.surface.clone() }
+}
+
+fn surface(s: [f32; 4]) -> ([f64; 3], f64) {
+    ([s[0] as f64, s[1] as f64, s[2] as f64], s[3] as f64)
+}
+
+fn inside(x: i64, y: i64, w: i64, h: i64) -> bool {
+    x >= 0 && y >= 0 && x < w && y < h
+}
+
+/// The history at pixel (`x`, `y`) moved by `vector`: the bilinear taps
+/// around where the pixel was that see its surface (`same`), weighted and
+/// renormalised; where they hold less than `TEMPORAL_MIN_FOOTPRINT` of the
+/// footprint, the mean of the 3×3 taps around the nearest pixel that do
+/// (SVGF's wider search); else none.
+fn reproject(
+    history: &History,
+    vector: [f32; 2],
+    (x, y): (i64, i64),
+    same: impl Fn(i64, i64) -> bool,
+) -> Option<Taken> {
+    let w = history.width as i64;
+    // In f32, as on the device: the same floor, the same taps.
+    let (qx, qy) = (x as f32 + vector[0], y as f32 + vector[1]);
+    let (fx0, fy0) = (qx.floor(), qy.floor());
+    let (fx, fy) = ((qx - fx0) as f64, (qy - fy0) as f64);
+    let (x0, y0) = (fx0 as i64, fy0 as i64);
+    let add = |sums: &mut ([Neumaier; 3], [Neumaier; 4]), weight: f64, j: usize| {
+        for (s, c) in sums.0.iter_mut().zip(history.color[j]) {
+            s.add(weight * c as f64);
+        }
+        for (s, m) in sums.1.iter_mut().zip(history.moments[j]) {
+            s.add(weight * m as f64);
+        }
+    };
+    let taken = |sums: ([Neumaier; 3], [Neumaier; 4]), total: f64| Taken {
+        color: sums.0.map(|s| s.total() / total),
+        moments: sums.1.map(|s| s.total() / total),
+    };
+    let mut sums = Default::default();
+    let mut total = Neumaier::default();
+    for dy in 0..2 {
+        for dx in 0..2 {
+            let (xj, yj) = (x0 + dx, y0 + dy);
+            if same(xj, yj) {
+                let weight = if dx == 1 { fx } else { 1.0 - fx } * if dy == 1 { fy } else { 1.0 - fy };
+                add(&mut sums, weight, (yj * w + xj) as usize);
+                total.add(weight);
+            }
+        }
+    }
+    if total.total() > pipeline::TEMPORAL_MIN_FOOTPRINT {
+        return Some(taken(sums, total.total()));
+    }
+    let (cx, cy) = ((qx + 0.5).floor() as i64, (qy + 0.5).floor() as i64);
+    let mut sums = Default::default();
+    let mut count = 0.0;
+    for dy in -1..=1 {
+        for dx in -1..=1 {
+            let (xj, yj) = (cx + dx, cy + dy);
+            if same(xj, yj) {
+                add(&mut sums, 1.0, (yj * w + xj) as usize);
+                count += 1.0;
+            }
+        }
+    }
+    (count > 0.0).then(|| taken(sums, count))
+}
+
+/// Each channel's mean and standard deviation over the 3×3 pixels around
+/// (`x`, `y`) inside the image: what `clamp=G` holds the history to.
+fn neighbourhood(color: &[[f32; 3]], x: i64, y: i64, w: i64, h: i64) -> ([f64; 3], [f64; 3]) {
+    let taps: Vec<[f64; 3]> = (-1..=1)
+        .flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy)))
+        .filter(|&(xj, yj)| inside(xj, yj, w, h))
+        .map(|(xj, yj)| color[(yj * w + xj) as usize].map(f64::from))
+        .collect();
+    let n = taps.len() as f64;
+    let mean = [0, 1, 2].map(|k| taps.iter().map(|t| t[k]).sum::<f64>() / n);
+    let deviation = [0, 1, 2].map(|k| (taps.iter().map(|t| (t[k] - mean[k]).powi(2)).sum::<f64>() / n).sqrt());
+    (mean, deviation)
+}
+
+/// The variance of the luminance over the (2R+1)² pixels around (`x`, `y`)
+/// that see its surface (R = `TEMPORAL_VARIANCE_RADIUS`): a history too
+/// short for its moments (SVGF's spatial estimate).
+fn spatial_variance(luminance: &[f64], surfaces: &[[f32; 4]], x: i64, y: i64, w: i64, h: i64) -> f64 {
+    let (normal, depth) = surface(surfaces[(y * w + x) as usize]);
+    let r = pipeline::TEMPORAL_VARIANCE_RADIUS as i64;
+    let taps: Vec<f64> = (-r..=r)
+        .flat_map(|dy| (-r..=r).map(move |dx| (x + dx, y + dy)))
+        .filter(|&(xj, yj)| {
+            inside(xj, yj, w, h) && {
+                let (n, z) = surface(surfaces[(yj * w + xj) as usize]);
+                pipeline::same_surface(n, z, normal, depth)
+            }
+        })
+        .map(|(xj, yj)| luminance[(yj * w + xj) as usize])
+        .collect();
+    let n = taps.len() as f64;
+    let mean = taps.iter().sum::<f64>() / n;
+    taps.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const UP: [f32; 4] = [0.0, 0.0, 1.0, 1.0];
+
+    /// A `w`×`h` frame of one colour, facing the camera at depth 1, still.
+    fn still(w: usize, h: usize, value: f32) -> (Vec<[f32; 3]>, Motion) {
+        (vec![[value; 3]; w * h], Motion { vectors: vec![[0.0; 2]; w * h], surface: vec![UP; w * h] })
+    }
+
+    fn stage(alpha: f32) -> Temporal {
+        Temporal { alpha, feedback: 0, clamp: None }
+    }
+
+    #[test]
+    fn a_still_history_averages_its_frames_evenly_then_forgets_at_alpha() {
+        let (w, h) = (6, 5);
+        let mut history: Option<History> = None;
+        // Frames of 0, 3, 6, 9, …: while 1/n > α every frame counts alike.
+        for k in 0..6 {
+            let (color, motion) = still(w, h, 3.0 * k as f32);
+            let out = accumulate(stage(0.2), &color, &motion, w, h, history.as_ref());
+            let n = (k + 1) as f32;
+            assert_eq!(out.length[7], n, "frame {k}");
+            let even = 3.0 * k as f32 / 2.0;
+            if n <= 5.0 {
+                assert!(
+                    (out.color[7][0] - even).abs() < 1e-5,
+                    "frame {k}: {} against the mean {even}",
+                    out.color[7][0]
+                );
+                // r: the blend's squared shares sum to 1/n.
+                assert!((out.moments[7][2] - 1.0 / n).abs() < 1e-6, "frame {k}: r {}", out.moments[7][2]);
+            } else {
+                // From n > 1/α on, the newest frame gets α.
+                let before = history.as_ref().unwrap().color[7][0];
+                assert!((out.color[7][0] - (0.8 * before + 0.2 * 3.0 * k as f32)).abs() < 1e-4, "frame {k}");
+            }
+            history = Some(keep(&out, out.color.clone(), &motion, w, h));
+        }
+    }
+
+    #[test]
+    fn a_surface_the_frame_before_did_not_see_starts_a_new_history() {
+        let (w, h) = (8, 4);
+        let (color, motion) = still(w, h, 1.0);
+        let first = accumulate(stage(0.2), &color, &motion, w, h, None);
+        let history = keep(&first, first.color.clone(), &motion, w, h);
+        // The right half now sees a surface twice as far (an object moved away), the
+        // bottom-left row a surface turned sideways: both disoccluded, the rest not.
+        let mut moved = motion.clone();
+        for y in 0..h {
+            for x in 0..w {
+                if x >= w / 2 {
+                    moved.surface[y * w + x] = [0.0, 0.0, 1.0, 2.0];
+                } else if y == h - 1 {
+                    moved.surface[y * w + x] = [1.0, 0.0, 0.0, 1.0];
+                }
+            }
+        }
+        let second = accumulate(stage(0.2), &color, &moved, w, h, Some(&history));
+        for y in 0..h {
+            for x in 0..w {
+                let fresh = x >= w / 2 || y == h - 1;
+                assert_eq!(second.length[y * w + x], if fresh { 1.0 } else { 2.0 }, "({x}, {y})");
+            }
+        }
+    }
+
+    #[test]
+    fn motion_vectors_bring_the_history_from_where_the_surface_was() {
+        let (w, h) = (9, 3);
+        // The frame before: a ramp in x.
+        let ramp: Vec<[f32; 3]> = (0..w * h).map(|p| [(p % w) as f32; 3]).collect();
+        let (_, motion) = still(w, h, 0.0);
+        let first = accumulate(stage(0.5), &ramp, &motion, w, h, None);
+        let history = keep(&first, ramp.clone(), &motion, w, h);
+        // Everything moved 2.5 pixels right: each pixel was 2.5 pixels left of here.
+        let moved = Motion { vectors: vec![[-2.5, 0.0]; w * h], surface: motion.surface.clone() };
+        let (zeros, _) = still(w, h, 0.0);
+        let second = accumulate(stage(0.5), &zeros, &moved, w, h, Some(&history));
+        for x in 3..w {
+            // History (x − 2.5), bilinear; then blended half and half with 0.
+            let expected = (x as f32 - 2.5) * 0.5;
+            assert!((second.color[w + x][0] - expected).abs() < 1e-5, "x {x}: {}", second.color[w + x][0]);
+            assert_eq!(second.length[w + x], 2.0);
+        }
+        // Pixels whose surface was outside the frame before start afresh (x − 2.5 < −0.5 … the wider search aside).
+        assert_eq!(second.length[w], 1.0, "x 0 was at −2.5: outside");
+        // A vector far outside any image (a non-finite one, sanitised) is no history.
+        let away = Motion { vectors: vec![[1e7, 1e7]; w * h], surface: motion.surface.clone() };
+        let third = accumulate(stage(0.5), &zeros, &away, w, h, Some(&history));
+        assert!(third.length.iter().all(|n| *n == 1.0));
+    }
+
+    #[test]
+    fn the_clamp_holds_a_disagreeing_history_to_the_frame() {
+        let (w, h) = (5, 5);
+        let (bright, motion) = still(w, h, 10.0);
+        let first = accumulate(stage(0.1), &bright, &motion, w, h, None);
+        let history = keep(&first, first.color.clone(), &motion, w, h);
+        let (dark, _) = still(w, h, 1.0);
+        let clamped = Temporal { clamp: Some(2.0), ..stage(0.1) };
+        // A flat frame has no spread: the history is clamped to it, no ghost of the light before.
+        let out = accumulate(clamped, &dark, &motion, w, h, Some(&history));
+        assert!((out.color[12][0] - 1.0).abs() < 1e-6, "{}", out.color[12][0]);
+        let ghost = accumulate(stage(0.1), &dark, &motion, w, h, Some(&history));
+        assert!((ghost.color[12][0] - 5.5).abs() < 1e-5, "without the clamp, half of each: {}", ghost.color[12][0]);
+    }
+
+    #[test]
+    fn a_short_history_takes_its_variance_from_the_neighbourhood() {
+        let (w, h) = (7, 7);
+        // Alternating 0 and 2: a sample variance of 1 around every pixel of the frame.
+        let checker: Vec<[f32; 3]> = (0..w * h).map(|p| [2.0 * ((p % w + p / w) % 2) as f32; 3]).collect();
+        let (_, motion) = still(w, h, 0.0);
+        let out = accumulate(stage(0.2), &checker, &motion, w, h, None);
+        let centre = 3 * w + 3;
+        // 49 taps, 25 of one value and 24 of the other.
+        let p = 25.0f64 / 49.0;
+        let expected = 4.0 * p * (1.0 - p) * pipeline::luminance([1.0; 3]).powi(2);
+        assert!((out.variance[centre] as f64 - expected).abs() < 1e-5, "{} against {expected}", out.variance[centre]);
+    }
+}

@@ -1,0 +1,71 @@
+//! The temporal stage's kernel (docs/SEMANTICS.md, "The temporal stage"):
+//! reprojection, the blend, the moments and the variance, one module for
+//! every pipeline (the uniform holds α_min and the clamp), rendered from
+//! `templates/temporal.wgsl.tera` with the constants `crate::pipeline` owns;
+//! `cpu::temporal` is its reference.
+
+use super::interface::{render_builtin, BindingInterface};
+use super::kernel::{wgsl_f32, OutputFormat};
+use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
+use crate::pipeline::{self, Temporal};
+
+/// The kernel's uniform (`struct Params` of its module; fields in [`BindingInterface::temporal`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct TemporalParams {
+    pub width: u32,
+    pub height: u32,
+    /// α_min.
+    pub alpha: f32,
+    /// γ of the history's clamp; 0 without.
+    pub gamma: f32,
+    /// 1 where the history holds the frame before's; 0 for a first frame.
+    pub history: u32,
+    pub _pad: [u32; 3],
+}
+
+impl TemporalParams {
+    pub fn of(temporal: Temporal, width: u32, height: u32, history: bool) -> Self {
+        TemporalParams {
+            width,
+            height,
+            alpha: temporal.alpha,
+            gamma: temporal.clamp.unwrap_or(0.0),
+            history: history as u32,
+            _pad: [0; 3],
+        }
+    }
+}
+
+/// The kernel's WGSL: its outputs storage buffers (filterjit's, `None`), or
+/// exported, storage textures.
+pub fn temporal_wgsl(textures: Option<OutputFormat>) -> String {
+    let mut context = BindingInterface::temporal(textures).template_context();
+    context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
+    context.insert("depth_tolerance", &wgsl_f32(pipeline::TEMPORAL_DEPTH_TOLERANCE));
+    context.insert("normal_cosine", &wgsl_f32(pipeline::TEMPORAL_NORMAL_COSINE));
+    context.insert("min_footprint", &wgsl_f32(pipeline::TEMPORAL_MIN_FOOTPRINT));
+    context.insert("max_history", &wgsl_f32(pipeline::TEMPORAL_MAX_HISTORY));
+    context.insert("short_history", &wgsl_f32(pipeline::TEMPORAL_SHORT_HISTORY));
+    context.insert("variance_radius", &pipeline::TEMPORAL_VARIANCE_RADIUS);
+    context.insert("textures", &textures.is_some());
+    render_builtin("temporal", include_str!("../../templates/temporal.wgsl.tera"), &context)
+}
+
+/// The kernel, validated by naga; its bindings are checked against its interface.
+pub fn temporal_module(textures: Option<OutputFormat>) -> Result<ValidatedModule, ValidateError> {
+    validate_with_interface(&temporal_wgsl(textures), "<temporal>", &BindingInterface::temporal(textures))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn both_variants_validate() {
+        for textures in [None, Some(OutputFormat::Rgba16float)] {
+            temporal_module(textures).unwrap_or_else(|e| panic!("{textures:?}: {e}"));
+        }
+        assert_eq!(std::mem::size_of::<TemporalParams>() as u32, BindingInterface::temporal(None).uniform_bytes);
+    }
+}

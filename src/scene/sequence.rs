@@ -1,0 +1,195 @@
+//! Sequences: the frames of an animation in order, each a dataset of its
+//! own (docs/SCENES.md, "Sequences"). Three folder layouts are read:
+//!
+//! - a folder of frame files (`frame_0001.exr`, `frame_0002.exr`, …, as
+//!   Blender writes an animation), with references of the same names in a
+//!   `reference/` folder beside it or inside it;
+//! - a folder holding such a `noisy/` folder and its `reference/` beside;
+//! - a folder of frame datasets (`frame_0001/noisy.exr` with its
+//!   `reference.exr`, …, as `filterjit render` writes a sequence).
+//!
+//! Frames are ordered by the number in their names; a gap in the numbers is
+//! a missing frame, and an error. [`Sequence::check`] reads every frame's
+//! header before any is filtered, so that a damaged sequence is refused
+//! before anything is written.
+
+use std::path::{Path, PathBuf};
+
+use super::{exr_io, import, Request, Scene, SceneError, NOISY_FILE, REFERENCE_FILE};
+
+/// One frame's files.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FrameFiles {
+    /// The frame's name: its file's stem or its folder's name (`frame_0007`).
+    pub name: String,
+    /// Its number, where its name has one.
+    pub number: Option<u64>,
+    /// The noisy image (a dataset's folder, or the EXR file).
+    pub path: PathBuf,
+    /// The reference, where there is one.
+    pub reference: Option<PathBuf>,
+}
+
+/// A sequence's frames, in order.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Sequence {
+    /// The sequence's name (its folder's).
+    pub name: String,
+    pub frames: Vec<FrameFiles>,
+}
+
+/// Whether `path` is a sequence rather than one render: a folder that holds
+/// no `noisy.exr` but frames (EXR files, a `noisy/` folder of them, or
+/// datasets). Whether they make a good sequence is [`Sequence::find`]'s to say.
+pub fn is_sequence(path: &Path) -> bool {
+    if !path.is_dir() || path.join(NOISY_FILE).is_file() {
+        return false;
+    }
+    if path.join("noisy").is_dir() {
+        return true;
+    }
+    let Ok(entries) = std::fs::read_dir(path) else { return false };
+    entries.filter_map(Result::ok).map(|e| e.path()).any(|p| {
+        (p.is_file() && p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr"))) || p.join(NOISY_FILE).is_file()
+    })
+}
+
+impl Sequence {
+    /// The frames of the sequence at `dir`, in order.
+    pub fn find(dir: &Path) -> Result<Sequence, SceneError> {
+        let io = |e| SceneError::io(dir, e);
+        let name = dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "sequence".into());
+        let noisy = dir.join("noisy");
+        if noisy.is_dir() && !dir.join(NOISY_FILE).is_file() {
+            let mut sequence = Self::find(&noisy)?;
+            sequence.name = name;
+            return Ok(sequence);
+        }
+        // References: a `reference/` folder inside, else one beside.
+        let references = [dir.join("reference"), dir.with_file_name("reference")].into_iter().find(|r| r.is_dir());
+        let mut frames = Vec::new();
+        for entry in std::fs::read_dir(dir).map_err(io)? {
+            let path = entry.map_err(io)?.path();
+            let stem = path.file_stem().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            let file_name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            let frame = if path.is_dir() && path.join(NOISY_FILE).is_file() {
+                let reference = Some(path.join(REFERENCE_FILE)).filter(|r| r.is_file());
+                FrameFiles { number: number_in(&file_name), name: file_name, path, reference }
+            } else if path.is_file() && path.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+                let reference = references.as_ref().map(|r| r.join(&file_name)).filter(|r| r.is_file());
+                FrameFiles { number: number_in(&stem), name: stem, path, reference }
+            } else {
+                continue;
+            };
+            frames.push(frame);
+        }
+        frames.sort_by(|a, b| (a.number, &a.name).cmp(&(b.number, &b.name)));
+        let sequence = Sequence { name, frames };
+        sequence.check_numbers(dir)?;
+        Ok(sequence)
+    }
+
+    /// Frame numbers that skip one are a missing frame.
+    fn check_numbers(&self, dir: &Path) -> Result<(), SceneError> {
+        for pair in self.frames.windows(2) {
+            if let (Some(a), Some(b)) = (pair[0].number, pair[1].number) {
+                if b > a + 1 {
+                    return Err(SceneError::Sequence {
+                        path: dir.to_path_buf(),
+                        message: format!(
+                            "frame {} is missing: {} is followed by {} (frames are numbered in order; \
+                             render the missing frame, or filter the frames on each side as sequences of their own)",
+                            a + 1,
+                            pair[0].path.display(),
+                            pair[1].path.display()
+                        ),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Read every frame's header (and its reference's) before any is
+    /// filtered: all of one size, each holding the channels `request` needs
+    /// that the first frame holds (a frame that lacks one is named), the
+    /// motion vectors where it asks for them. The size, on success.
+    pub fn check(&self, request: &Request) -> Result<(usize, usize), SceneError> {
+        let mut size = None;
+        let mut first_channels: Option<(PathBuf, Vec<String>)> = None;
+        for frame in &self.frames {
+            let file = if frame.path.is_dir() { frame.path.join(NOISY_FILE) } else { frame.path.clone() };
+            let (names, width, height) = exr_io::channel_names(&file)?;
+            match size {
+                None => size = Some((width, height)),
+                Some(expected) if expected != (width, height) => {
+                    let first = self.frames[0].path.clone();
+                    return Err(SceneError::SizeMismatch { file, size: (width, height), noisy: first, expected });
+                }
+                Some(_) => {}
+            }
+            if let Some(reference) = &frame.reference {
+                let (_, w, h) = exr_io::channel_names(reference)?;
+                if (w, h) != (width, height) {
+                    return Err(SceneError::SizeMismatch {
+                        file: reference.clone(),
+                        size: (w, h),
+                        noisy: file,
+                        expected: (width, height),
+                    });
+                }
+            }
+            let view = import::Channels::of(&file, names, request.view_layer.as_deref())?;
+            let layout = view.layout();
+            if request.motion && import::pick(layout.motion(), &view.names).is_none() {
+                return Err(SceneError::MissingMotion {
+                    scene: frame.name.clone(),
+                    origin: super::Origin::File { layout, file },
+                });
+            }
+            // What the first frame holds, every frame holds: a render setting changed mid-sequence is named.
+            match &first_channels {
+                None => first_channels = Some((file, view.names)),
+                Some((first, expected)) => {
+                    if let Some(missing) = expected.iter().find(|c| !view.names.contains(c)) {
+                        return Err(SceneError::MissingChannel {
+                            file,
+                            channel: format!("{missing} (which {} has)", first.display()),
+                            available: view.names,
+                        });
+                    }
+                }
+            }
+        }
+        size.ok_or_else(|| SceneError::Sequence { path: PathBuf::from(&self.name), message: "no frames".into() })
+    }
+
+    /// Load frame `k` for `request` (its reference where the frame has one).
+    pub fn load(&self, k: usize, request: &Request) -> Result<Scene, SceneError> {
+        let frame = &self.frames[k];
+        let request = Request { reference_path: frame.reference.clone(), ..request.clone() };
+        let mut scene = super::load(&frame.path, &request)?;
+        scene.name = frame.name.clone();
+        Ok(scene)
+    }
+}
+
+/// The last run of digits in `name` (`frame_0012` → 12).
+fn number_in(name: &str) -> Option<u64> {
+    let end = name.rfind(|c: char| c.is_ascii_digit())? + 1;
+    let start = name[..end].rfind(|c: char| !c.is_ascii_digit()).map_or(0, |k| k + 1);
+    name[start..end].parse().ok()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_numbers_are_the_last_digits() {
+        assert_eq!(number_in("frame_0012"), Some(12));
+        assert_eq!(number_in("shot3_frame9"), Some(9));
+        assert_eq!(number_in("0007"), Some(7));
+        assert_eq!(number_in("still"), None);
+    }
+}
