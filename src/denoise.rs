@@ -297,6 +297,22 @@ pub fn filter(gpu: &Gpu, choice: &Choice, kernel: &jit::ValidatedKernel, scene: 
     Ok(gpu.filter(kernel, &mut buffers, scene, choice.radius)?)
 }
 
+/// The next frame of a sequence filtered on `gpu` with `kernel` (the
+/// choice's), in one submission: a temporal pipeline blends it into
+/// `state`'s history and leaves its own there for the frame after; any other
+/// filters the frame alone. [`SequenceFilter`] and Python's `Denoiser` share it.
+pub fn filter_frame(
+    gpu: &Gpu,
+    choice: &Choice,
+    kernel: &jit::ValidatedKernel,
+    scene: &Scene,
+    state: &mut TemporalState,
+) -> Result<FilteredFrame> {
+    let mut buffers = SceneBuffers::for_frame(gpu, scene, &choice.pipeline)?;
+    let filtered = gpu.filter_frame(kernel, &mut buffers, scene, choice.radius, state)?;
+    Ok(FilteredFrame { filtered, temporal: buffers.temporal_time() })
+}
+
 /// A frame of a sequence, filtered.
 pub struct FilteredFrame {
     pub filtered: Filtered,
@@ -323,9 +339,7 @@ impl<'g> SequenceFilter<'g> {
 
     /// The next frame, filtered, in one submission; its history is kept for the frame after.
     pub fn frame(&mut self, scene: &Scene) -> Result<FilteredFrame> {
-        let mut buffers = SceneBuffers::for_frame(self.gpu, scene, &self.choice.pipeline)?;
-        let filtered = self.gpu.filter_frame(&self.kernel, &mut buffers, scene, self.choice.radius, &mut self.state)?;
-        Ok(FilteredFrame { filtered, temporal: buffers.temporal_time() })
+        filter_frame(self.gpu, &self.choice, &self.kernel, scene, &mut self.state)
     }
 
     /// Forget the history: the next frame starts a sequence (a cut).

@@ -733,6 +733,10 @@ fn bindings(interface: &BindingInterface, target: Target, format: OutputFormat, 
                     | Role::Motion
                     | Role::Geometry
                     | Role::PreviousGeometry
+                    | Role::PreviousAlbedo
+                    | Role::SampleVariance
+                    | Role::PastModulation
+                    | Role::ModulationOut
                     | Role::History
                     | Role::Moments
                     | Role::MomentsOut

@@ -221,6 +221,12 @@ pub struct Temporal {
     /// deviations, so that a history the frame disagrees with (a moving
     /// shadow, a reflection) fades instead of ghosting.
     pub clamp: Option<f32>,
+    /// κ of the history's test, if any (`antilag=K`): where the history's
+    /// luminance lies more than κ standard errors from the mean of the
+    /// frame's 3×3 (plus [`TEMPORAL_ANTILAG_SLACK`] of it), the light there
+    /// changed (a light moved, a shadow swept in) and the history is cut to
+    /// one frame, so that the blend follows within a few frames.
+    pub antilag: Option<f32>,
 }
 
 impl Temporal {
@@ -229,6 +235,11 @@ impl Temporal {
         (self.alpha as f64).max(1.0 / n)
     }
 }
+
+/// The relative change of luminance the history's test (`antilag=K`) always
+/// allows, beside κ standard errors: where the frame's neighbourhood is
+/// flat, noise-free light that changed by less is no change.
+pub const TEMPORAL_ANTILAG_SLACK: f64 = 0.02;
 
 /// The largest relative depth difference |z' − z| / z at which a history
 /// sample is taken to see the same surface as the pixel.
@@ -255,19 +266,40 @@ pub const TEMPORAL_VARIANCE_RADIUS: i32 = 3;
 /// The largest α_min: a history that forgets faster than this is no history.
 pub const TEMPORAL_MAX_ALPHA: f32 = 1.0;
 
-/// Whether a history sample with normal `n` and depth `z` sees the surface a
-/// pixel with normal `at_n` and depth `at_z` sees: depths within
-/// [`TEMPORAL_DEPTH_TOLERANCE`] of the pixel's and normals' directions within
-/// [`TEMPORAL_NORMAL_COSINE`], where a zero normal (no surface: the sky) only
-/// matches another. `n` and `at_n` are directions (unit or zero).
-pub fn same_surface(n: [f64; 3], z: f64, at_n: [f64; 3], at_z: f64) -> bool {
+/// Below this albedo in every channel a surface counts as black: an
+/// emitter's (or a void's). A history sample and a pixel see the same
+/// surface only where both are black or neither is: an emitter sliding over
+/// a wall it lies flat on leaves light whose demodulated value is ten times
+/// its own behind, though depth and normal agree. Any other albedos mix,
+/// so that a texture's edges are averaged over the pixel's samples of many
+/// frames, as the reference averages them.
+pub const TEMPORAL_BLACK_ALBEDO: f64 = 0.05;
+
+/// A pixel's surface as the history's test compares it: the normal's
+/// direction (unit, or zero: no surface, the sky), the depth and the albedo
+/// clipped to [0, 1].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Surface {
+    pub normal: [f64; 3],
+    pub depth: f64,
+    pub albedo: [f64; 3],
+}
+
+/// Whether a history sample on surface `s` sees the surface `at` of a
+/// pixel: depths within [`TEMPORAL_DEPTH_TOLERANCE`] of the pixel's,
+/// normals' directions within [`TEMPORAL_NORMAL_COSINE`] (a zero normal
+/// only matches another), and both black or neither ([`TEMPORAL_BLACK_ALBEDO`]).
+pub fn same_surface(s: Surface, at: Surface) -> bool {
     let has = |v: [f64; 3]| v.iter().any(|c| *c != 0.0);
+    let (n, at_n) = (s.normal, at.normal);
     let normals = match (has(n), has(at_n)) {
         (true, true) => n[0] * at_n[0] + n[1] * at_n[1] + n[2] * at_n[2] >= TEMPORAL_NORMAL_COSINE,
         (false, false) => true,
         _ => false,
     };
-    normals && (z - at_z).abs() <= TEMPORAL_DEPTH_TOLERANCE * at_z
+    let black = |a: [f64; 3]| a.iter().all(|c| *c < TEMPORAL_BLACK_ALBEDO);
+    let albedo = black(s.albedo) == black(at.albedo);
+    normals && albedo && (s.depth - at.depth).abs() <= TEMPORAL_DEPTH_TOLERANCE * at.depth
 }
 
 /// A normal's direction: the unit vector, or zero for a zero normal.
@@ -360,8 +392,8 @@ impl FilterPipeline {
 
     /// The features the pipeline's own stages read (besides the colour and
     /// the albedo `demodulate` divides by): the normal, for `keep=surface`,
-    /// `planefit` and the temporal stage, and the depth for the latter (which
-    /// also reads the motion vectors, no feature).
+    /// `planefit` and the temporal stage, and the depth and albedo
+    /// (`texture`) for the latter (which also reads the motion vectors, no feature).
     pub fn features(&self) -> std::collections::BTreeSet<crate::lang::Feature> {
         use crate::lang::Feature;
         let mut features = std::collections::BTreeSet::new();
@@ -369,7 +401,7 @@ impl FilterPipeline {
             features.insert(Feature::Normal);
         }
         if self.temporal.is_some() {
-            features.insert(Feature::Depth);
+            features.extend([Feature::Depth, Feature::Texture]);
         }
         features
     }
@@ -377,6 +409,17 @@ impl FilterPipeline {
     /// Whether the pipeline carries state from frame to frame (a temporal stage).
     pub fn is_temporal(&self) -> bool {
         self.temporal.is_some()
+    }
+
+    /// What follows a temporal pipeline's stage: its demodulation, form and
+    /// fit, scored on frames that went through the pre-pass and the stage
+    /// already (`datasets::accumulated`, which leaves each blend multiplied
+    /// back for the demodulation to divide out). Other pipelines are themselves.
+    pub fn spatial(&self) -> FilterPipeline {
+        match self.temporal {
+            Some(_) => FilterPipeline { outliers: None, temporal: None, ..*self },
+            None => *self,
+        }
     }
 
     /// The kind of `keep` the pipeline has, if any.
@@ -532,7 +575,7 @@ impl FromStr for FilterPipeline {
                     if pipeline.temporal.is_some() {
                         return Err(error("`temporal` appears once".into()));
                     }
-                    pipeline.temporal = Some(Temporal { alpha, feedback: 0, clamp: None });
+                    pipeline.temporal = Some(Temporal { alpha, feedback: 0, clamp: None, antilag: None });
                 }
                 ("temporal", None) => {
                     return Err(error("`temporal` needs its α_min, the least share of a frame: temporal=A".into()))
@@ -566,7 +609,23 @@ impl FromStr for FilterPipeline {
                         }
                     }
                 }
-                ("feedback" | "clamp", None) => {
+                ("antilag", Some(v)) => {
+                    let kappa: f32 = v.parse().map_err(|_| error(format!("antilag={v}: κ must be a number")))?;
+                    if !(kappa.is_finite() && kappa > 0.0) {
+                        return Err(error(format!("antilag={v}: κ must be finite and above 0")));
+                    }
+                    match &mut pipeline.temporal {
+                        Some(temporal) if temporal.antilag.is_none() => temporal.antilag = Some(kappa),
+                        Some(_) => return Err(error("`antilag` appears once".into())),
+                        None => {
+                            return Err(error(
+                                "`antilag=K` cuts the temporal stage's history where the light changed: write it after temporal=A"
+                                    .into(),
+                            ))
+                        }
+                    }
+                }
+                ("feedback" | "clamp" | "antilag", None) => {
                     return Err(error(format!("`{name}` needs its value: {name}=N")));
                 }
                 ("outliers", None) => return Err(error("`outliers` needs its strength: outliers=K".into())),
@@ -598,7 +657,7 @@ impl FromStr for FilterPipeline {
                 }
                 (other, _) => {
                     return Err(error(format!(
-                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, temporal=A, feedback=K, clamp=G, window, atrous=N, atrous3x3=N, planefit=R"
+                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, temporal=A, feedback=K, clamp=G, antilag=K, window, atrous=N, atrous3x3=N, planefit=R"
                     )))
                 }
             }
@@ -641,10 +700,13 @@ impl fmt::Display for FilterPipeline {
         if self.demodulate {
             write!(f, "demodulate,")?;
         }
-        if let Some(Temporal { alpha, feedback, clamp }) = self.temporal {
+        if let Some(Temporal { alpha, feedback, clamp, antilag }) = self.temporal {
             write!(f, "temporal={alpha},feedback={feedback},")?;
             if let Some(gamma) = clamp {
                 write!(f, "clamp={gamma},")?;
+            }
+            if let Some(kappa) = antilag {
+                write!(f, "antilag={kappa},")?;
             }
         }
         match self.form {
@@ -703,6 +765,7 @@ mod tests {
             "window,planefit=1",
             "outliers=2,demodulate,temporal=0.2,feedback=1,atrous=4",
             "demodulate,temporal=0.1,feedback=0,clamp=2,atrous3x3=3,planefit=3",
+            "demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5",
             "temporal=0.05,feedback=1,window",
         ] {
             let p: FilterPipeline = text.parse().unwrap();
@@ -762,17 +825,25 @@ mod tests {
         let p: FilterPipeline = "demodulate,temporal=0.2,atrous=4".parse().unwrap();
         assert_eq!(p.to_string(), "demodulate,temporal=0.2,feedback=1,atrous=4");
         assert!(p.features().contains(&crate::lang::Feature::Depth) && p.is_temporal());
+        assert!(p.features().contains(&crate::lang::Feature::Texture), "the history's test compares albedos");
     }
 
     #[test]
-    fn the_same_surface_test_reads_directions_and_relative_depth() {
+    fn the_same_surface_test_reads_directions_relative_depth_and_albedo() {
         let up = [0.0, 0.0, 1.0];
-        assert!(same_surface(up, 1.05, up, 1.0));
-        assert!(!same_surface(up, 1.2, up, 1.0));
-        assert!(!same_surface([1.0, 0.0, 0.0], 1.0, up, 1.0));
+        let grey = [0.5; 3];
+        let at = |normal, depth| Surface { normal, depth, albedo: grey };
+        assert!(same_surface(at(up, 1.05), at(up, 1.0)));
+        assert!(!same_surface(at(up, 1.2), at(up, 1.0)));
+        assert!(!same_surface(at([1.0, 0.0, 0.0], 1.0), at(up, 1.0)));
         // No surface matches no surface only.
-        assert!(same_surface([0.0; 3], 0.0, [0.0; 3], 0.0));
-        assert!(!same_surface([0.0; 3], 0.0, up, 0.0));
+        assert!(same_surface(at([0.0; 3], 0.0), at([0.0; 3], 0.0)));
+        assert!(!same_surface(at([0.0; 3], 0.0), at(up, 0.0)));
+        // An emitter (black) lying flat on a wall is another material.
+        assert!(!same_surface(Surface { albedo: [0.0; 3], ..at(up, 1.0) }, at(up, 1.0)));
+        // A texture's dark and light squares are one surface: they mix.
+        assert!(same_surface(Surface { albedo: [0.9, 0.9, 0.1], ..at(up, 1.0) }, at(up, 1.0)));
+        assert!(same_surface(Surface { albedo: [0.06, 0.0, 0.0], ..at(up, 1.0) }, at(up, 1.0)));
         assert_eq!(direction([0.0, 3.0, 4.0]), [0.0, 0.6, 0.8]);
     }
 

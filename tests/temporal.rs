@@ -305,3 +305,39 @@ fn a_damaged_sequence_is_refused_before_anything_is_written() {
     let image = exr_io::read_channels(&out.join("frame_0002.exr"), &["R", "G", "B"]).unwrap();
     assert!(image.data.iter().flatten().all(|v| v.is_finite()), "every pixel finite");
 }
+
+/// A regression: filterjit's own frames name one normal for the feature and
+/// for the temporal stage's surface test, and loading both decoded the
+/// channels into one of the two only (the feature read as zero, so every
+/// weight that compared normals was 0). Each image is loaded whole, whoever asks.
+#[test]
+fn a_channel_both_a_feature_and_the_temporal_stage_read_is_loaded_for_both() {
+    let (w, h) = (4usize, 3usize);
+    let n = w * h;
+    let ramp = |k: usize| (0..n).map(|p| (p + k) as f32 * 0.1).collect::<Vec<f32>>();
+    let channels = [
+        ("R", ramp(0)),
+        ("G", ramp(1)),
+        ("B", ramp(2)),
+        ("Ns.X", vec![0.0; n]),
+        ("Ns.Y", vec![0.6; n]),
+        ("Ns.Z", vec![0.8; n]),
+        ("Z", vec![2.0; n]),
+        ("Vector.X", vec![0.5; n]),
+        ("Vector.Y", vec![0.25; n]),
+    ];
+    let file = temp_dir("temporal", "shared-channels").join("noisy.exr");
+    exr_io::write_channels(&file, w, h, &channels).unwrap();
+    let features = [filterjit::lang::Feature::Normal, filterjit::lang::Feature::Depth].into();
+    let alone = filterjit::scene::load(&file, &Request { features, ..Default::default() }).unwrap();
+    let features = [filterjit::lang::Feature::Normal, filterjit::lang::Feature::Depth].into();
+    let both = filterjit::scene::load(&file, &Request { features, motion: true, ..Default::default() }).unwrap();
+    for f in [filterjit::lang::Feature::Normal, filterjit::lang::Feature::Depth] {
+        assert_eq!(both.feature(f), alone.feature(f), "{f} as a feature");
+        assert!(both.feature(f).unwrap().iter().all(|v| v.iter().any(|c| *c != 0.0)), "{f} is not zero");
+    }
+    let motion = both.motion.unwrap();
+    assert!(motion.surface.iter().all(|s| (s[1] - 0.6).abs() < 1e-6 && (s[2] - 0.8).abs() < 1e-6 && s[3] == 2.0));
+    // Blender's y up, read as image rows down.
+    assert!(motion.vectors.iter().all(|v| *v == [0.5, -0.25]));
+}

@@ -10,6 +10,12 @@ chooses it (``FILTERJIT_BACKEND``, ``FILTERJIT_ADAPTER``).
     import filterjit
     out = filterjit.denoise(color, albedo=albedo, normal=normal, position=position)
     print(filterjit.relmse(out, reference), filterjit.flip(out, reference))
+
+    # A sequence: the temporal state carried from frame to frame.
+    denoiser = filterjit.Denoiser()
+    for frame in frames:
+        out = denoiser.denoise(frame.color, albedo=frame.albedo, normal=frame.normal,
+                               position=frame.position, depth=frame.depth, motion=frame.motion)
 """
 
 import os as _os
@@ -23,6 +29,7 @@ from . import _filterjit  # noqa: E402
 # The functions are the binding's own; their docstrings are its Rust doc
 # comments (python/src/lib.rs), and __init__.pyi gives their types.
 from ._filterjit import (  # noqa: E402
+    Denoiser,
     check,
     choose,
     compile,
@@ -37,6 +44,7 @@ from ._filterjit import (  # noqa: E402
 
 __all__ = [
     "denoise",
+    "Denoiser",
     "choose",
     "check",
     "simplify",

@@ -17,10 +17,11 @@ use filterjit::denoise::{Choice, Provided};
 use filterjit::environment::Environment;
 use filterjit::export::{Code, Target};
 use filterjit::gpu::Gpu;
+use filterjit::gpu::TemporalState;
 use filterjit::jit::{self, OutputFormat, ValidatedKernel};
 use filterjit::lang::{Feature, ScalarVar};
 use filterjit::pipeline::FilterPipeline;
-use filterjit::scene::{self, import, Images, Origin};
+use filterjit::scene::{self, import, Images, Motion, Origin};
 
 /// The device, opened on first use and kept for the process (adapter chosen
 /// as the command line chooses it, from `FILTERJIT_BACKEND` and `FILTERJIT_ADAPTER`).
@@ -190,11 +191,42 @@ fn denoise<'py>(
     pipeline: Option<&str>,
     radius: Option<u32>,
 ) -> PyResult<Bound<'py, PyAny>> {
+    let (images, given) = arrays(color, [albedo, normal, position, depth, variance], None, spp)?;
+    let choice = Choice::asked_or_best(filter, parse_pipeline(pipeline)?, radius, &given).map_err(value)?;
+    check_given(&choice, &given)?;
+    let request = scene::Request { reference: false, ..choice.request() };
+    let (height, width) = (images.height, images.width);
+    let scene = scene::prepare(images, &request).map_err(value)?;
+    // As `filterjit filter`: a chosen filter may give way to its variant for the render's light.
+    let choice = choice.for_light(&scene.color).map_err(value)?;
+    let kernel = kernel(&choice)?;
+    let gpu = device()?;
+    let filtered = py.detach(|| filterjit::denoise::filter(&gpu, &choice, &kernel, &scene)).map_err(runtime)?;
+    image_array(py, &filtered.color, height, width)
+}
+
+/// A filtered image as a float32 (H, W, 3) array.
+fn image_array<'py>(py: Python<'py>, color: &[[f32; 4]], height: usize, width: usize) -> PyResult<Bound<'py, PyAny>> {
+    let flat: Vec<f32> = color.iter().flat_map(|c| [c[0], c[1], c[2]]).collect();
+    Ok(PyArray1::from_vec(py, flat).reshape([height, width, 3])?.into_any())
+}
+
+/// The arrays of a call as a render's raw images, and what they provide:
+/// the colour, the images of `INPUTS` in its order, and a frame's motion
+/// vectors (float32 (H, W, 2), Blender's Vector pass X and Y: where the
+/// surface was the frame before minus where it is, in pixels, y up), which
+/// need the raw normal and depth beside them.
+fn arrays(
+    color: &Bound<'_, PyAny>,
+    inputs: [Option<&Bound<'_, PyAny>>; 5],
+    motion: Option<&Bound<'_, PyAny>>,
+    spp: Option<u32>,
+) -> PyResult<(Images, Provided)> {
     let (height, width, color) = rgb("color", color)?;
     let size = (height, width);
     let mut features = BTreeMap::new();
     let mut variances = BTreeMap::new();
-    for ((name, feature), array) in INPUTS.iter().zip([albedo, normal, position, depth, variance]) {
+    for ((name, feature), array) in INPUTS.iter().zip(inputs) {
         let Some(array) = array else { continue };
         let image = Image::read(name, array)?;
         match feature {
@@ -207,20 +239,29 @@ fn denoise<'py>(
             }
         }
     }
+    let motion = match motion {
+        None => None,
+        Some(array) => {
+            let image = Image::read("motion", array)?;
+            image.check("motion", size, &[2])?;
+            let vectors = image.values.chunks_exact(2).map(|v| [v[0], -v[1]]).collect();
+            // The surface test reads the normal and depth as given; without them the filter's needs say so.
+            match (features.get(&Feature::Normal), features.get(&Feature::Depth)) {
+                (Some(normal), Some(depth)) => Some(Motion {
+                    vectors,
+                    surface: normal.iter().zip(depth).map(|(n, z)| Motion::surface_of(*n, z[0])).collect(),
+                    albedo: match features.get(&Feature::Texture) {
+                        Some(albedo) => albedo.iter().copied().map(Motion::albedo_of).collect(),
+                        None => vec![[0.0; 4]; width * height],
+                    },
+                }),
+                _ => None,
+            }
+        }
+    };
     let provided: BTreeSet<Feature> = features.keys().copied().collect();
-    let given = Provided::new(provided.clone(), variances.keys().copied().collect());
-    let choice = Choice::asked_or_best(filter, parse_pipeline(pipeline)?, radius, &given).map_err(value)?;
-    let missing = choice.missing(&given);
-    if !missing.is_empty() {
-        let arguments: Vec<String> = missing.iter().map(|m| argument_for(m)).collect();
-        return Err(PyValueError::new_err(format!(
-            "filter {} (pipeline {}) reads {}, which the call does not give: {}",
-            choice.describe(),
-            choice.pipeline,
-            missing.join(", "),
-            arguments.join("; ")
-        )));
-    }
+    let given =
+        Provided { motion: motion.is_some(), ..Provided::new(provided.clone(), variances.keys().copied().collect()) };
     let images = Images {
         name: "arrays".into(),
         width,
@@ -232,16 +273,127 @@ fn denoise<'py>(
         provided,
         variances,
         reference: None,
+        motion,
     };
-    let request = scene::Request { reference: false, ..choice.request() };
-    let scene = scene::prepare(images, &request).map_err(value)?;
-    // As `filterjit filter`: a chosen filter may give way to its variant for the render's light.
-    let choice = choice.for_light(&scene.color).map_err(value)?;
-    let kernel = kernel(&choice)?;
-    let gpu = device()?;
-    let filtered = py.detach(|| filterjit::denoise::filter(&gpu, &choice, &kernel, &scene)).map_err(runtime)?;
-    let flat: Vec<f32> = filtered.color.iter().flat_map(|c| [c[0], c[1], c[2]]).collect();
-    Ok(PyArray1::from_vec(py, flat).reshape([height, width, 3])?.into_any())
+    Ok((images, given))
+}
+
+/// Refuses a filter that reads an input the call does not give, naming the argument.
+fn check_given(choice: &Choice, given: &Provided) -> PyResult<()> {
+    let missing = choice.missing(given);
+    if missing.is_empty() {
+        return Ok(());
+    }
+    let arguments: Vec<String> = missing.iter().map(|m| argument_for(m)).collect();
+    Err(PyValueError::new_err(format!(
+        "filter {} (pipeline {}) reads {}, which the call does not give: {}",
+        choice.describe(),
+        choice.pipeline,
+        missing.join(", "),
+        arguments.join("; ")
+    )))
+}
+
+/// Denoises the frames of a sequence in order, carrying the temporal
+/// state from each frame to the next: what an interactive renderer calls
+/// once a frame.
+///
+/// :param filter: as :func:`denoise`'s; by default the best shipped
+///     temporal filter whose inputs the first frame gives (with ``motion``),
+///     else the best filter of single renders, frame by frame.
+/// :param pipeline: the filter pipeline; by default the filter's own.
+/// :param radius: the window form's radius; by default the stored one, else 5.
+///
+/// Every frame gives the same inputs as the first. A frame of another size
+/// than the one before starts a new history, as :meth:`reset` does.
+#[pyclass(module = "filterjit")]
+struct Denoiser {
+    filter: Option<String>,
+    pipeline: Option<FilterPipeline>,
+    radius: Option<u32>,
+    /// The filter taken at the first frame, its kernel, and the inputs that frame gave.
+    chosen: Option<(Choice, Arc<ValidatedKernel>, Provided)>,
+    state: TemporalState,
+}
+
+#[pymethods]
+impl Denoiser {
+    #[new]
+    #[pyo3(signature = (filter=None, pipeline=None, radius=None))]
+    fn new(filter: Option<String>, pipeline: Option<&str>, radius: Option<u32>) -> PyResult<Self> {
+        Ok(Denoiser { filter, pipeline: parse_pipeline(pipeline)?, radius, chosen: None, state: TemporalState::new() })
+    }
+
+    /// Denoise the next frame and return it, float32 (H, W, 3).
+    ///
+    /// :param color, albedo, normal, position, depth, variance, spp: as :func:`denoise`'s.
+    /// :param motion: the frame's motion vectors, float32 (H, W, 2):
+    ///     Blender's Vector pass X and Y (where each pixel's surface was in
+    ///     the frame before minus where it is, in pixels, y up). A temporal
+    ///     filter reads them with the normal and depth.
+    /// :raises ValueError: as :func:`denoise`; or a frame gives other inputs than the first.
+    #[pyo3(signature = (color, *, albedo=None, normal=None, position=None, depth=None, motion=None,
+                        variance=None, spp=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn denoise<'py>(
+        &mut self,
+        py: Python<'py>,
+        color: &Bound<'py, PyAny>,
+        albedo: Option<&Bound<'py, PyAny>>,
+        normal: Option<&Bound<'py, PyAny>>,
+        position: Option<&Bound<'py, PyAny>>,
+        depth: Option<&Bound<'py, PyAny>>,
+        motion: Option<&Bound<'py, PyAny>>,
+        variance: Option<&Bound<'py, PyAny>>,
+        spp: Option<u32>,
+    ) -> PyResult<Bound<'py, PyAny>> {
+        let (images, mut given) = arrays(color, [albedo, normal, position, depth, variance], motion, spp)?;
+        given.sequence = true;
+        if self.chosen.is_none() {
+            let choice =
+                Choice::asked_or_best(self.filter.as_deref(), self.pipeline, self.radius, &given).map_err(value)?;
+            check_given(&choice, &given)?;
+            let kernel = kernel(&choice)?;
+            self.chosen = Some((choice, kernel, given.clone()));
+        }
+        let (choice, kernel, first) = self.chosen.as_ref().expect("chosen at the first frame");
+        if *first != given {
+            return Err(PyValueError::new_err(
+                "this frame gives other inputs than the sequence's first: give every frame the same arrays",
+            ));
+        }
+        let request = scene::Request { reference: false, ..choice.request() };
+        let (height, width) = (images.height, images.width);
+        let scene = scene::prepare(images, &request).map_err(value)?;
+        let gpu = device()?;
+        let state = &mut self.state;
+        let frame =
+            py.detach(|| filterjit::denoise::filter_frame(&gpu, choice, kernel, &scene, state)).map_err(runtime)?;
+        image_array(py, &frame.filtered.color, height, width)
+    }
+
+    /// Forget the history: the next frame starts a sequence (a cut, a new shot).
+    fn reset(&mut self) {
+        self.state.reset();
+    }
+
+    /// Frames blended into the history since the sequence started or was reset.
+    #[getter]
+    fn frames(&self) -> u32 {
+        self.state.frames()
+    }
+
+    /// The filter taken (``"@svgf"``, or the expression), once a frame has been denoised.
+    #[getter]
+    fn filter(&self) -> Option<String> {
+        self.chosen.as_ref().map(|(choice, ..)| choice.describe())
+    }
+
+    /// Its pipeline, once a frame has been denoised.
+    #[getter]
+    fn pipeline(&self) -> Option<String> {
+        self.chosen.as_ref().map(|(choice, ..)| choice.pipeline.to_string())
+    }
 }
 
 /// How a caller gives the input a filter reads (`Choice::missing`'s names).
@@ -439,6 +591,7 @@ fn _filterjit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(flip, m)?)?;
     m.add_function(wrap_pyfunction!(light, m)?)?;
     m.add_function(wrap_pyfunction!(device_name, m)?)?;
+    m.add_class::<Denoiser>()?;
     m.add("SHIPPED_BY_QUALITY", filterjit::denoise::SHIPPED_BY_QUALITY.to_vec())?;
     Ok(())
 }

@@ -257,3 +257,57 @@ def test_the_readme_shows_the_example_ci_runs():
     example = (ROOT / "examples" / "python" / "denoise_mitsuba.py").read_text()
     readme = (ROOT / "README.md").read_text()
     assert "```python\n" + example + "```" in readme, "README's Python example differs from examples/python/denoise_mitsuba.py"
+
+
+SEQUENCE_FRAMES = 4
+
+
+@pytest.fixture(scope="session")
+def sequence():
+    """A Cornell box seen by a camera that slides sideways, at 64x64: each
+    frame 1 spp with its own noise, albedo, normal, position and depth, its
+    motion vectors as Blender writes them (the position of each pixel's
+    surface projected by the frame before's camera, minus the pixel's, y up),
+    and a 256-spp reference."""
+    import importlib.util
+
+    path = ROOT / "examples" / "python" / "denoise_mitsuba_sequence.py"
+    spec = importlib.util.spec_from_file_location("denoise_mitsuba_sequence", path)
+    example = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(example)
+    return example.render_sequence(mitsuba(), SEQUENCE_FRAMES, size=SIZE, spp=1, reference_spp=256)
+
+
+def test_a_denoiser_carries_its_history_through_a_sequence(sequence):
+    denoiser = filterjit.Denoiser()
+    errors = []
+    for k, frame in enumerate(sequence):
+        out = denoiser.denoise(**frame["inputs"])
+        assert out.shape == (SIZE, SIZE, 3) and out.dtype == np.float32 and np.isfinite(out).all()
+        assert denoiser.frames == k + 1
+        errors.append(filterjit.relmse(out, frame["reference"]))
+        noisy = filterjit.relmse(frame["inputs"]["color"], frame["reference"])
+        assert errors[-1] < 0.3 * noisy, (k, errors[-1], noisy)
+        light = filterjit.light(out, frame["reference"]) / filterjit.light(frame["inputs"]["color"], frame["reference"])
+        assert abs(light - 1) < 0.05, (k, light)
+    # The best shipped temporal filter, chosen because the frames give motion vectors.
+    assert denoiser.filter == "@svgf" and "temporal=" in denoiser.pipeline
+    # The last frame alone (a fresh denoiser, or after reset) has no history: it is worse.
+    last = sequence[-1]
+    alone = filterjit.Denoiser().denoise(**last["inputs"])
+    assert filterjit.relmse(alone, last["reference"]) > errors[-1]
+    denoiser.reset()
+    assert denoiser.frames == 0
+    again = denoiser.denoise(**last["inputs"])
+    assert np.array_equal(again, alone), "after reset, the frame is a sequence's first"
+
+
+def test_a_denoiser_refuses_a_frame_with_other_inputs(sequence):
+    denoiser = filterjit.Denoiser()
+    denoiser.denoise(**sequence[0]["inputs"])
+    without_motion = {k: v for k, v in sequence[1]["inputs"].items() if k != "motion"}
+    with pytest.raises(ValueError, match="other inputs than the sequence's first"):
+        denoiser.denoise(**without_motion)
+    bad = dict(sequence[1]["inputs"], motion=np.zeros((SIZE, SIZE, 3), np.float32))
+    with pytest.raises(ValueError, match="motion"):
+        denoiser.denoise(**bad)

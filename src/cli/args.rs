@@ -221,6 +221,14 @@ pub(crate) enum Preset {
     /// (colour, position, normal, albedo, depth, colour variance) plus the
     /// outlier rule's measures. About 9 minutes on a 2-core CPU once the scenes are rendered.
     Realtime,
+    /// A temporal filter for sequences at one sample per pixel: the built-in
+    /// training sequences (96x96, 1 spp, 256-spp references, each frame
+    /// scored after the temporal stage), pipeline
+    /// `demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5`, seeded with
+    /// `@svgf` and scored against it (`--fitness-pool guarded`, the light
+    /// charged), 4 islands of 20, 10 generations, 2 elites, and only what an
+    /// engine's G-buffer holds plus the temporal stage's measures.
+    Temporal,
 }
 
 /// Render settings and radius; unset ones come from `evolve`'s preset, or

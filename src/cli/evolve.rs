@@ -318,6 +318,17 @@ const G_BUFFER: &[&str] = &[
     "clampedShare",
 ];
 
+/// The temporal preset's pipeline: SVGF's, its history the blend itself
+/// (`feedback=0`, which `evolve` scores exactly), clamped (`clamp=2`) and
+/// cut where the light changed (`antilag=3`): chosen with SVGF's weight on
+/// the built-in training sequences (docs/BENCHMARKS.md, "Sequences").
+const TEMPORAL_PIPELINE: &str = "demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5";
+
+/// What an engine's G-buffer holds (no colour variance: a real-time
+/// renderer keeps none) plus the temporal stage's measures.
+const TEMPORAL_G_BUFFER: &[&str] =
+    &["color", "pixel", "normal", "texture", "worldPosition", "depth", "historyLength", "temporalVariance"];
+
 impl PresetValues {
     fn of(preset: Preset) -> PresetValues {
         use filterjit::fitness::Pool;
@@ -397,6 +408,21 @@ impl PresetValues {
                 cost_model: filterjit::cost::CostModel::lavapipe,
                 ..thesis()
             },
+            Preset::Temporal => PresetValues {
+                gp: Settings { island_size: 20, generations: 10, max_length: 100, ..Settings::default() },
+                size: (96, 96),
+                spp: 1,
+                reference_spp: 256,
+                radius: 3,
+                pipeline: TEMPORAL_PIPELINE.parse().expect("a valid pipeline"),
+                seed_expr: "@svgf".into(),
+                elites: 2,
+                features: TEMPORAL_G_BUFFER,
+                relative_to: Some("@svgf".into()),
+                pool: Pool::Guarded,
+                light_tolerance: Some(0.05),
+                ..thesis()
+            },
         }
     }
 }
@@ -432,7 +458,12 @@ fn run_settings(args: &EvolveArgs) -> Result<(filterjit::gp::Settings, filterjit
         elites: args.elites.unwrap_or(preset.elites),
     };
     let size = args.render.size.unwrap_or(preset.size);
-    let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
+    let pipeline = args.render.pipeline.unwrap_or(preset.pipeline);
+    // A temporal pipeline trains and is tested on sequences; any other on stills.
+    let builtin = |split| match pipeline.is_temporal() {
+        true => render::builtin_sequences(split).into_iter().map(|d| d.name).collect::<Vec<_>>(),
+        false => render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>(),
+    };
     let seed_text = resolve_expr(args.seed_expr.as_deref().unwrap_or(&preset.seed_expr))?.to_string();
     let features: Vec<String> = match args.features.is_empty() {
         true => preset.features.iter().map(|f| f.to_string()).collect(),
@@ -451,7 +482,7 @@ fn run_settings(args: &EvolveArgs) -> Result<(filterjit::gp::Settings, filterjit
         },
         radius: args.render.radius.unwrap_or(preset.radius),
         seed_expr: seed_text,
-        pipeline: args.render.pipeline.unwrap_or(preset.pipeline),
+        pipeline,
         cost_model: match &args.cost_model {
             Some(path) => filterjit::cost::CostModel::read(path).map_err(anyhow::Error::msg)?,
             None => (preset.cost_model)(),

@@ -15,6 +15,9 @@ pub(crate) fn flag_for(error: &anyhow::Error) -> Option<&'static str> {
             return Some(match e {
                 TerminalError::Unknown(_) | TerminalError::NotProvided(_) => "the allowed terminals are `--features`",
                 TerminalError::NeedsOutliers(_) => "add `outliers=K` to `--pipeline`, or leave it out of `--features`",
+                TerminalError::NeedsTemporal(_) => {
+                    "add `temporal=A` to `--pipeline` (and score sequences), or leave it out of `--features`"
+                }
                 TerminalError::SeedReads(_) => "the seed expression is `--seed-expr`",
             });
         }

@@ -405,9 +405,9 @@ pub fn filter_frame(
     radius: u32,
     history: Option<&temporal::History>,
 ) -> Result<(CpuFiltered, Option<temporal::History>), MissingInput> {
-    let prepared = prepass(scene, pipeline)?;
+    let mut prepared = prepass(scene, pipeline)?;
     let mut working = scene.clone();
-    working.color = prepared.color;
+    working.color = prepared.color.clone();
     // What the outlier rule measured is read like a variance, at the centre.
     if let Some(local) = prepared.local {
         for (v, values) in ScalarVar::FROM_PREPASS.into_iter().zip(local) {
@@ -423,6 +423,10 @@ pub fn filter_frame(
                 .ok_or_else(|| MissingInput { scene: scene.name.clone(), missing: crate::scene::Missing::Motion })?;
             let accumulated = temporal::accumulate(stage, &working.color, motion, scene.width, scene.height, history);
             working.color = accumulated.color.clone();
+            // The result is multiplied back by the albedo blended over frames.
+            if prepared.modulation.is_some() {
+                prepared.modulation = Some(accumulated.modulation.clone());
+            }
             working.variances.insert(ScalarVar::HistoryLength, accumulated.length.clone());
             working.variances.insert(ScalarVar::TemporalVariance, accumulated.variance.clone());
             Some((stage, motion, accumulated))

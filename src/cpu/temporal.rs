@@ -21,8 +21,11 @@ pub struct History {
     /// Per pixel: the luminance's first and second moments, the blend's
     /// variance factor r (Σ of its squared shares) and the history's length.
     pub moments: Vec<[f32; 4]>,
-    /// The last frame's surface ([`Motion::surface`]).
+    /// The last frame's surface and albedo ([`Motion::surface`], [`Motion::albedo`]).
     pub surface: Vec<[f32; 4]>,
+    pub albedo: Vec<[f32; 4]>,
+    /// The modulation blended over frames ([`Accumulated::modulation`]).
+    pub modulation: Vec<[f32; 3]>,
 }
 
 /// What the stage makes of one frame.
@@ -36,12 +39,20 @@ pub struct Accumulated {
     pub variance: Vec<f32>,
     /// `historyLength`: the frames in each pixel's blend, this one included.
     pub length: Vec<f32>,
+    /// The modulation max(albedo, `pipeline::ALBEDO_FLOOR`) blended as the
+    /// colour is: what a demodulating pipeline multiplies its result back by,
+    /// the albedo averaged over the pixel's samples of many frames.
+    pub modulation: Vec<[f32; 3]>,
 }
+
+/// The running sums of a history's colour, moments and modulation over taps.
+type Sums = ([Neumaier; 3], [Neumaier; 4], [Neumaier; 3]);
 
 /// A pixel's history as the taps it was read from give it.
 struct Taken {
     color: [f64; 3],
     moments: [f64; 4],
+    modulation: [f64; 3],
 }
 
 /// The temporal stage on one frame: `color` (as the pre-pass left it),
@@ -62,26 +73,41 @@ pub fn accumulate(
         moments: Vec::with_capacity(color.len()),
         variance: Vec::with_capacity(color.len()),
         length: Vec::with_capacity(color.len()),
+        modulation: Vec::with_capacity(color.len()),
     };
+    // Each pixel's sample variance, stored as f32 as on the device, before its blur.
+    let mut samples: Vec<f32> = Vec::with_capacity(color.len());
     for y in 0..h {
         for x in 0..w {
             let i = (y * w + x) as usize;
-            let (normal, depth) = surface(motion.surface[i]);
+            let at = surface(motion, i);
             let taken = history.and_then(|history| {
                 let same = |xj: i64, yj: i64| {
                     inside(xj, yj, w, h) && {
-                        let (n, z) = surface(history.surface[(yj * w + xj) as usize]);
-                        pipeline::same_surface(n, z, normal, depth)
+                        let j = (yj * w + xj) as usize;
+                        pipeline::same_surface(surface_of(history.surface[j], history.albedo[j]), at)
                     }
                 };
                 reproject(history, motion.vectors[i], (x, y), same)
             });
             let d = color[i].map(f64::from);
             let l = luminance[i];
-            let n = (taken.as_ref().map_or(0.0, |t| t.moments[3]) + 1.0).min(pipeline::TEMPORAL_MAX_HISTORY);
+            let mut before = taken.as_ref().map_or(0.0, |t| t.moments[3]);
+            // The history's test: where its light is off the frame's, it is cut to one frame.
+            if let (Some(kappa), Some(t)) = (temporal.antilag, &taken) {
+                let (mean, error) = mean_and_error(&luminance, x, y, w, h);
+                let past = pipeline::luminance(t.color);
+                let allowed = kappa as f64 * error + pipeline::TEMPORAL_ANTILAG_SLACK * mean.max(past);
+                if (past - mean).abs() > allowed {
+                    before = before.min(1.0);
+                }
+            }
+            let n = (before + 1.0).min(pipeline::TEMPORAL_MAX_HISTORY);
             let a = temporal.share(n);
-            let (blend, m1, m2, r) = match taken {
-                Some(Taken { color: mut past, moments }) => {
+            let own = motion.albedo[i].map(|c| (c as f64).max(pipeline::ALBEDO_FLOOR));
+            let own = [own[0], own[1], own[2]];
+            let (blend, m1, m2, r, modulation) = match taken {
+                Some(Taken { color: mut past, moments, modulation }) => {
                     if let Some(gamma) = temporal.clamp {
                         let (mean, deviation) = neighbourhood(color, x, y, w, h);
                         for k in 0..3 {
@@ -93,22 +119,47 @@ pub fn accumulate(
                     let m1 = moments[0] * (1.0 - a) + l * a;
                     let m2 = moments[1] * (1.0 - a) + l * l * a;
                     let r = moments[2] * (1.0 - a) * (1.0 - a) + a * a;
-                    (blend, m1, m2, r)
+                    let modulation = [0, 1, 2].map(|k| modulation[k] * (1.0 - a) + own[k] * a);
+                    (blend, m1, m2, r, modulation)
                 }
-                None => (d, l, l * l, 1.0),
+                None => (d, l, l * l, 1.0, own),
             };
             let sample_variance = if n >= pipeline::TEMPORAL_SHORT_HISTORY {
                 (m2 - m1 * m1).max(0.0)
             } else {
-                spatial_variance(&luminance, &motion.surface, x, y, w, h)
+                spatial_variance(&luminance, motion, x, y, w, h)
             };
             out.color.push(blend.map(|c| c as f32));
+            out.modulation.push(modulation.map(|c| c as f32));
             out.moments.push([m1 as f32, m2 as f32, r as f32, n as f32]);
-            out.variance.push((sample_variance * r) as f32);
+            samples.push(sample_variance as f32);
             out.length.push(n as f32);
         }
     }
+    out.variance = (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| (prefiltered(&samples, x, y, w, h) * out.moments[(y * w + x) as usize][2] as f64) as f32)
+        .collect();
     out
+}
+
+/// The sample variance around (`x`, `y`) blurred by the 3×3 Gaussian
+/// (1/2, 1/4 each way) over the taps inside the image, as SVGF prefilters
+/// it: a pixel whose few samples agreed takes its neighbours' spread.
+fn prefiltered(samples: &[f32], x: i64, y: i64, w: i64, h: i64) -> f64 {
+    let h_of = |d: i64| if d == 0 { 0.5 } else { 0.25 };
+    let (mut sum, mut total) = (0.0, 0.0);
+    for dy in -1..=1 {
+        for dx in -1..=1 {
+            let (xj, yj) = (x + dx, y + dy);
+            if inside(xj, yj, w, h) {
+                let weight = h_of(dx) * h_of(dy);
+                sum += weight * samples[(yj * w + xj) as usize] as f64;
+                total += weight;
+            }
+        }
+    }
+    sum / total
 }
 
 /// What the stage keeps of a frame: `accumulated`'s moments, `feedback` (the
@@ -120,11 +171,28 @@ pub fn keep(
     width: usize,
     height: usize,
 ) -> History {
-    History { width, height, color: feedback, moments: accumulated.moments.clone(), surface: motion.surface.clone() }
+    History {
+        width,
+        height,
+        color: feedback,
+        moments: accumulated.moments.clone(),
+        surface: motion.surface.clone(),
+        albedo: motion.albedo.clone(),
+        modulation: accumulated.modulation.clone(),
+    }
 }
 
-fn surface(s: [f32; 4]) -> ([f64; 3], f64) {
-    ([s[0] as f64, s[1] as f64, s[2] as f64], s[3] as f64)
+/// Pixel `i`'s surface as the history's test compares it.
+fn surface(motion: &Motion, i: usize) -> pipeline::Surface {
+    surface_of(motion.surface[i], motion.albedo[i])
+}
+
+fn surface_of(s: [f32; 4], a: [f32; 4]) -> pipeline::Surface {
+    pipeline::Surface {
+        normal: [s[0] as f64, s[1] as f64, s[2] as f64],
+        depth: s[3] as f64,
+        albedo: [a[0] as f64, a[1] as f64, a[2] as f64],
+    }
 }
 
 fn inside(x: i64, y: i64, w: i64, h: i64) -> bool {
@@ -148,19 +216,23 @@ fn reproject(
     let (fx0, fy0) = (qx.floor(), qy.floor());
     let (fx, fy) = ((qx - fx0) as f64, (qy - fy0) as f64);
     let (x0, y0) = (fx0 as i64, fy0 as i64);
-    let add = |sums: &mut ([Neumaier; 3], [Neumaier; 4]), weight: f64, j: usize| {
+    let add = |sums: &mut Sums, weight: f64, j: usize| {
         for (s, c) in sums.0.iter_mut().zip(history.color[j]) {
             s.add(weight * c as f64);
         }
         for (s, m) in sums.1.iter_mut().zip(history.moments[j]) {
             s.add(weight * m as f64);
         }
+        for (s, m) in sums.2.iter_mut().zip(history.modulation[j]) {
+            s.add(weight * m as f64);
+        }
     };
-    let taken = |sums: ([Neumaier; 3], [Neumaier; 4]), total: f64| Taken {
+    let taken = |sums: Sums, total: f64| Taken {
         color: sums.0.map(|s| s.total() / total),
         moments: sums.1.map(|s| s.total() / total),
+        modulation: sums.2.map(|s| s.total() / total),
     };
-    let mut sums = Default::default();
+    let mut sums: Sums = Default::default();
     let mut total = Neumaier::default();
     for dy in 0..2 {
         for dx in 0..2 {
@@ -176,7 +248,7 @@ fn reproject(
         return Some(taken(sums, total.total()));
     }
     let (cx, cy) = ((qx + 0.5).floor() as i64, (qy + 0.5).floor() as i64);
-    let mut sums = Default::default();
+    let mut sums: Sums = Default::default();
     let mut count = 0.0;
     for dy in -1..=1 {
         for dx in -1..=1 {
@@ -188,6 +260,21 @@ fn reproject(
         }
     }
     (count > 0.0).then(|| taken(sums, count))
+}
+
+/// The mean of the luminance over the 3×3 pixels around (`x`, `y`) inside
+/// the image, and its standard error (the population standard deviation
+/// over √N): what the history's test (`antilag=K`) holds the history to.
+fn mean_and_error(luminance: &[f64], x: i64, y: i64, w: i64, h: i64) -> (f64, f64) {
+    let taps: Vec<f64> = (-1..=1)
+        .flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy)))
+        .filter(|&(xj, yj)| inside(xj, yj, w, h))
+        .map(|(xj, yj)| luminance[(yj * w + xj) as usize])
+        .collect();
+    let n = taps.len() as f64;
+    let mean = taps.iter().sum::<f64>() / n;
+    let deviation = (taps.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / n).sqrt();
+    (mean, deviation / n.sqrt())
 }
 
 /// Each channel's mean and standard deviation over the 3×3 pixels around
@@ -207,17 +294,12 @@ fn neighbourhood(color: &[[f32; 3]], x: i64, y: i64, w: i64, h: i64) -> ([f64; 3
 /// The variance of the luminance over the (2R+1)² pixels around (`x`, `y`)
 /// that see its surface (R = `TEMPORAL_VARIANCE_RADIUS`): a history too
 /// short for its moments (SVGF's spatial estimate).
-fn spatial_variance(luminance: &[f64], surfaces: &[[f32; 4]], x: i64, y: i64, w: i64, h: i64) -> f64 {
-    let (normal, depth) = surface(surfaces[(y * w + x) as usize]);
+fn spatial_variance(luminance: &[f64], motion: &Motion, x: i64, y: i64, w: i64, h: i64) -> f64 {
+    let at = surface(motion, (y * w + x) as usize);
     let r = pipeline::TEMPORAL_VARIANCE_RADIUS as i64;
     let taps: Vec<f64> = (-r..=r)
         .flat_map(|dy| (-r..=r).map(move |dx| (x + dx, y + dy)))
-        .filter(|&(xj, yj)| {
-            inside(xj, yj, w, h) && {
-                let (n, z) = surface(surfaces[(yj * w + xj) as usize]);
-                pipeline::same_surface(n, z, normal, depth)
-            }
-        })
+        .filter(|&(xj, yj)| inside(xj, yj, w, h) && pipeline::same_surface(surface(motion, (yj * w + xj) as usize), at))
         .map(|(xj, yj)| luminance[(yj * w + xj) as usize])
         .collect();
     let n = taps.len() as f64;
@@ -231,13 +313,16 @@ mod tests {
 
     const UP: [f32; 4] = [0.0, 0.0, 1.0, 1.0];
 
+    const GREY: [f32; 4] = [0.5, 0.5, 0.5, 0.0];
+
     /// A `w`×`h` frame of one colour, facing the camera at depth 1, still.
     fn still(w: usize, h: usize, value: f32) -> (Vec<[f32; 3]>, Motion) {
-        (vec![[value; 3]; w * h], Motion { vectors: vec![[0.0; 2]; w * h], surface: vec![UP; w * h] })
+        let motion = Motion { vectors: vec![[0.0; 2]; w * h], surface: vec![UP; w * h], albedo: vec![GREY; w * h] };
+        (vec![[value; 3]; w * h], motion)
     }
 
     fn stage(alpha: f32) -> Temporal {
-        Temporal { alpha, feedback: 0, clamp: None }
+        Temporal { alpha, feedback: 0, clamp: None, antilag: None }
     }
 
     #[test]
@@ -275,7 +360,8 @@ mod tests {
         let first = accumulate(stage(0.2), &color, &motion, w, h, None);
         let history = keep(&first, first.color.clone(), &motion, w, h);
         // The right half now sees a surface twice as far (an object moved away), the
-        // bottom-left row a surface turned sideways: both disoccluded, the rest not.
+        // bottom-left row a surface turned sideways, its top-left pixel a black
+        // emitter lying flat where the wall was: all disoccluded, the rest not.
         let mut moved = motion.clone();
         for y in 0..h {
             for x in 0..w {
@@ -286,10 +372,11 @@ mod tests {
                 }
             }
         }
+        moved.albedo[0] = [0.0; 4];
         let second = accumulate(stage(0.2), &color, &moved, w, h, Some(&history));
         for y in 0..h {
             for x in 0..w {
-                let fresh = x >= w / 2 || y == h - 1;
+                let fresh = x >= w / 2 || y == h - 1 || (x, y) == (0, 0);
                 assert_eq!(second.length[y * w + x], if fresh { 1.0 } else { 2.0 }, "({x}, {y})");
             }
         }
@@ -304,7 +391,7 @@ mod tests {
         let first = accumulate(stage(0.5), &ramp, &motion, w, h, None);
         let history = keep(&first, ramp.clone(), &motion, w, h);
         // Everything moved 2.5 pixels right: each pixel was 2.5 pixels left of here.
-        let moved = Motion { vectors: vec![[-2.5, 0.0]; w * h], surface: motion.surface.clone() };
+        let moved = Motion { vectors: vec![[-2.5, 0.0]; w * h], ..motion.clone() };
         let (zeros, _) = still(w, h, 0.0);
         let second = accumulate(stage(0.5), &zeros, &moved, w, h, Some(&history));
         for x in 3..w {
@@ -316,7 +403,7 @@ mod tests {
         // Pixels whose surface was outside the frame before start afresh (x − 2.5 < −0.5 … the wider search aside).
         assert_eq!(second.length[w], 1.0, "x 0 was at −2.5: outside");
         // A vector far outside any image (a non-finite one, sanitised) is no history.
-        let away = Motion { vectors: vec![[1e7, 1e7]; w * h], surface: motion.surface.clone() };
+        let away = Motion { vectors: vec![[1e7, 1e7]; w * h], ..motion.clone() };
         let third = accumulate(stage(0.5), &zeros, &away, w, h, Some(&history));
         assert!(third.length.iter().all(|n| *n == 1.0));
     }
@@ -337,16 +424,59 @@ mod tests {
     }
 
     #[test]
+    fn the_history_test_cuts_a_history_whose_light_changed() {
+        let (w, h) = (5, 5);
+        let (bright, motion) = still(w, h, 4.0);
+        let mut history: Option<History> = None;
+        for _ in 0..6 {
+            let out = accumulate(stage(0.1), &bright, &motion, w, h, history.as_ref());
+            history = Some(keep(&out, out.color.clone(), &motion, w, h));
+        }
+        let testing = Temporal { antilag: Some(3.0), ..stage(0.1) };
+        // The same light again: the history stays.
+        let same = accumulate(testing, &bright, &motion, w, h, history.as_ref());
+        assert_eq!(same.length[12], 7.0);
+        // A shadow swept in: the history is cut to one frame, the blend half the new light.
+        let (dark, _) = still(w, h, 1.0);
+        let cut = accumulate(testing, &dark, &motion, w, h, history.as_ref());
+        assert_eq!(cut.length[12], 2.0);
+        assert!((cut.color[12][0] - 2.5).abs() < 1e-5, "{}", cut.color[12][0]);
+        // Without the test it lags: a seventh of the new light.
+        let lagging = accumulate(stage(0.1), &dark, &motion, w, h, history.as_ref());
+        assert!((lagging.color[12][0] - (4.0 - 3.0 / 7.0)).abs() < 1e-5, "{}", lagging.color[12][0]);
+    }
+
+    #[test]
     fn a_short_history_takes_its_variance_from_the_neighbourhood() {
-        let (w, h) = (7, 7);
-        // Alternating 0 and 2: a sample variance of 1 around every pixel of the frame.
+        let (w, h) = (15, 15);
+        // Alternating 0 and 2: a sample variance of about 1 around every pixel of the frame.
         let checker: Vec<[f32; 3]> = (0..w * h).map(|p| [2.0 * ((p % w + p / w) % 2) as f32; 3]).collect();
         let (_, motion) = still(w, h, 0.0);
         let out = accumulate(stage(0.2), &checker, &motion, w, h, None);
-        let centre = 3 * w + 3;
-        // 49 taps, 25 of one value and 24 of the other.
+        // Around the centre every pixel's 7×7 holds 25 of one value and 24 of the other.
         let p = 25.0f64 / 49.0;
-        let expected = 4.0 * p * (1.0 - p) * pipeline::luminance([1.0; 3]).powi(2);
+        let expected = 4.0 * p * (1.0 - p);
+        let centre = 7 * w + 7;
         assert!((out.variance[centre] as f64 - expected).abs() < 1e-5, "{} against {expected}", out.variance[centre]);
+    }
+
+    #[test]
+    fn a_pixel_whose_samples_agreed_takes_its_neighbours_spread() {
+        let (w, h) = (5, 5);
+        let (_, motion) = still(w, h, 0.0);
+        let mut history: Option<History> = None;
+        // Four frames: every pixel alternates 0 and 2 but the centre, always 0 (a dim
+        // pixel whose few samples all missed the light).
+        for k in 0..4 {
+            let frame: Vec<[f32; 3]> =
+                (0..w * h).map(|p| if p == 12 { [0.0; 3] } else { [2.0 * ((p + k) % 2) as f32; 3] }).collect();
+            let out = accumulate(stage(0.2), &frame, &motion, w, h, history.as_ref());
+            history = Some(keep(&out, out.color.clone(), &motion, w, h));
+            if k == 3 {
+                assert_eq!(out.length[12], 4.0);
+                // Its own moments say 0; its neighbours' say 1 a sample, a quarter for a blend of four.
+                assert!((out.variance[12] - 0.75 * 0.25).abs() < 1e-6, "{}", out.variance[12]);
+            }
+        }
     }
 }

@@ -58,7 +58,8 @@ impl RunConfig {
             fusion,
             rule: self.fitness.clone(),
             cost_model: self.cost_model.clone(),
-            ..fitness::Settings::for_pipeline(self.radius, self.pipeline, threads)
+            // A temporal pipeline's frames come with its pre-pass and stage already run (`datasets::accumulated`).
+            ..fitness::Settings::for_pipeline(self.radius, self.pipeline.spatial(), threads)
         }
     }
 

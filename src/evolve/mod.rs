@@ -43,6 +43,8 @@ pub enum TerminalError {
     Unknown(String),
     #[error("the allowed terminals name `{0}`, which the outlier pre-pass measures, but the pipeline has no outlier stage (`outliers=K`)")]
     NeedsOutliers(String),
+    #[error("the allowed terminals name `{0}`, which the temporal stage measures, but the pipeline has no temporal stage (`temporal=A`)")]
+    NeedsTemporal(String),
     #[error("the allowed terminals name `{0}`, which the training scenes do not all provide")]
     NotProvided(String),
     #[error("the seed expression reads `{0}`, which the training scenes do not all provide")]
@@ -125,6 +127,12 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
                     }
                     true
                 }
+                (None, Some(v)) if v.from_temporal() => {
+                    if !config.pipeline.is_temporal() {
+                        return Err(TerminalError::NeedsTemporal(name.clone()).into());
+                    }
+                    true
+                }
                 (Some(f), _) => features.contains(&f) && allowed.insert(f),
                 (None, Some(v)) => variances.contains(&v) && allowed_variances.insert(v),
                 (None, None) => return Err(TerminalError::Unknown(name.clone()).into()),
@@ -157,8 +165,11 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let mut evaluator = Scorer::new(gpu, scenes, &on_tiles)?;
     // `level` (the à-trous pass) is a terminal where there are passes: a filter may change with scale.
     let level = config.pipeline.is_atrous().then_some(ScalarVar::Level);
-    // What the outlier rule measured, where the pipeline has it: a weight may adapt to fireflies.
-    let measures = config.pipeline.outliers.map(|_| ScalarVar::FROM_PREPASS).into_iter().flatten();
+    // What the outlier rule measured, where the pipeline has it: a weight may adapt to fireflies;
+    // what the temporal stage accumulated, where it has one: a weight may trust a long history.
+    let measures = config.pipeline.outliers.map(|_| ScalarVar::FROM_PREPASS.to_vec()).into_iter().flatten();
+    let accumulated = config.pipeline.temporal.map(|_| ScalarVar::FROM_TEMPORAL.to_vec()).into_iter().flatten();
+    let measures = measures.chain(accumulated);
     let terminals = gp::operators::Terminals {
         features: features.iter().copied().collect(),
         variables: variances.iter().copied().chain(level).chain(measures).collect(),
@@ -255,8 +266,8 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let test_sets = datasets::resolve(gpu, &config.test, &config.render, &cache, &mut *on_render)?;
     let test_scenes = datasets::load_all(&test_sets, &features, &variances, &config.pipeline)?;
     let names = test_scenes.iter().map(|s| s.name.clone()).collect();
-    let mut tester =
-        Scorer::new(gpu, test_scenes, &fitness::Settings::for_pipeline(config.radius, config.pipeline, threads))?;
+    let scoring = fitness::Settings::for_pipeline(config.radius, config.pipeline.spatial(), threads);
+    let mut tester = Scorer::new(gpu, test_scenes, &scoring)?;
     let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut compared = vec![best_expr, seed_expr];
     compared.extend(

@@ -193,7 +193,11 @@ impl SceneBuffers {
                         usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
                     })
                 };
-                Some(FrameMotion { vectors: buffer("motion", &vectors), surface: buffer("surface", &motion.surface) })
+                Some(FrameMotion {
+                    vectors: buffer("motion", &vectors),
+                    surface: buffer("surface", &motion.surface),
+                    albedo: buffer("albedo of the surface", &motion.albedo),
+                })
             }
             (true, None) => {
                 let missing = MissingInput { scene: scene.name.clone(), missing: Missing::Motion };
@@ -266,6 +270,13 @@ impl SceneBuffers {
     pub(super) fn replace_color(&mut self, color: wgpu::Buffer) {
         self.color = color;
         self.sampled.forget(Role::Color);
+    }
+
+    /// Make `modulation` what the result is multiplied back by (the
+    /// temporal stage's blend of it), forgetting any texture of the one before.
+    pub(super) fn replace_modulation(&mut self, modulation: wgpu::Buffer) {
+        self.modulation = Some(modulation);
+        self.sampled.forget(Role::Modulation);
     }
 
     /// Record the pending pre-pass into `encoder`; its outputs become these
@@ -455,7 +466,9 @@ impl Gpu {
         let temporal = buffers.pipeline.temporal.filter(|_| buffers.temporal_pending);
         if temporal.is_some() {
             self.built_in(crate::jit::BuiltIn::Temporal, 0)?;
+            self.built_in(crate::jit::BuiltIn::TemporalVariance, 0)?;
             self.blit_pipeline(Element::Vec4F32)?;
+            self.blit_pipeline(Element::F32)?;
         }
         let guide = Input::Feature(Feature::Guide);
         // Made in this submission: a frame's first filter on buffers from

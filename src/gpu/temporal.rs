@@ -30,8 +30,11 @@ struct Kept {
     color: wgpu::Buffer,
     /// m1, m2, r, n per pixel.
     moments: wgpu::Buffer,
-    /// The frame's surface: the normal's direction and the depth.
+    /// The frame's surface: the normal's direction and the depth; and its albedo.
     surface: wgpu::Buffer,
+    albedo: wgpu::Buffer,
+    /// The modulation blended over frames.
+    modulation: wgpu::Buffer,
 }
 
 impl TemporalState {
@@ -61,6 +64,8 @@ impl TemporalState {
 pub(super) struct Recorded {
     moments: wgpu::Buffer,
     surface: wgpu::Buffer,
+    albedo: wgpu::Buffer,
+    modulation: wgpu::Buffer,
     /// The passes of the form after which the image is the next history.
     pub(super) feedback: u32,
     /// The image fed back, once recorded.
@@ -73,6 +78,8 @@ pub(super) struct FrameMotion {
     pub(super) vectors: wgpu::Buffer,
     /// The normal's direction and the depth per pixel.
     pub(super) surface: wgpu::Buffer,
+    /// The albedo clipped to [0, 1] per pixel.
+    pub(super) albedo: wgpu::Buffer,
 }
 
 impl Gpu {
@@ -91,7 +98,7 @@ impl Gpu {
     ) -> Result<Recorded, GpuError> {
         let (width, height) = (buffers.width, buffers.height);
         let motion = buffers.motion.as_ref().expect("a temporal pipeline's buffers hold the frame's motion");
-        let (vectors, surface) = (motion.vectors.clone(), motion.surface.clone());
+        let (vectors, surface, albedo) = (motion.vectors.clone(), motion.surface.clone(), motion.albedo.clone());
         let kernel = self.built_in(BuiltIn::Temporal, 0)?;
         let interface = BindingInterface::temporal(None);
         let history = state.history_for(width, height);
@@ -107,18 +114,26 @@ impl Gpu {
             })
         };
         let (blend, moments) = (make("temporal blend", 16), make("temporal moments", 16));
-        let measures = ScalarVar::FROM_TEMPORAL.map(|_| make("temporal measure", 4));
+        let modulation = make("temporal modulation", 16);
+        let (length, samples) = (make("history length", 4), make("sample variance", 4));
         let size = (width, height);
         let view = |encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer| {
             Ok::<_, GpuError>(self.blitted(encoder, buffer, Element::Vec4F32, size)?.create_view(&Default::default()))
         };
         let color = view(encoder, &buffers.color)?;
         let geometry = view(encoder, &surface)?;
+        let material = view(encoder, &albedo)?;
         let motion = view(encoder, &vectors)?;
         // A first frame reads no history: the frame's own images stand in for it.
-        let (past, past_moments, past_surface) = match history {
-            Some(kept) => (view(encoder, &kept.color)?, view(encoder, &kept.moments)?, view(encoder, &kept.surface)?),
-            None => (color.clone(), color.clone(), geometry.clone()),
+        let (past, past_moments, past_surface, past_albedo, past_modulation) = match history {
+            Some(kept) => (
+                view(encoder, &kept.color)?,
+                view(encoder, &kept.moments)?,
+                view(encoder, &kept.surface)?,
+                view(encoder, &kept.albedo)?,
+                view(encoder, &kept.modulation)?,
+            ),
+            None => (color.clone(), color.clone(), geometry.clone(), material.clone(), material.clone()),
         };
         let bind_group = self.bind_in_slot_order(
             &kernel,
@@ -129,33 +144,60 @@ impl Gpu {
                     Role::Params => uniform.as_entire_binding(),
                     Role::Color => wgpu::BindingResource::TextureView(&color),
                     Role::Geometry => wgpu::BindingResource::TextureView(&geometry),
+                    Role::Albedo => wgpu::BindingResource::TextureView(&material),
+                    Role::PreviousAlbedo => wgpu::BindingResource::TextureView(&past_albedo),
                     Role::Motion => wgpu::BindingResource::TextureView(&motion),
                     Role::History => wgpu::BindingResource::TextureView(&past),
                     Role::Moments => wgpu::BindingResource::TextureView(&past_moments),
                     Role::PreviousGeometry => wgpu::BindingResource::TextureView(&past_surface),
+                    Role::PastModulation => wgpu::BindingResource::TextureView(&past_modulation),
+                    Role::ModulationOut => modulation.as_entire_binding(),
                     Role::Output => blend.as_entire_binding(),
                     Role::MomentsOut => moments.as_entire_binding(),
-                    Role::Input(Input::Variance(v)) if v.from_temporal() => {
-                        let k = ScalarVar::FROM_TEMPORAL.iter().position(|w| *w == v).expect("a temporal measure");
-                        measures[k].as_entire_binding()
-                    }
+                    Role::Input(Input::Variance(ScalarVar::HistoryLength)) => length.as_entire_binding(),
+                    Role::SampleVariance => samples.as_entire_binding(),
                     other => unreachable!("the temporal stage has no {other:?} binding"),
                 })
                 .collect(),
         );
+        let groups = (width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]));
         {
             let mut pass = encoder.begin_compute_pass(&Default::default());
             pass.set_pipeline(&kernel.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
         }
-        for (v, buffer) in ScalarVar::FROM_TEMPORAL.into_iter().zip(measures) {
-            buffers.inputs.insert(Input::Variance(v), buffer);
+        // The sample variance, prefiltered and scaled to the blend's: `temporalVariance`.
+        let prefilter = self.built_in(BuiltIn::TemporalVariance, 0)?;
+        let interface = BindingInterface::temporal_variance(None);
+        let sizes = crate::jit::BlitParams { width, height, _pad: [0; 2] };
+        let uniform = self.params_buffer(interface.params(), "temporal variance params", bytemuck::bytes_of(&sizes));
+        let sample_view = self.blitted(encoder, &samples, Element::F32, size)?.create_view(&Default::default());
+        let moments_view = view(encoder, &moments)?;
+        let variance = make("temporal variance", 4);
+        let bind_group = self.bind_group(&prefilter, &interface, |role| match role {
+            Role::Params => uniform.as_entire_binding(),
+            Role::SampleVariance => wgpu::BindingResource::TextureView(&sample_view),
+            Role::Moments => wgpu::BindingResource::TextureView(&moments_view),
+            Role::Input(Input::Variance(ScalarVar::TemporalVariance)) => variance.as_entire_binding(),
+            other => unreachable!("the temporal variance has no {other:?} binding"),
+        });
+        {
+            let mut pass = encoder.begin_compute_pass(&Default::default());
+            pass.set_pipeline(&prefilter.pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(groups.0, groups.1, 1);
+        }
+        buffers.inputs.insert(Input::Variance(ScalarVar::HistoryLength), length);
+        buffers.inputs.insert(Input::Variance(ScalarVar::TemporalVariance), variance);
+        // The form's result is multiplied back by the albedo blended over frames.
+        if buffers.modulation.is_some() {
+            buffers.replace_modulation(modulation.clone());
         }
         buffers.replace_color(blend);
         let feedback = stage.feedback;
         let color = (feedback == 0).then(|| buffers.color.clone());
-        Ok(Recorded { moments, surface, feedback, color })
+        Ok(Recorded { moments, surface, albedo, modulation, feedback, color })
     }
 
     /// Record a copy of `image` (a pass's output) as the history's colour.
@@ -181,7 +223,15 @@ impl Recorded {
     /// Make what this frame recorded `state`'s history, once its submission is done.
     pub(super) fn commit(self, state: &mut TemporalState, width: u32, height: u32) {
         let color = self.color.expect("the fed-back pass is among the form's passes (`most_feedback`)");
-        state.kept = Some(Kept { width, height, color, moments: self.moments, surface: self.surface });
+        state.kept = Some(Kept {
+            width,
+            height,
+            color,
+            moments: self.moments,
+            surface: self.surface,
+            albedo: self.albedo,
+            modulation: self.modulation,
+        });
         state.frames += 1;
     }
 }

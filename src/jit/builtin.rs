@@ -30,6 +30,8 @@ pub enum BuiltIn {
     Reduce,
     /// The temporal stage: reprojection, history and moments (`jit::temporal`).
     Temporal,
+    /// The temporal stage's variance, prefiltered (`jit::temporal`).
+    TemporalVariance,
 }
 
 impl BuiltIn {
@@ -45,6 +47,7 @@ impl BuiltIn {
             BuiltIn::Blit(_) => "<blit>",
             BuiltIn::Reduce => "<fitness reduction>",
             BuiltIn::Temporal => "<temporal>",
+            BuiltIn::TemporalVariance => "<temporal variance>",
         }
     }
 
@@ -60,6 +63,7 @@ impl BuiltIn {
             BuiltIn::Blit(element) => super::blit_wgsl(element),
             BuiltIn::Reduce => super::reduce_wgsl(),
             BuiltIn::Temporal => super::temporal_wgsl(None),
+            BuiltIn::TemporalVariance => super::temporal_variance_wgsl(None),
         }
     }
 
@@ -76,6 +80,7 @@ impl BuiltIn {
             BuiltIn::Blit(element) => super::blit_module(element),
             BuiltIn::Reduce => super::reduce_module(),
             BuiltIn::Temporal => super::temporal_module(None),
+            BuiltIn::TemporalVariance => super::temporal_variance_module(None),
         }
     }
 
@@ -90,7 +95,7 @@ impl BuiltIn {
     }
 
     /// Every built-in kernel.
-    pub const ALL: [BuiltIn; 10] = [
+    pub const ALL: [BuiltIn; 11] = [
         BuiltIn::PathTracer,
         BuiltIn::Prepass,
         BuiltIn::Spread(Keep::Even),
@@ -101,6 +106,7 @@ impl BuiltIn {
         BuiltIn::Blit(Element::Vec4F32),
         BuiltIn::Reduce,
         BuiltIn::Temporal,
+        BuiltIn::TemporalVariance,
     ];
 }
 

@@ -53,6 +53,16 @@ pub enum Role {
     Geometry,
     /// The frame before's surface, which the history's taps are tested against.
     PreviousGeometry,
+    /// The frame before's albedo, likewise (the frame's own is `Albedo`).
+    PreviousAlbedo,
+    /// Each pixel's sample variance of the luminance, which the temporal
+    /// stage writes and its variance kernel blurs into `temporalVariance`.
+    SampleVariance,
+    /// The history's modulation (the albedo blended over frames), read.
+    PastModulation,
+    /// The modulation the temporal stage blends, written: what the form's
+    /// result is multiplied back by, and what the next frame keeps.
+    ModulationOut,
     /// The temporal stage's history: the colour the frame before kept.
     History,
     /// The history's moments (m1, m2, r, n), read.
@@ -549,8 +559,8 @@ impl BindingInterface {
 
     /// The interface of the temporal stage (`jit::temporal`): the uniform
     /// `TemporalParams`; the frame's colour (as the pre-pass left it), its
-    /// surface and motion vectors, the history's colour and moments and the
-    /// frame before's surface, all sampled; then what it writes: the blend
+    /// surface, albedo and motion vectors, the history's colour and moments
+    /// and the frame before's surface and albedo, all sampled; then what it writes: the blend
     /// the form filters, the moments kept for the next frame, and
     /// `historyLength` and `temporalVariance` (filterjit's storage buffers,
     /// `None`), or exported (`Some`), storage textures: the blend and the
@@ -561,33 +571,34 @@ impl BindingInterface {
         let read = [
             (Role::Color, "color"),
             (Role::Geometry, "geometry"),
+            (Role::Albedo, "albedo"),
             (Role::Motion, "motion"),
             (Role::History, "history"),
             (Role::Moments, "moments"),
             (Role::PreviousGeometry, "previous_geometry"),
+            (Role::PreviousAlbedo, "previous_albedo"),
+            (Role::PastModulation, "past_modulation"),
         ]
         .map(|(role, name)| (role, Resource::SampledTexture, format!("tex_{name}")));
         let (kind, params, written): (_, _, Vec<(Role, Resource, String)>) = match textures {
             None => {
                 let buffer = |element| Resource::Storage { element, writable: true };
-                let measures = ScalarVar::FROM_TEMPORAL.map(|v| {
-                    (
-                        Role::Input(Input::Variance(v)),
-                        buffer(Element::F32),
-                        format!("buf_{}", v.name().to_ascii_lowercase()),
-                    )
-                });
+                let length = Role::Input(Input::Variance(ScalarVar::HistoryLength));
                 let images = [
                     (Role::Output, buffer(Element::Vec4F32), "buf_out".to_string()),
                     (Role::MomentsOut, buffer(Element::Vec4F32), "buf_moments_out".to_string()),
+                    (Role::ModulationOut, buffer(Element::Vec4F32), "buf_modulation_out".to_string()),
+                    (length, buffer(Element::F32), "buf_historylength".to_string()),
+                    (Role::SampleVariance, buffer(Element::F32), "buf_sample_variance".to_string()),
                 ];
-                (KernelKind::Filter, own_params(), images.into_iter().chain(measures).collect())
+                (KernelKind::Filter, own_params(), images.into_iter().collect())
             }
             Some(format) => {
                 let texture = Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float));
                 let images = [
                     (Role::Output, texture, "tex_out".to_string()),
                     (Role::MomentsOut, texture, "tex_moments_out".to_string()),
+                    (Role::ModulationOut, texture, "tex_modulation_out".to_string()),
                     (Role::Accumulated, texture, "tex_accumulated".to_string()),
                 ];
                 (KernelKind::Export(format), Resource::Uniform, images.into_iter().collect())
@@ -600,11 +611,35 @@ impl BindingInterface {
             field("alpha", "f32", 8, "alpha_min: a frame's share of the blend is max(alpha_min, 1/n)"),
             field("gamma", "f32", 12, "the history's clamp: within the frame's 3x3 mean +- gamma std; 0: no clamp"),
             field("history", "u32", 16, "1 where the history textures hold the frame before's; 0 for a first frame"),
-            field("_pad0", "u32", 20, "unused"),
-            field("_pad1", "u32", 24, "unused"),
-            field("_pad2", "u32", 28, "unused"),
+            field(
+                "antilag",
+                "f32",
+                20,
+                "kappa of the history's test: cut to one frame where its luminance is off; 0: none",
+            ),
+            field("_pad0", "u32", 24, "unused"),
+            field("_pad1", "u32", 28, "unused"),
         ];
         BindingInterface { kind, bindings, uniform, uniform_bytes: 32 }
+    }
+
+    /// The interface of the temporal stage's variance kernel
+    /// (`jit::temporal_variance`): the uniform (width, height), the sample
+    /// variance the stage wrote and its moments (for r), sampled; the
+    /// `temporalVariance` it writes: a storage buffer (filterjit's, `None`)
+    /// or, exported, an `r32float` storage texture.
+    pub fn temporal_variance(textures: Option<OutputFormat>) -> BindingInterface {
+        let written = match textures {
+            None => Resource::Storage { element: Element::F32, writable: true },
+            Some(_) => Resource::StorageTexture(TexelFormat::R32float),
+        };
+        let reads = [(Role::SampleVariance, "sample_variance"), (Role::Moments, "moments")];
+        let mut interface =
+            Self::image_stage(textures, true, &reads, written, [("_pad0", "unused"), ("_pad1", "unused")]);
+        let out = interface.bindings.last_mut().expect("the output is bound last");
+        out.role = Role::Input(Input::Variance(ScalarVar::TemporalVariance));
+        out.ident = if textures.is_some() { "tex_temporal_variance" } else { "buf_temporalvariance" }.to_string();
+        interface
     }
 
     /// The interface of the fitness reduction (`jit::reduce`): the uniform

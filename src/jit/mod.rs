@@ -34,7 +34,7 @@ pub use spread::{
     spread_interface, spread_kernel, spread_module, spread_surface_module, spread_surface_wgsl, spread_wgsl,
     written_before, SpreadDispatch, SpreadParams, SpreadSource, SpreadStage, SpreadTarget, SurfaceStage, SPREAD_STAGE,
 };
-pub use temporal::{temporal_module, temporal_wgsl, TemporalParams};
+pub use temporal::{temporal_module, temporal_variance_module, temporal_variance_wgsl, temporal_wgsl, TemporalParams};
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 
 /// Lower and validate in one step.

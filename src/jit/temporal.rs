@@ -21,7 +21,9 @@ pub struct TemporalParams {
     pub gamma: f32,
     /// 1 where the history holds the frame before's; 0 for a first frame.
     pub history: u32,
-    pub _pad: [u32; 3],
+    /// κ of the history's test; 0 without.
+    pub antilag: f32,
+    pub _pad: [u32; 2],
 }
 
 impl TemporalParams {
@@ -32,7 +34,8 @@ impl TemporalParams {
             alpha: temporal.alpha,
             gamma: temporal.clamp.unwrap_or(0.0),
             history: history as u32,
-            _pad: [0; 3],
+            antilag: temporal.antilag.unwrap_or(0.0),
+            _pad: [0; 2],
         }
     }
 }
@@ -44,6 +47,9 @@ pub fn temporal_wgsl(textures: Option<OutputFormat>) -> String {
     context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
     context.insert("depth_tolerance", &wgsl_f32(pipeline::TEMPORAL_DEPTH_TOLERANCE));
     context.insert("normal_cosine", &wgsl_f32(pipeline::TEMPORAL_NORMAL_COSINE));
+    context.insert("black_albedo", &wgsl_f32(pipeline::TEMPORAL_BLACK_ALBEDO));
+    context.insert("albedo_floor", &wgsl_f32(pipeline::ALBEDO_FLOOR));
+    context.insert("antilag_slack", &wgsl_f32(pipeline::TEMPORAL_ANTILAG_SLACK));
     context.insert("min_footprint", &wgsl_f32(pipeline::TEMPORAL_MIN_FOOTPRINT));
     context.insert("max_history", &wgsl_f32(pipeline::TEMPORAL_MAX_HISTORY));
     context.insert("short_history", &wgsl_f32(pipeline::TEMPORAL_SHORT_HISTORY));
@@ -57,6 +63,21 @@ pub fn temporal_module(textures: Option<OutputFormat>) -> Result<ValidatedModule
     validate_with_interface(&temporal_wgsl(textures), "<temporal>", &BindingInterface::temporal(textures))
 }
 
+/// The stage's second kernel: the sample variance blurred by a 3×3
+/// Gaussian and multiplied by r, `temporalVariance`
+/// (`templates/temporal_variance.wgsl.tera`).
+pub fn temporal_variance_wgsl(textures: Option<OutputFormat>) -> String {
+    let mut context = BindingInterface::temporal_variance(textures).template_context();
+    context.insert("textures", &textures.is_some());
+    render_builtin("temporal variance", include_str!("../../templates/temporal_variance.wgsl.tera"), &context)
+}
+
+/// The variance kernel, validated by naga and checked against its interface.
+pub fn temporal_variance_module(textures: Option<OutputFormat>) -> Result<ValidatedModule, ValidateError> {
+    let interface = BindingInterface::temporal_variance(textures);
+    validate_with_interface(&temporal_variance_wgsl(textures), "<temporal variance>", &interface)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -65,6 +86,7 @@ mod tests {
     fn both_variants_validate() {
         for textures in [None, Some(OutputFormat::Rgba16float)] {
             temporal_module(textures).unwrap_or_else(|e| panic!("{textures:?}: {e}"));
+            temporal_variance_module(textures).unwrap_or_else(|e| panic!("{textures:?}: {e}"));
         }
         assert_eq!(std::mem::size_of::<TemporalParams>() as u32, BindingInterface::temporal(None).uniform_bytes);
     }

@@ -57,13 +57,18 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
     };
     // Blender's Vector pass (and filterjit's own) has y up; image rows go down.
     let motion = match (&plan.motion, &plan.surface) {
-        (Some(vectors), Some((normal, depth))) => {
+        (Some(vectors), Some((normal, depth, albedo))) => {
             let (normal, depth) = (gathered(normal), gathered(depth));
             let mut depth: Vec<[f32; 3]> = depth;
             layout.clean(Feature::Depth, &mut depth);
+            let albedo = match albedo {
+                Some(range) => gathered(range).into_iter().map(Motion::albedo_of).collect(),
+                None => vec![[0.0; 4]; pixels],
+            };
             Some(Motion {
                 vectors: gathered(vectors).iter().map(|v| [v[0], -v[1]]).collect(),
                 surface: normal.iter().zip(&depth).map(|(n, z)| Motion::surface_of(*n, z[0])).collect(),
+                albedo,
             })
         }
         _ => None,
@@ -175,15 +180,23 @@ struct NoisyPlan {
     separate_variances: BTreeMap<ScalarVar, &'static [&'static [&'static str]]>,
     /// The motion vectors, where the request asks for them and the image has them.
     motion: Option<Range<usize>>,
-    /// The raw normal and depth of the temporal stage's surface test, likewise.
-    surface: Option<(Range<usize>, Range<usize>)>,
+    /// The raw normal, depth and albedo (where the image has one) of the
+    /// temporal stage's surface test, likewise.
+    surface: Option<SurfacePlan>,
 }
+
+/// Where the temporal stage's raw normal, depth and albedo lie among the decoded channels.
+type SurfacePlan = (Range<usize>, Range<usize>, Option<Range<usize>>);
 
 impl NoisyPlan {
     fn new(layout: Layout, channels: &[String], request: &Request, noisy: &Path) -> Result<NoisyPlan, SceneError> {
         let mut names: Vec<&'static str> = Vec::new();
+        // Channels asked for twice (a feature and the temporal stage's raw copy of it) are decoded once.
         let mut plan = |alternatives| -> Option<Range<usize>> {
             let chosen = pick(alternatives, channels)?;
+            if let Some(start) = names.windows(chosen.len()).position(|w| w == chosen) {
+                return Some(start..start + chosen.len());
+            }
             let start = names.len();
             names.extend_from_slice(chosen);
             Some(start..names.len())
@@ -217,7 +230,9 @@ impl NoisyPlan {
             false => (None, None),
             true => {
                 let motion = plan(layout.motion());
-                let surface = plan(layout.surface_normal()).zip(plan(layout.feature(Feature::Depth)));
+                let surface = plan(layout.surface_normal())
+                    .zip(plan(layout.feature(Feature::Depth)))
+                    .map(|(normal, depth)| (normal, depth, plan(layout.feature(Feature::Texture))));
                 (motion, surface)
             }
         };
@@ -326,14 +341,14 @@ impl Preparer<'_> {
             self.notes.push(format!("motion vectors: {bad} non-finite vectors; those pixels start a new history"));
         }
         let mut bad = 0;
-        for s in &mut motion.surface {
+        for s in motion.surface.iter_mut().chain(&mut motion.albedo) {
             if s.iter().any(|c| !c.is_finite()) {
                 *s = [0.0; 4];
                 bad += 1;
             }
         }
         if bad > 0 {
-            self.notes.push(format!("normal or depth: {bad} non-finite values read as no surface"));
+            self.notes.push(format!("normal, depth or albedo: {bad} non-finite values read as no surface"));
         }
         motion
     }

@@ -207,6 +207,9 @@ pub struct Motion {
     /// Each pixel's surface: the normal's direction (unit, or zero where
     /// nothing was hit) and the depth (0 where nothing was hit).
     pub surface: Vec<[f32; 4]>,
+    /// Each pixel's albedo clipped to [0, 1] (and a 0): the surface's
+    /// material, which the history's test compares too (0 where the render has none).
+    pub albedo: Vec<[f32; 4]>,
 }
 
 impl Motion {
@@ -214,6 +217,12 @@ impl Motion {
     pub fn surface_of(normal: [f32; 3], depth: f32) -> [f32; 4] {
         let d = crate::pipeline::direction(normal.map(f64::from));
         [d[0] as f32, d[1] as f32, d[2] as f32, depth.max(0.0)]
+    }
+
+    /// The material of a pixel from its raw albedo.
+    pub fn albedo_of(albedo: [f32; 3]) -> [f32; 4] {
+        let a = albedo.map(|c| if c.is_finite() { c.clamp(0.0, 1.0) } else { 0.0 });
+        [a[0], a[1], a[2], 0.0]
     }
 }
 
@@ -274,6 +283,7 @@ impl Scene {
         out.motion = self.motion.as_ref().map(|m| Motion {
             vectors: tiled(&m.vectors, (w, h), (tw, th)),
             surface: tiled(&m.surface, (w, h), (tw, th)),
+            albedo: tiled(&m.albedo, (w, h), (tw, th)),
         });
         out
     }
@@ -301,6 +311,7 @@ impl Scene {
             motion: self.motion.as_ref().map(|m| Motion {
                 vectors: rows(&m.vectors, self.width, x, y, width, height),
                 surface: rows(&m.surface, self.width, x, y, width, height),
+                albedo: rows(&m.albedo, self.width, x, y, width, height),
             }),
             notes: Vec::new(),
         }
