@@ -45,7 +45,7 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
 /// The shipped temporal filters a sequence gets when none is asked for,
 /// best first (docs/BENCHMARKS.md, "Sequences"); the first whose inputs the
 /// frames have is taken.
-pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["svgf"];
+pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["temporal", "svgf"];
 
 /// Shipped filters with a variant for renders whose light is sparse, and
 /// that variant: the same inputs, the weight's pixel term widened from pass

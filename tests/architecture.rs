@@ -252,36 +252,75 @@ fn every_module_has_a_layer_and_imports_go_down() {
     assert_eq!(cycle(&graph), None, "a cycle between top-level modules");
 }
 
-#[test]
-fn the_jit_files_import_each_other_without_a_cycle() {
-    let files: Vec<(String, String)> = sources()
+/// Which files of the folder `dir` (relative to `src/`, without a
+/// trailing slash) each of its files names: `super::x` and `crate::dir::x`,
+/// where `x` is a sibling file or folder, or an item its `mod.rs`
+/// re-exports (`pub use file::{…}`), counted as that file's. A subfolder
+/// is one node.
+fn folder_graph(dir: &str) -> std::collections::BTreeMap<String, std::collections::BTreeSet<String>> {
+    let prefix = format!("{dir}/");
+    let files: Vec<(String, String, bool)> = sources()
         .into_iter()
-        .filter_map(|(p, t)| Some((p.strip_prefix("jit/")?.strip_suffix(".rs")?.to_string(), t)))
+        .filter_map(|(p, t)| {
+            let rest = p.strip_prefix(&prefix)?.to_string();
+            let direct = !rest.contains('/');
+            let node = rest.split('/').next().unwrap().trim_end_matches(".rs").to_string();
+            Some((node, t, direct))
+        })
         .collect();
-    let siblings: Vec<&String> = files.iter().map(|(f, _)| f).filter(|f| *f != "mod").collect();
-    // What `jit/mod.rs` re-exports, by the file that defines it.
+    let siblings: std::collections::BTreeSet<String> =
+        files.iter().map(|(n, _, _)| n.clone()).filter(|n| n != "mod").collect();
     let mut defined_in = std::collections::BTreeMap::new();
-    let facade = &files.iter().find(|(f, _)| f == "mod").unwrap().1;
-    for line in facade.lines().filter_map(|l| l.trim().strip_prefix("pub use ")) {
-        let (file, items) = line.split_once("::").unwrap();
-        for item in items.trim_matches(|c| "{};".contains(c)).split(',') {
-            defined_in.insert(item.trim().to_string(), file.to_string());
+    if let Some((_, facade, _)) = files.iter().find(|(n, _, direct)| n == "mod" && *direct) {
+        for line in facade.lines().filter_map(|l| l.trim().strip_prefix("pub use ")) {
+            let Some((file, items)) = line.split_once("::") else { continue };
+            for item in items.trim_matches(|c| "{};".contains(c)).split(',') {
+                defined_in.insert(item.trim().to_string(), file.to_string());
+            }
         }
     }
+    let through_crate = format!("crate::{}::", dir.replace('/', "::"));
     let mut graph: std::collections::BTreeMap<String, std::collections::BTreeSet<String>> = Default::default();
-    for (file, text) in files.iter().filter(|(f, _)| f != "mod") {
-        let edges = graph.entry(file.clone()).or_default();
+    for (node, text, direct) in files.iter().filter(|(n, _, _)| n != "mod") {
+        let edges = graph.entry(node.clone()).or_default();
         for line in code_of(text) {
-            let names = reached(line, "super::").into_iter().chain(reached(line, "crate::jit::"));
-            for name in names {
-                let target = if siblings.contains(&&name) { Some(name) } else { defined_in.get(&name).cloned() };
-                if let Some(target) = target.filter(|t| t != file) {
+            // `super::` in a subfolder's file is that subfolder: only `crate::dir::` leaves it.
+            let supers = if *direct { reached(line, "super::") } else { Vec::new() };
+            for name in supers.into_iter().chain(reached(line, &through_crate)) {
+                let target = if siblings.contains(&name) { Some(name) } else { defined_in.get(&name).cloned() };
+                if let Some(target) = target.filter(|t| t != node) {
                     edges.insert(target);
                 }
             }
         }
     }
-    assert_eq!(cycle(&graph), None, "a cycle between files of src/jit: {graph:?}");
+    graph
+}
+
+/// No folder's files import each other round in a circle (a cycle inside a
+/// folder is a cycle between two things that should have been one, or one
+/// thing that should have been two).
+#[test]
+fn no_folder_has_an_import_cycle() {
+    let mut folders: std::collections::BTreeSet<String> =
+        sources().into_iter().filter_map(|(p, _)| Some(p.rsplit_once('/')?.0.to_string())).collect();
+    folders.insert("jit".into());
+    assert!(folders.contains("gpu") && folders.contains("export"), "{folders:?}");
+    for dir in folders {
+        let graph = folder_graph(&dir);
+        assert_eq!(cycle(&graph), None, "a cycle between files of src/{dir}: {graph:?}");
+    }
+}
+
+/// No source file holds more than 600 lines of code before its tests
+/// (blank and comment lines not counted): a file does one thing.
+#[test]
+fn no_file_holds_more_than_600_lines_of_code() {
+    for (path, text) in sources() {
+        let before_tests = text.split("\n#[cfg(test)]").next().unwrap();
+        let lines = code_of(before_tests).len();
+        assert!(lines <= 600, "src/{path} has {lines} lines of code before its tests (at most 600)");
+    }
 }
 
 /// Files that each do one thing stay small enough to read: the search's and

@@ -493,3 +493,34 @@ fn filter_without_expr_picks_a_variance_free_filter_where_the_render_has_no_vari
     assert!(stderr.contains("filter    @evolvedAtrous64Plane"), "{stderr}");
     assert!(relmse(&stdout, "filtered") < relmse(&stdout, "noisy"), "{stdout}");
 }
+
+/// `bench --frames SIZES`: whole frames only, of `filter`'s default, the
+/// 3x3 cascade and the best temporal filter (its stage timed apart), at
+/// every size, their wall (and device) times in `bench.json`'s `frames`.
+#[test]
+fn bench_frames_times_whole_frames_at_each_size() {
+    let dir = crate::common::temp_dir("cli", "bench-frames");
+    let json = dir.join("bench.json");
+    let run = Command::new(env!("CARGO_BIN_EXE_filterjit"))
+        .args(["bench", "--frames", "96x64,48x48", "--repeats", "1", "--no-oidn", "-o", json.to_str().unwrap()])
+        .env("FILTERJIT_CACHE", dir.join("cache"))
+        .output()
+        .unwrap();
+    let stdout = text(&run.stdout);
+    assert!(run.status.success(), "{stdout}\n{}", text(&run.stderr));
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let frames = report["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 6, "three methods at two sizes: {report}");
+    let temporal = filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0];
+    for frame in frames {
+        let (w, h) = (frame["width"].as_u64().unwrap(), frame["height"].as_u64().unwrap());
+        assert!([(96, 64), (48, 48)].contains(&(w, h)), "{frame}");
+        assert!(frame["wall_ms"].as_f64().unwrap() > 0.0, "{frame}");
+        let stage = frame["parts_ms"]["temporal"].as_f64().unwrap();
+        match frame["method"].as_str().unwrap() == format!("@{temporal}") {
+            true => assert!(stage > 0.0, "the temporal stage is timed: {frame}"),
+            false => assert_eq!(stage, 0.0, "{frame}"),
+        }
+    }
+    assert!(stdout.contains("96x64") && stdout.contains(&format!("@{temporal}")), "{stdout}");
+}

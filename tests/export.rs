@@ -6,7 +6,7 @@ use std::collections::HashMap;
 use std::path::Path;
 use std::process::Command;
 
-use filterjit::export::{export, Code, Target};
+use filterjit::export::{export, Code, StageName, Target};
 use filterjit::gpu::SceneBuffers;
 use filterjit::jit::{self, OutputFormat};
 use filterjit::lang::random::Alphabet;
@@ -58,6 +58,18 @@ fn frame_of(scene: &Scene, manifest: &serde_json::Value) -> host::Frame {
     }
 }
 
+/// Every shader of an export, as the host takes them.
+fn shaders_of(exported: &filterjit::export::Exported) -> host::Shaders {
+    let text_of = |code: &Code| match code {
+        Code::Text(t) => t.clone(),
+        Code::SpirV(_) => panic!("WGSL is text"),
+    };
+    host::Shaders {
+        form: text_of(&exported.code),
+        stages: exported.stages.iter().map(|(name, code)| (name.key().to_string(), text_of(code))).collect(),
+    }
+}
+
 /// Largest |exported − filter| / max(1, |filter|) over all channels.
 fn compare(expr: &Expr, scene: &Scene, radius: u32, format: OutputFormat) -> f64 {
     let exported = export(expr, Target::Wgsl, format).unwrap();
@@ -65,7 +77,7 @@ fn compare(expr: &Expr, scene: &Scene, radius: u32, format: OutputFormat) -> f64
     let manifest = serde_json::to_value(&exported.manifest).unwrap();
     let gpu = gpu(); // first: it quiets Mesa's device-select layer for the whole process
     let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
-    let shaders = host::Shaders { form: wgsl.clone(), prepass: None, spread: None, guide: None, planefit: None };
+    let shaders = host::Shaders { form: wgsl.clone(), stages: HashMap::new() };
     let ours = host::filter(&device, &queue, &shaders, &manifest, &frame_of(scene, &manifest), radius)
         .unwrap_or_else(|e| panic!("the exported shader of `{expr}` fails in plain wgpu: {e}"));
 
@@ -167,12 +179,8 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         let pipeline: filterjit::pipeline::FilterPipeline = text.parse().unwrap();
         let exported = export_pipeline(&expr, &pipeline, Target::Wgsl, OutputFormat::Rgba32float).unwrap();
         let manifest = serde_json::to_value(&exported.manifest).unwrap();
-        let text_of = |code: &Code| match code {
-            Code::Text(t) => t.clone(),
-            Code::SpirV(_) => panic!("WGSL is text"),
-        };
         assert_eq!(
-            exported.prepass.is_some(),
+            exported.stage(StageName::Prepass).is_some(),
             !["atrous=2", "atrous3x3=3", "window", "atrous=2,planefit=2"].contains(&text),
             "{text}: a pre-pass exactly where the pipeline has one"
         );
@@ -180,23 +188,29 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         for b in exported.manifest.bindings.iter().filter(|b| measures.contains(&b.role.as_str())) {
             assert_eq!((b.image, b.scale_index), (Some("local"), None), "{b:?}: read raw from the pre-pass's `local`");
         }
-        assert_eq!(exported.spread.is_some(), text.contains("keep"), "{text}: a spread exactly where it keeps");
+        assert_eq!(
+            exported.stage(StageName::Spread).is_some(),
+            text.contains("keep"),
+            "{text}: a spread exactly where it keeps"
+        );
         let guided = expr.features().contains(&filterjit::lang::Feature::Guide);
-        assert_eq!(exported.guide.is_some(), guided, "{expr}: a guide stage exactly where the weight reads it");
-        let filters = match (text.contains("keep"), exported.prepass.is_some()) {
+        assert_eq!(
+            exported.stage(StageName::Guide).is_some(),
+            guided,
+            "{expr}: a guide stage exactly where the weight reads it"
+        );
+        let filters = match (text.contains("keep"), exported.stage(StageName::Prepass).is_some()) {
             (true, _) => "kept",
             (false, true) => "prepared",
             (false, false) => "color",
         };
         assert_eq!(manifest["filters"], filters, "{text}: the image the form's first pass filters");
-        let shaders = host::Shaders {
-            form: text_of(&exported.code),
-            prepass: exported.prepass.as_ref().map(text_of),
-            spread: exported.spread.as_ref().map(text_of),
-            guide: exported.guide.as_ref().map(text_of),
-            planefit: exported.planefit.as_ref().map(text_of),
-        };
-        assert_eq!(exported.planefit.is_some(), text.contains("planefit"), "{text}: planefit exactly where it fits");
+        let shaders = shaders_of(&exported);
+        assert_eq!(
+            exported.stage(StageName::PlaneFit).is_some(),
+            text.contains("planefit"),
+            "{text}: planefit exactly where it fits"
+        );
         let mut frame = frame_of(&scene, &manifest);
         frame
             .inputs
@@ -218,7 +232,11 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
             assert!(bits(&one.color) == bits(&staged.color), "{text}, run {run}: one submission changed the image");
             assert_eq!(one.flags, staged.flags, "{text}, run {run}");
         }
-        assert_eq!(frame_buffers.prepass_time().is_some(), exported.prepass.is_some(), "{text}: the pre-pass timed");
+        assert_eq!(
+            frame_buffers.prepass_time().is_some(),
+            exported.stage(StageName::Prepass).is_some(),
+            "{text}: the pre-pass timed"
+        );
         assert_eq!(frame_buffers.guide_time().is_some(), guided, "{text}: the guide timed where it ran");
         let error = ours
             .iter()
@@ -302,9 +320,7 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
             let exported =
                 filterjit::export::export_pipeline(expr, &pipeline, target, OutputFormat::Rgba16float).unwrap();
             let shaders = std::iter::once(("", &exported.code))
-                .chain(exported.prepass.as_ref().map(|p| ("prepass", p)))
-                .chain(exported.spread.as_ref().map(|p| ("spread", p)))
-                .chain(exported.planefit.as_ref().map(|p| ("planefit", p)));
+                .chain(exported.stages.iter().map(|(name, code)| (name.key(), code)));
             for (stage, code) in shaders {
                 let file = dir.join(format!("e{k}{stage}.{}", target.extension()));
                 std::fs::write(&file, code.to_bytes()).unwrap();
@@ -325,4 +341,103 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
         }
     }
     eprintln!("{} expressions (and {named} as a whole pipeline) × GLSL, HLSL, SPIR-V passed glslangValidator / spirv-val; MSL generated only (no Metal compiler on Linux)", exprs.len());
+}
+
+/// A temporal pipeline exported: the plain host keeps the manifest's
+/// `history` between frames and gives, frame after frame, what
+/// `Gpu::filter_frame` gives with its `TemporalState`; a reset host starts
+/// the sequence again.
+#[test]
+fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
+    use filterjit::export::export_pipeline;
+    use filterjit::gpu::TemporalState;
+    use filterjit::jit::{KernelKind, LowerOptions, Shape};
+    let scenes =
+        crate::temporal::frames(&crate::temporal::committed().join("noisy"), &crate::temporal::temporal_request());
+    let cases = [
+        // SVGF's pipeline: the first pass fed back, the temporal variance carried over the passes.
+        (
+            "demodulate,temporal=0.2,feedback=1,atrous=3",
+            "exp(-(distanceMax(color) / (4 * sqrt(temporalVariance) + 0.001) + distance2(normal) / historyLength))",
+            0,
+        ),
+        ("outliers=2,keep,demodulate,temporal=0.1,feedback=0,clamp=2,antilag=3,window", "exp(-distance2(color))", 2),
+        ("temporal=0.5,feedback=2,atrous=2,planefit=2", "exp(-(distance2(color) + historyLength))", 0),
+        ("@temporal", "", 0),
+    ];
+    let gpu = gpu();
+    let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
+    for (text, weight, radius) in cases {
+        let (expr, pipeline) = match text.strip_prefix('@') {
+            Some(_) => {
+                let resolved = corpus::resolve_with_pipeline(text).unwrap();
+                (resolved.expr, resolved.pipeline.unwrap())
+            }
+            None => (parse_expr(weight).unwrap(), text.parse().unwrap()),
+        };
+        let exported = export_pipeline(&expr, &pipeline, Target::Wgsl, OutputFormat::Rgba32float).unwrap();
+        let manifest = serde_json::to_value(&exported.manifest).unwrap();
+        assert!(exported.stage(StageName::Temporal).is_some() && exported.stage(StageName::TemporalVariance).is_some());
+        assert_eq!(manifest["filters"], "blend", "{text}: the form filters the blend");
+        assert_eq!(manifest["temporal"]["first_frame"]["history"], 0.0, "{text}");
+        let feedback = pipeline.temporal.unwrap().feedback;
+        let fed_back = &manifest["history"][0];
+        assert_eq!(fed_back["image"], "history");
+        match feedback {
+            0 => assert_eq!((fed_back["from"].as_str(), fed_back.get("after_pass")), (Some("blend"), None)),
+            k => assert_eq!(fed_back["after_pass"], k as u64 - 1, "{text}: kept right after the pass fed back"),
+        }
+        let shaders = shaders_of(&exported);
+        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&pipeline)).unwrap();
+        let mut state = TemporalState::new();
+        let mut sequence = host::Sequence::new();
+        let frame_of_scene = |scene: &Scene| {
+            let mut frame = frame_of(scene, &manifest);
+            let rgba = |v: &[f32; 3]| [v[0], v[1], v[2], 0.0];
+            let motion = scene.motion.as_ref().unwrap();
+            frame.inputs.insert("albedo".into(), scene.albedo.as_ref().unwrap().iter().map(rgba).collect());
+            frame.inputs.insert("geometry".into(), motion.surface.clone());
+            frame.inputs.insert("motion".into(), motion.vectors.iter().map(|v| [v[0], v[1], 0.0, 0.0]).collect());
+            if !frame.inputs.contains_key("normal") {
+                frame
+                    .inputs
+                    .insert("normal".into(), scene.feature(Feature::Normal).unwrap().iter().map(rgba).collect());
+            }
+            frame
+        };
+        let mut last = Vec::new();
+        for (k, scene) in scenes.iter().enumerate() {
+            let ours =
+                host::filter_frame(&device, &queue, &shaders, &manifest, &frame_of_scene(scene), radius, &mut sequence)
+                    .unwrap_or_else(|e| {
+                        panic!("the exported `{text}` pipeline fails in plain wgpu, frame {}: {e}", k + 1)
+                    });
+            assert_eq!(sequence.frames as usize, k + 1, "{text}: the host counts its frames");
+            let mut buffers = SceneBuffers::for_frame(&gpu, scene, &pipeline).unwrap();
+            let filtered = gpu.filter_frame(&kernel, &mut buffers, scene, radius, &mut state).unwrap().rgb();
+            let error = relative_difference(&ours, &filtered);
+            eprintln!("{text}, frame {}: max relative difference {error:.2e}", k + 1);
+            // The same kernels on the same inputs: the same bits.
+            assert!(error == 0.0, "{text}, frame {}: the export differs from filter by {error:e}", k + 1);
+            last = ours;
+        }
+        // The history made the last frame; after a reset, the same frame comes out as a sequence's first.
+        sequence.reset();
+        let scene = scenes.last().unwrap();
+        let again =
+            host::filter_frame(&device, &queue, &shaders, &manifest, &frame_of_scene(scene), radius, &mut sequence)
+                .unwrap();
+        let mut buffers = SceneBuffers::for_frame(&gpu, scene, &pipeline).unwrap();
+        let alone = gpu.filter_frame(&kernel, &mut buffers, scene, radius, &mut TemporalState::new()).unwrap().rgb();
+        assert!(relative_difference(&again, &alone) == 0.0, "{text}: a reset host starts the sequence again");
+        assert!(relative_difference(&again, &last.iter().map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>()) > 1e-3);
+    }
+}
+
+/// Largest |a − b| / max(1, |b|) over the colour channels.
+fn relative_difference(a: &[[f32; 4]], b: &[[f32; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(a, b)| (0..3).map(move |c| (a[c] as f64 - b[c] as f64).abs() / (b[c] as f64).abs().max(1.0)))
+        .fold(0.0, f64::max)
 }

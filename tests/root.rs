@@ -13,6 +13,7 @@ mod flip;
 mod gpu_vs_cpu;
 mod lang;
 mod pipeline;
+mod readme;
 mod render;
 mod report;
 mod scenes;

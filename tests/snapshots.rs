@@ -130,12 +130,31 @@ fn exported_shaders_match_snapshots() {
         let exported =
             filterjit::export::export_pipeline(&guided, &pipeline, Target::Wgsl, jit::OutputFormat::Rgba16float)
                 .unwrap();
-        let Code::Text(pass) = exported.code else { panic!("WGSL is text") };
+        let Code::Text(pass) = &exported.code else { panic!("WGSL is text") };
         insta::assert_snapshot!("export__guided.atrous.wgsl", pass);
-        let Some(Code::Text(text)) = exported.guide else { panic!("a WGSL guide stage") };
+        let Some(Code::Text(text)) = exported.stage(filterjit::export::StageName::Guide) else {
+            panic!("a WGSL guide stage")
+        };
         insta::assert_snapshot!("export__guide.wgsl", text);
         insta::assert_snapshot!(
             "export__guided.atrous.wgsl.json",
+            serde_json::to_string_pretty(&exported.manifest).unwrap()
+        );
+        // The shipped temporal filter: the temporal stage's two shaders, what a sequence keeps.
+        let temporal = corpus::resolve_with_pipeline("@temporal").unwrap();
+        let pipeline = temporal.pipeline.expect("shipped with its pipeline");
+        let exported = filterjit::export::export_filter(
+            &temporal.expr,
+            &pipeline,
+            None,
+            Target::Wgsl,
+            jit::OutputFormat::Rgba16float,
+        )
+        .unwrap();
+        let Code::Text(pass) = &exported.code else { panic!("WGSL is text") };
+        insta::assert_snapshot!("export__temporal.atrous.wgsl", pass);
+        insta::assert_snapshot!(
+            "export__temporal.atrous.wgsl.json",
             serde_json::to_string_pretty(&exported.manifest).unwrap()
         );
     });

@@ -9,15 +9,19 @@
 //
 // Per frame, as the manifest's `order` says: the pre-pass once (where the
 // pipeline has one), the spread's dispatches (where it keeps what the outlier
-// clamp removed), the guide's (where the weight reads `guide`), then the
-// form's shader `passes` times, its colour and carried variance ping-ponged
-// between textures, then planefit's (where the pipeline has `planefit`).
+// clamp removed), the temporal stage's two (where the pipeline has
+// `temporal=A`: the blend with the history, then its variance), the guide's
+// (where the weight reads `guide`), then the form's shader `passes` times,
+// its colour and carried variance ping-ponged between textures, then
+// planefit's (where the pipeline has `planefit`). A temporal filter keeps the
+// manifest's `history` from one `run` to the next: frames of a sequence in
+// order; `reset()` starts a new sequence.
 
 /** The manifest layout this module reads (filterjit's `export::MANIFEST_VERSION`). */
-export const MANIFEST_VERSION = 4;
+export const MANIFEST_VERSION = 5;
 
 /** The shaders a manifest may have besides the form's, in the order they run. */
-const STAGES = ["prepass", "spread", "guide", "planefit"];
+const STAGES = ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit"];
 
 const WRITTEN = GPUTextureUsage.STORAGE_BINDING | GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_SRC;
 
@@ -98,6 +102,15 @@ export class Filter {
     this.compiled = Promise.all(compiled);
     this.textures = new Map();
     this.uniforms = new Map();
+    /** What the frame before kept (`manifest.history`), by image name. */
+    this.kept = new Map();
+    /** Frames run since the sequence started. */
+    this.frames = 0;
+  }
+
+  /** Forget the history: the next `run` is a sequence's first frame. */
+  reset() {
+    this.frames = 0;
   }
 
   /** Every image the caller provides, by role: `color`, `albedo` where the pipeline demodulates, and the features. */
@@ -109,6 +122,8 @@ export class Filter {
     for (const b of [...(this.manifest.spread?.bindings ?? []), ...(this.manifest.planefit?.bindings ?? [])]) {
       if (b.role === "normal") roles.add("normal");
     }
+    // The temporal stage reads the frame's surface, albedo and motion vectors.
+    if (this.manifest.temporal) for (const role of ["geometry", "albedo", "motion"]) roles.add(role);
     return [...roles];
   }
 
@@ -123,7 +138,9 @@ export class Filter {
     const { width, height } = frame;
     const own = !encoder;
     encoder ??= this.device.createCommandEncoder({ label: "filterjit" });
-    const images = new Map(Object.entries(frame.textures).map(([role, texture]) => [role, texture.createView()]));
+    // Every image by name, its texture beside its view (what a sequence keeps is copied from the texture).
+    const sources = new Map(Object.entries(frame.textures));
+    const images = new Map([...sources].map(([role, texture]) => [role, texture.createView()]));
     for (const role of this.inputs) {
       if (!images.has(role)) {
         throw new FilterError(`the filter reads \`${role}\` and no texture was given for it (inputs: ${this.inputs.join(", ")})`);
@@ -131,7 +148,39 @@ export class Filter {
     }
     // Not read unless the pipeline demodulates; any texture will do.
     if (!images.has("albedo")) images.set("albedo", images.get("color"));
-    const target = (name, format) => images.set(name, this.texture(name, format, width, height).createView());
+    const target = (name, format) => {
+      const texture = this.texture(name, format, width, height);
+      sources.set(name, texture);
+      images.set(name, texture.createView());
+    };
+    // What the frame before kept; a sequence's first frame (or one of another size) binds
+    // stand-ins, which the blend does not read.
+    const history = this.manifest.history ?? [];
+    const first = this.frames === 0 || this.keptSize !== `${width}x${height}`;
+    for (const { image } of history) {
+      const kept = first ? this.texture("unread", "rgba32float", width, height) : this.kept.get(image);
+      images.set(image, kept.createView());
+    }
+    const keep = (pass) => {
+      for (const k of history.filter((k) => k.after_pass === pass)) {
+        const source = sources.get(k.from);
+        if (!source) throw new FilterError(`the history keeps \`${k.from}\`, which no stage wrote and no texture was given for`);
+        const key = `${k.image}/${source.format}`;
+        let into = this.kept.get(key);
+        if (into?.width !== width || into?.height !== height) {
+          into?.destroy();
+          into = this.device.createTexture({
+            label: `filterjit kept ${k.image}`,
+            size: [width, height],
+            format: source.format,
+            usage: GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_DST,
+          });
+          this.kept.set(key, into);
+        }
+        this.kept.set(k.image, into);
+        encoder.copyTextureToTexture({ texture: source }, { texture: into }, [width, height]);
+      }
+    };
     const workgroups = [Math.ceil(width / this.workgroup[0]), Math.ceil(height / this.workgroup[1])];
     let dispatches = 0;
     const dispatch = (name, values, roles) => {
@@ -163,16 +212,19 @@ export class Filter {
     const sequence = (name) => {
       const stage = this.manifest[name];
       if (!stage) return false;
+      // A sequence's first frame replaces some values (the temporal stage's `history`).
+      const values = { ...stage.uniform_values, ...(first ? stage.first_frame : {}) };
       for (const step of stage.sequence) {
         for (const b of storage(stage)) target(step.images[b.role] ?? b.role, b.format);
-        dispatch(name, { ...stage.uniform_values, ...step.uniform_values }, step.images);
+        dispatch(name, { ...values, ...step.uniform_values }, step.images);
       }
       return true;
     };
-    sequence("spread");
-    sequence("guide");
+    for (const name of ["spread", "temporal", "temporal_variance", "guide"]) sequence(name);
     let colour = this.manifest.filters;
-    let variance = "colorVariance";
+    // The variance the passes carry, where the weight reads one: pass 0 binds the frame's.
+    const carried = this.manifest.carries ?? "colorVariance";
+    let variance = carried;
     const passes = this.manifest.passes;
     const radius = frame.radius ?? this.manifest.radius ?? 0;
     for (let k = 0; k < passes; k++) {
@@ -182,13 +234,20 @@ export class Filter {
       const values = { radius, step: 2 ** k, level: k, last: k + 1 === passes ? 1 : 0 };
       // The guide is the guide stage's in pass 0, the pass's own colour after.
       const guided = k === 0 ? "guide" : colour;
-      dispatch("form", values, { color: colour, output: out, colorVariance: variance, variance_out: varianceOut, guide: guided });
+      dispatch("form", values, { color: colour, output: out, [carried]: variance, variance_out: varianceOut, guide: guided });
+      // The pass the temporal stage feeds back, kept before a later pass writes its texture again.
+      keep(k);
       colour = out;
       variance = varianceOut;
     }
     // `planefit` after the form: `filtered` is the last pass's output; it writes the frame.
     images.set("filtered", images.get(colour));
     if (sequence("planefit")) colour = "fitted";
+    keep(undefined);
+    if (history.length > 0) {
+      this.frames = first ? 1 : this.frames + 1;
+      this.keptSize = `${width}x${height}`;
+    }
     if (own) this.device.queue.submit([encoder.finish()]);
     return this.texture(colour, this.manifest.output_format, width, height);
   }
@@ -210,7 +269,8 @@ export class Filter {
         label: role,
         size: [width, height],
         format: "rgba32float",
-        usage: GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_DST,
+        // COPY_SRC: a sequence keeps its albedo and geometry for the next frame.
+        usage: GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_DST | GPUTextureUsage.COPY_SRC,
       });
       this.device.queue.writeTexture({ texture }, texels, { bytesPerRow: 16 * width, rowsPerImage: height }, [width, height]);
       textures[role] = texture;
@@ -288,6 +348,8 @@ export class Filter {
 
   /** Free the textures and buffers this filter made. */
   destroy() {
+    for (const texture of new Set(this.kept.values())) texture.destroy();
+    this.kept.clear();
     for (const texture of this.textures.values()) texture.destroy();
     for (const buffer of this.uniforms.values()) buffer.destroy();
     this.textures.clear();

@@ -1,4 +1,4 @@
-# Denoise a Mitsuba 3 render in the same process (README, "From Python").
+# Denoise a Mitsuba 3 render in the same process (docs/PYTHON.md).
 import mitsuba as mi, numpy as np, filterjit
 
 mi.set_variant("llvm_ad_rgb")

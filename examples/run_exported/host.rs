@@ -5,14 +5,23 @@
 //!
 //! Per frame, as the manifest's `order` says: the pre-pass shader once (where
 //! the pipeline has one), the spread shader's `sequence` (where it keeps what
-//! the clamp removed), the guide shader (where the weight reads `guide`),
-//! then the form's shader `passes` times (à-trous: pass
-//! k with step 2^k, colour and carried variance ping-ponged between textures),
-//! then the planefit shader (where the pipeline has `planefit`).
+//! the clamp removed), the temporal stage's two shaders (where the pipeline
+//! has `temporal=A`: the blend with the history, then its variance), the
+//! guide shader (where the weight reads `guide`), then the form's shader
+//! `passes` times (à-trous: pass k with step 2^k, colour and carried
+//! variance ping-ponged between textures), then the planefit shader (where
+//! the pipeline has `planefit`). A sequence keeps the manifest's `history`
+//! from frame to frame ([`Sequence`]).
 
 use std::collections::HashMap;
 
 use serde_json::Value;
+
+/// The layout of the manifest this host reads (filterjit's `export::MANIFEST_VERSION`).
+const MANIFEST_VERSION: u64 = 5;
+
+/// The stages besides the form's that run before it, in order.
+const BEFORE_THE_FORM: [&str; 4] = ["spread", "temporal", "temporal_variance", "guide"];
 
 /// One frame of an engine's G-buffer, as plain arrays (row-major, top row first).
 pub struct Frame {
@@ -20,21 +29,42 @@ pub struct Frame {
     pub height: u32,
     /// Noisy linear RGB colour; alpha is passed through.
     pub color: Vec<[f32; 4]>,
-    /// The inputs by the manifest's `role` (`normal`, `wpVariance`, …, and
-    /// `albedo` for a pre-pass that demodulates), as the engine has them.
+    /// The inputs by the manifest's `role` (`normal`, `wpVariance`, …;
+    /// `albedo` for a pre-pass that demodulates; `geometry`, `motion` and
+    /// `albedo` for the temporal stage), as the engine has them.
     pub inputs: HashMap<String, Vec<[f32; 4]>>,
     /// Normalisation scale per role; 1 when absent (textures already normalised).
     pub scales: HashMap<String, f32>,
 }
 
-/// The exported shaders: the form's, and the pre-pass's and the spread's
-/// where the manifest has them.
+/// The exported shaders: the form's, and the other stages' by their key in
+/// the manifest (`prepass`, `spread`, `temporal`, …) where it has them.
 pub struct Shaders {
     pub form: String,
-    pub prepass: Option<String>,
-    pub spread: Option<String>,
-    pub guide: Option<String>,
-    pub planefit: Option<String>,
+    pub stages: HashMap<String, String>,
+}
+
+/// What a sequence keeps on the device from one frame for the next: the
+/// images the manifest's `history` names. A new one (or [`Sequence::reset`])
+/// starts a sequence; a frame of another size starts one too.
+#[derive(Default)]
+pub struct Sequence {
+    kept: HashMap<String, wgpu::Texture>,
+    size: (u32, u32),
+    /// Frames filtered since the sequence started.
+    pub frames: u32,
+}
+
+impl Sequence {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Forget the history: the next frame is a sequence's first (a cut).
+    #[allow(dead_code)] // the example filters one sequence; tests/export.rs and engines cut
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
 }
 
 /// A device on the adapter wgpu prefers (`WGPU_BACKEND` narrows the choice).
@@ -79,9 +109,11 @@ impl Images<'_> {
         })
     }
 
-    /// Upload `texels` as an RGBA32F sampled texture called `name`.
+    /// Upload `texels` as an RGBA32F sampled texture called `name` (that a
+    /// sequence may copy to keep it).
     fn upload(&mut self, name: &str, texels: &[[f32; 4]]) {
-        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        let usage =
+            wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC;
         let texture = self.texture(name, wgpu::TextureFormat::Rgba32Float, usage);
         self.queue.write_texture(
             wgpu::TexelCopyTextureInfo {
@@ -109,6 +141,29 @@ impl Images<'_> {
         let texture = self.texture(name, format, usage);
         let view = texture.create_view(&Default::default());
         self.views.insert(name.to_string(), (texture, view));
+    }
+
+    /// Bind `texture` as the image `name`.
+    fn insert(&mut self, name: &str, texture: wgpu::Texture) {
+        let view = texture.create_view(&Default::default());
+        self.views.insert(name.to_string(), (texture, view));
+    }
+
+    /// Record a copy of the image `from` into a new texture of its format,
+    /// which becomes the next frame's `into`.
+    fn keep(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        from: &str,
+        into: &str,
+        kept: &mut HashMap<String, wgpu::Texture>,
+    ) -> Result<(), String> {
+        let (source, _) = self.views.get(from).ok_or_else(|| format!("no image `{from}` to keep as `{into}`"))?;
+        let usage = wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST;
+        let texture = self.texture(into, source.format(), usage);
+        encoder.copy_texture_to_texture(source.as_image_copy(), texture.as_image_copy(), self.extent);
+        kept.insert(into.to_string(), texture);
+        Ok(())
     }
 
     fn view(&self, name: &str) -> Result<&wgpu::TextureView, String> {
@@ -264,21 +319,25 @@ fn record(
 /// uniform takes the stage's values, then its own. `filtered` is the image
 /// the name `filtered` stands for (the form's last output). Whether it ran.
 #[allow(clippy::too_many_arguments)]
-fn sequence(
+fn run_stage(
     images: &mut Images<'_>,
     encoder: &mut wgpu::CommandEncoder,
     manifest: &Value,
     name: &str,
-    shader: &Option<String>,
+    shader: Option<&str>,
     workgroup: [u32; 2],
     frame: &Frame,
     filtered: Option<&str>,
+    first: bool,
 ) -> Result<bool, String> {
     let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { return Ok(false) };
-    let wgsl = shader.as_deref().ok_or(format!("the manifest has a {name} stage, and no {name} shader was given"))?;
+    let wgsl = shader.ok_or(format!("the manifest has a {name} stage, and no {name} shader was given"))?;
+    let none = Value::Object(Default::default());
+    // A sequence's first frame replaces some of the stage's values (the temporal stage's `history`).
+    let first_frame = if first { stage.get("first_frame").unwrap_or(&none) } else { &none };
     for step in array(stage, "sequence")? {
         let mut dispatch = Dispatch { values: HashMap::new(), images: HashMap::new() };
-        for values in [field(stage, "uniform_values")?, field(step, "uniform_values")?] {
+        for values in [field(stage, "uniform_values")?, first_frame, field(step, "uniform_values")?] {
             for (name, value) in values.as_object().ok_or("uniform_values")? {
                 dispatch.values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
             }
@@ -301,8 +360,8 @@ fn sequence(
     Ok(true)
 }
 
-/// Filter `frame` with the exported `shaders` described by `manifest`;
-/// returns the filtered frame's texels as f32 RGBA.
+/// Filter `frame` with the exported `shaders` described by `manifest`, as
+/// a frame of its own; returns the filtered frame's texels as f32 RGBA.
 pub fn filter(
     device: &wgpu::Device,
     queue: &wgpu::Queue,
@@ -311,9 +370,26 @@ pub fn filter(
     frame: &Frame,
     radius: u32,
 ) -> Result<Vec<[f32; 4]>, String> {
-    // The layout this host reads (filterjit's export::MANIFEST_VERSION).
-    if manifest.get("version").and_then(Value::as_u64) != Some(4) {
-        return Err(format!("manifest version {:?}: this host reads version 4", manifest.get("version")));
+    filter_frame(device, queue, shaders, manifest, frame, radius, &mut Sequence::new())
+}
+
+/// Filter `frame`, the next of `sequence`: the temporal stage blends it
+/// with what the frames before left; what the manifest's `history` names is
+/// kept for the next.
+pub fn filter_frame(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    shaders: &Shaders,
+    manifest: &Value,
+    frame: &Frame,
+    radius: u32,
+    sequence: &mut Sequence,
+) -> Result<Vec<[f32; 4]>, String> {
+    if manifest.get("version").and_then(Value::as_u64) != Some(MANIFEST_VERSION) {
+        return Err(format!(
+            "manifest version {:?}: this host reads version {MANIFEST_VERSION}",
+            manifest.get("version")
+        ));
     }
     let (width, height) = (frame.width, frame.height);
     let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
@@ -329,12 +405,29 @@ pub fn filter(
     for (role, texels) in &frame.inputs {
         images.upload(role, texels);
     }
+    // What the frame before kept; on a sequence's first frame, textures the blend does not read.
+    let first = sequence.frames == 0 || sequence.size != (width, height);
+    let history = manifest.get("history").and_then(Value::as_array).cloned().unwrap_or_default();
+    for kept in &history {
+        let image = field(kept, "image")?.as_str().ok_or("a kept image's name")?;
+        match sequence.kept.get(image).filter(|_| !first) {
+            Some(texture) => images.insert(image, texture.clone()),
+            None => images.upload(image, &vec![[0.0; 4]; (width * height) as usize]),
+        }
+    }
+    let mut kept = HashMap::new();
+    let keep_after = |pass: Option<u64>| {
+        history.iter().filter(move |k| k.get("after_pass").and_then(Value::as_u64) == pass).map(|k| {
+            (k["from"].as_str().unwrap_or_default().to_string(), k["image"].as_str().unwrap_or_default().to_string())
+        })
+    };
+    let stage_shader = |name: &str| shaders.stages.get(name).map(String::as_str);
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let mut encoder = device.create_command_encoder(&Default::default());
 
     // The pre-pass, once: it writes the colour the form filters and the modulation.
     if let Some(stage) = manifest.get("prepass").filter(|p| !p.is_null()) {
-        let wgsl = shaders.prepass.as_deref().ok_or("the manifest has a pre-pass, and no pre-pass shader was given")?;
+        let wgsl = stage_shader("prepass").ok_or("the manifest has a pre-pass, and no pre-pass shader was given")?;
         // Everything it writes (`prepared`, `modulation`, what the outlier rule measured) is read later by role.
         for b in array(stage, "bindings")?.iter().filter(|b| b["kind"] == "storage_texture") {
             images.target(b["role"].as_str().ok_or("binding role")?, texel_format(b)?);
@@ -352,22 +445,24 @@ pub fn filter(
         record(&images, &mut encoder, wgsl, stage, workgroup, frame, &dispatch)?;
     }
 
-    // The spread, then the guide, dispatch by dispatch: each names the image
-    // every role binds; its uniform takes the stage's values, then its own.
-    for (name, shader) in [("spread", &shaders.spread), ("guide", &shaders.guide)] {
-        sequence(&mut images, &mut encoder, manifest, name, shader, workgroup, frame, None)?;
+    // The spread, the temporal stage, then the guide, dispatch by dispatch:
+    // each names the image every role binds; its uniform takes the stage's
+    // values, then its own.
+    for name in BEFORE_THE_FORM {
+        run_stage(&mut images, &mut encoder, manifest, name, stage_shader(name), workgroup, frame, None, first)?;
     }
     // The form's first pass filters what the manifest names.
     let mut colour = field(manifest, "filters")?.as_str().ok_or("`filters` is not a name")?.to_string();
 
     // The form, `passes` times; pass k reads pass k-1's image and variance.
     let passes = field(manifest, "passes")?.as_u64().ok_or("passes")? as u32;
-    let carries = array(manifest, "bindings")?.iter().any(|b| b["role"] == "variance_out");
-    let mut variance = "colorVariance".to_string();
+    // The variance the passes carry, where the weight reads one: pass 0 binds the frame's.
+    let carried = manifest.get("carries").and_then(Value::as_str);
+    let mut variance = carried.unwrap_or("colorVariance").to_string();
     for k in 0..passes {
         let (out, variance_out) = (format!("image{}", k % 2), format!("variance{}", k % 2));
         images.target(&out, output_format);
-        if carries {
+        if carried.is_some() {
             images.target(&variance_out, wgpu::TextureFormat::R32Float);
         }
         let values: HashMap<&str, f64> = [
@@ -377,23 +472,44 @@ pub fn filter(
             ("last", if k + 1 == passes { 1.0 } else { 0.0 }),
         ]
         .into();
-        let roles = [
+        let mut roles: HashMap<&str, String> = [
             ("color", colour.clone()),
             ("output", out.clone()),
-            ("colorVariance", variance.clone()),
             ("variance_out", variance_out.clone()),
             // The guide stage's in pass 0, the pass's own colour after.
             ("guide", if k == 0 { "guide".to_string() } else { colour.clone() }),
-        ];
-        let dispatch = Dispatch { values, images: roles.into() };
+        ]
+        .into();
+        if let Some(role) = carried {
+            roles.insert(role, variance.clone());
+        }
+        let dispatch = Dispatch { values, images: roles };
         record(&images, &mut encoder, &shaders.form, manifest, workgroup, frame, &dispatch)?;
+        // The pass the temporal stage feeds back, kept before a later pass writes its texture again.
+        for (from, into) in keep_after(Some(k as u64)) {
+            images.keep(&mut encoder, &from, &into, &mut kept)?;
+        }
         // Pass k+1 reads what pass k wrote and writes fresh textures (`target` replaces by name).
         colour = out;
         variance = variance_out;
     }
     // `planefit` after the form: its `filtered` is the last pass's output; it writes the frame.
-    if sequence(&mut images, &mut encoder, manifest, "planefit", &shaders.planefit, workgroup, frame, Some(&colour))? {
+    if run_stage(
+        &mut images,
+        &mut encoder,
+        manifest,
+        "planefit",
+        stage_shader("planefit"),
+        workgroup,
+        frame,
+        Some(&colour),
+        first,
+    )? {
         colour = "fitted".to_string();
+    }
+    // What the next frame reads of this one.
+    for (from, into) in keep_after(None) {
+        images.keep(&mut encoder, &from, &into, &mut kept)?;
     }
 
     // Copy the last image out (rows padded to 256 bytes).
@@ -422,6 +538,9 @@ pub fn filter(
     queue.submit([encoder.finish()]);
     if let Some(error) = pollster::block_on(scope.pop()) {
         return Err(error.to_string());
+    }
+    if !history.is_empty() {
+        *sequence = Sequence { kept, size: (width, height), frames: if first { 1 } else { sequence.frames + 1 } };
     }
     let slice = staging.slice(..);
     slice.map_async(wgpu::MapMode::Read, |_| {});

@@ -1,19 +1,23 @@
 //! Runs a filter exported by `filterjit export --target wgsl` in a small wgpu
 //! program, the way an engine would (see README.md beside this file): its
-//! pre-pass and à-trous passes too, where the filter's pipeline has them.
+//! pre-pass, temporal stage and à-trous passes too, where the filter's
+//! pipeline has them.
 //!
 //!     cargo run --release --example run_exported -- SHADER.wgsl SCENE [RADIUS] OUT.png
+//!     cargo run --release --example run_exported -- SHADER.wgsl SEQ_DIR [RADIUS] OUT_DIR
 //!
 //! `host.rs` is the integration: plain wgpu and the manifest, nothing from
 //! filterjit. This file only stands in for the engine's G-buffer: it loads a
-//! filterjit scene (an EXR dataset) to have colour and features to feed in.
+//! filterjit scene (an EXR dataset), or a sequence's frames in order, to have
+//! colour, features and motion vectors to feed in.
 
 mod host;
 
 use std::collections::HashMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use filterjit::lang::{Feature, ScalarVar};
+use filterjit::scene::{Request, Scene};
 
 fn main() -> Result<(), String> {
     // Mesa's Vulkan device-select layer looks for a display and complains
@@ -22,16 +26,27 @@ fn main() -> Result<(), String> {
         std::env::set_var("NODEVICE_SELECT", "1");
     }
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let (shader, scene, radius, out) = match args.as_slice() {
-        [shader, scene, out] => (shader, scene, 5, out),
-        [shader, scene, radius, out] => (shader, scene, radius.parse().map_err(|_| "RADIUS is a number")?, out),
-        _ => return Err("usage: run_exported SHADER.wgsl SCENE [RADIUS] OUT.png".into()),
+    let (shader, input, radius, out) = match args.as_slice() {
+        [shader, input, out] => (shader, input, 5, out),
+        [shader, input, radius, out] => (shader, input, radius.parse().map_err(|_| "RADIUS is a number")?, out),
+        _ => return Err("usage: run_exported SHADER.wgsl SCENE|SEQ_DIR [RADIUS] OUT.png|OUT_DIR".into()),
     };
     let wgsl = std::fs::read_to_string(shader).map_err(|e| format!("{shader}: {e}"))?;
     let manifest_path = format!("{shader}.json");
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&manifest_path).map_err(|e| format!("{manifest_path}: {e}"))?)
             .map_err(|e| format!("{manifest_path}: {e}"))?;
+
+    // The other stages' shaders (the pre-pass's, the spread's…), where the pipeline has them, are files beside the form's.
+    let mut stages = HashMap::new();
+    for name in ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit"] {
+        let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { continue };
+        let file = Path::new(shader).with_file_name(stage["file"].as_str().ok_or("a stage's file")?);
+        stages
+            .insert(name.to_string(), std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?);
+    }
+    let temporal = stages.contains_key("temporal");
+    let shaders = host::Shaders { form: wgsl, stages };
 
     // The engine's G-buffer stand-in: every input the manifest names.
     let roles: Vec<String> = manifest["bindings"]
@@ -41,7 +56,7 @@ fn main() -> Result<(), String> {
         .filter(|b| b.get("scale_index").is_some())
         .filter_map(|b| b["role"].as_str().map(str::to_string))
         .collect();
-    let mut request = filterjit::scene::Request { reference: false, ..Default::default() };
+    let mut request = Request { reference: false, motion: temporal, ..Default::default() };
     for role in &roles {
         if let Some(f) = Feature::from_name(role) {
             request.features.insert(f);
@@ -49,13 +64,47 @@ fn main() -> Result<(), String> {
             request.variances.insert(v);
         }
     }
-    // A pre-pass that demodulates divides by the raw albedo.
+    // A pre-pass that demodulates divides by the raw albedo; the temporal stage compares it.
     let prepass = manifest.get("prepass").filter(|p| !p.is_null());
-    request.albedo = prepass.is_some_and(|p| p["uniform_values"]["stages"].as_f64().unwrap_or(0.0) as u32 & 2 != 0);
-    let scene = filterjit::scene::load(&PathBuf::from(scene), &request).map_err(|e| e.to_string())?;
+    request.albedo =
+        temporal || prepass.is_some_and(|p| p["uniform_values"]["stages"].as_f64().unwrap_or(0.0) as u32 & 2 != 0);
+    if manifest.get("planefit").is_some_and(|p| !p.is_null()) {
+        request.features.insert(Feature::Normal);
+    }
+
+    let (device, queue) = host::open_device()?;
+    let input = PathBuf::from(input);
+    if !filterjit::scene::is_sequence(&input) {
+        if temporal {
+            return Err(format!("{shader} is a temporal filter: give it a sequence's folder of frames"));
+        }
+        let scene = filterjit::scene::load(&input, &request).map_err(|e| e.to_string())?;
+        let filtered = host::filter(&device, &queue, &shaders, &manifest, &frame(&scene, &roles)?, radius)?;
+        write_png(&scene, &filtered, Path::new(out))?;
+        println!("filtered {}x{} with radius {radius}: wrote {out}", scene.width, scene.height);
+        return Ok(());
+    }
+    // A sequence: its frames in order, what the manifest's `history` names kept between them.
+    let sequence = filterjit::scene::Sequence::find(&input).map_err(|e| e.to_string())?;
+    std::fs::create_dir_all(out).map_err(|e| format!("{out}: {e}"))?;
+    let mut kept = host::Sequence::new();
+    for k in 0..sequence.frames.len() {
+        let scene = sequence.load(k, &request).map_err(|e| e.to_string())?;
+        let filtered =
+            host::filter_frame(&device, &queue, &shaders, &manifest, &frame(&scene, &roles)?, radius, &mut kept)?;
+        let name = sequence.frames[k].path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        write_png(&scene, &filtered, &Path::new(out).join(format!("{name}.png")))?;
+    }
+    println!("filtered {} frames with radius {radius}: wrote {out}", sequence.frames.len());
+    Ok(())
+}
+
+/// The frame as the host takes it: colour, the manifest's inputs, and for
+/// the temporal stage the albedo, the surface and the motion vectors.
+fn frame(scene: &Scene, roles: &[String]) -> Result<host::Frame, String> {
     let rgba = |v: &[f32; 3]| [v[0], v[1], v[2], 1.0];
     let mut inputs = HashMap::new();
-    for role in &roles {
+    for role in roles {
         let texels: Vec<[f32; 4]> = match (Feature::from_name(role), ScalarVar::from_name(role)) {
             (Some(f), _) => scene.feature(f).ok_or(format!("scene lacks {role}"))?.iter().map(rgba).collect(),
             (_, Some(v)) => {
@@ -65,35 +114,27 @@ fn main() -> Result<(), String> {
         };
         inputs.insert(role.clone(), texels);
     }
+    if let Some(normal) = scene.feature(Feature::Normal) {
+        inputs.entry("normal".to_string()).or_insert_with(|| normal.iter().map(rgba).collect());
+    }
     if let Some(albedo) = &scene.albedo {
         inputs.insert("albedo".to_string(), albedo.iter().map(rgba).collect());
     }
-    let frame = host::Frame {
+    if let Some(motion) = &scene.motion {
+        inputs.insert("geometry".to_string(), motion.surface.clone());
+        inputs.insert("motion".to_string(), motion.vectors.iter().map(|v| [v[0], v[1], 0.0, 0.0]).collect());
+    }
+    Ok(host::Frame {
         width: scene.width as u32,
         height: scene.height as u32,
         color: scene.color.iter().map(rgba).collect(),
         inputs,
         // filterjit's scenes hold normalised features already.
         scales: HashMap::new(),
-    };
+    })
+}
 
-    let (device, queue) = host::open_device()?;
-    // The pre-pass's, the spread's, the guide's and planefit's shaders, where the pipeline has them, are files beside the form's.
-    let stage = |name: &str| -> Result<Option<String>, String> {
-        let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { return Ok(None) };
-        let file = std::path::Path::new(shader).with_file_name(stage["file"].as_str().ok_or("a stage's file")?);
-        Ok(Some(std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?))
-    };
-    let shaders = host::Shaders {
-        form: wgsl,
-        prepass: stage("prepass")?,
-        spread: stage("spread")?,
-        guide: stage("guide")?,
-        planefit: stage("planefit")?,
-    };
-    let filtered = host::filter(&device, &queue, &shaders, &manifest, &frame, radius)?;
+fn write_png(scene: &Scene, filtered: &[[f32; 4]], out: &Path) -> Result<(), String> {
     let rgb: Vec<[f32; 3]> = filtered.iter().map(|c| [c[0], c[1], c[2]]).collect();
-    filterjit::preview::write_png(&PathBuf::from(out), scene.width, scene.height, &rgb).map_err(|e| e.to_string())?;
-    println!("filtered {}x{} with radius {radius}: wrote {out}", scene.width, scene.height);
-    Ok(())
+    filterjit::preview::write_png(out, scene.width, scene.height, &rgb).map_err(|e| e.to_string())
 }

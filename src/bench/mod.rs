@@ -20,12 +20,12 @@ use crate::scene::Scene;
 
 pub use calibration::{calibrate, CalibrationResult, THESIS_TABLE_4_1};
 pub use expressions::{corpus, CorpusResult, ExpressionResult, VARIANTS};
-pub use frames::{FrameResult, StageResult, FRAME_SIDE};
+pub use frames::{FrameMethod, FrameParts, FrameResult, StageResult, FRAME_SIDE};
 pub use generation::GenerationResult;
 pub use handwritten::{HandWrittenResult, HANDWRITTEN_BILATERAL};
 pub use population::PopulationResult;
 pub use simplified::{SimplifiedResult, BLOATED};
-pub use table::table;
+pub use table::{frames_report, table};
 pub use timing::Stat;
 
 #[derive(Clone, Debug, Serialize)]
@@ -74,6 +74,59 @@ pub struct Report {
     /// The bench scene's noisy input's light, beside the frames' outputs'.
     pub noisy_light: Option<f64>,
     pub generations: Vec<GenerationResult>,
+}
+
+/// `bench --frames`: whole frames only, at real sizes.
+#[derive(Clone, Debug, Serialize)]
+pub struct FramesReport {
+    pub device: String,
+    pub clock: Clock,
+    /// What the frames are: the bench scene's render, tiled to each size.
+    pub source: String,
+    pub repeats: usize,
+    pub frames: Vec<FrameResult>,
+}
+
+/// The methods `bench --frames` times: `filter`'s default, the 3x3
+/// cascade, and the best shipped temporal filter (a still sequence's frames,
+/// its history settled); OIDN beside them where found.
+pub fn frame_methods() -> anyhow::Result<Vec<FrameMethod>> {
+    let names =
+        [crate::denoise::SHIPPED_BY_QUALITY[0], "evolvedAtrous3x3", crate::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0]];
+    names.iter().map(|name| FrameMethod::shipped(name)).collect()
+}
+
+/// What `bench --frames` measures: the sizes, each frame's repeats, and
+/// where OIDN's files go.
+pub struct FramesSettings<'a> {
+    pub sizes: &'a [(usize, usize)],
+    pub repeats: usize,
+    pub scratch: &'a std::path::Path,
+}
+
+/// Whole frames of `methods` and OIDN at every size of `settings`, from
+/// `scene` tiled to each ([`frames::frames`]).
+pub fn frames_at(
+    gpu: &Gpu,
+    scene: &Scene,
+    methods: &[FrameMethod],
+    settings: &FramesSettings,
+    peer: Option<&crate::oidn::Oidn>,
+    progress: &mut dyn FnMut(&str),
+) -> anyhow::Result<FramesReport> {
+    let FramesSettings { sizes, repeats, scratch } = *settings;
+    let mut all = Vec::new();
+    for &size in sizes {
+        progress(&format!("whole frames {}x{}", size.0, size.1));
+        all.extend(frames::frames(gpu, scene, size, methods, repeats, peer, scratch)?);
+    }
+    Ok(FramesReport {
+        device: gpu.describe(),
+        clock: if gpu.has_device_clock() { Clock::Device } else { Clock::Wall },
+        source: format!("{} ({}x{}), tiled to each size", scene.name, scene.width, scene.height),
+        repeats,
+        frames: all,
+    })
 }
 
 /// The clock warm kernels are timed by ([`crate::gpu::Filtered::kernel_time`]).

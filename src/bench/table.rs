@@ -115,39 +115,10 @@ pub fn table(r: &Report) -> String {
     }
     if !r.frames.is_empty() {
         t += &format!(
-            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: wall time of pre-pass, guide and passes in one submission; OIDN: wall time of each execution on the device it chose; warm median [min, max], ms; pre / guide / passes: the medians of the pre-pass, the guide and the passes, on the device's clock where it has one; on device: the frame's median on the device's own clock; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
+            "\nwhole frames, {FRAME_SIDE}x{FRAME_SIDE} (shipped a-trous filters: wall time of pre-pass, temporal stage, guide and passes in one submission; OIDN: wall time of each execution on the device it chose; warm median [min, max], ms; pre / temporal / guide / passes: the medians of the pre-pass, the temporal stage, the guide and the passes, on the device's clock where it has one; on device: the frame's median on the device's own clock; light: mean luminance over the reference's on the bench scene, noisy {}):\n",
             r.noisy_light.map_or("-".into(), |l| format!("{l:.3}"))
         );
-        let pipeline_width = r.frames.iter().map(|f| f.pipeline.len()).max().unwrap_or(0).max("pipeline".len());
-        t += &format!(
-            "  {:<34} {:<pipeline_width$} {:>10} {:>22} {:>22} {:>9} {:>10} {:>8} {:>7}\n",
-            "method",
-            "pipeline",
-            "compile ms",
-            "warm ms",
-            "pre / guide / passes",
-            "on device",
-            "ms/Mpx",
-            "/ OIDN",
-            "light"
-        );
-        for f in &r.frames {
-            t += &format!(
-                "  {:<34} {:<pipeline_width$} {:>10} {:>22} {:>22} {:>9} {:>10.1} {:>8} {:>7}\n",
-                f.method,
-                f.pipeline,
-                f.compile_ms.map_or("-".into(), |v| format!("{v:.1}")),
-                format!("{:.2} [{:.2}, {:.2}]", f.warm_ms.median, f.warm_ms.min, f.warm_ms.max),
-                f.parts_ms.map_or("-".into(), |p| format!("{:.1} / {:.1} / {:.1}", p.prepass, p.guide, p.passes)),
-                f.device_ms.as_ref().map_or("-".into(), |d| format!("{:.3}", d.median)),
-                f.ms_per_mpx,
-                f.over_oidn.map_or("-".into(), |v| format!("{v:.2}x")),
-                f.light.map_or("-".into(), |v| format!("{v:.3}")),
-            );
-        }
-        if !r.frames.iter().any(|f| f.compile_ms.is_none()) {
-            t += "  (OIDN's oidnDenoise not found: FILTERJIT_OIDN, PATH or `pip install pyoidn`)\n";
-        }
+        t += &frames_table(&r.frames);
     }
     if !r.generations.is_empty() {
         t += "\none GP generation (this device) next to the thesis's Table 4.1 (GTX 980 Ti, population 200: another machine)\n";
@@ -169,6 +140,58 @@ pub fn table(r: &Report) -> String {
                 thesis.map_or("-".into(), |t| format!("{:.1}", t.2))
             );
         }
+    }
+    t
+}
+
+/// `bench --frames`' table.
+pub fn frames_report(r: &super::FramesReport) -> String {
+    format!(
+        "device  {}\nframes  {}; each method's frame in one submission (wall ms: recording to completion; pre / temporal / guide / passes on the device's clock where it has one), OIDN's its program's own time; {} rounds\n{}",
+        r.device,
+        r.source,
+        r.repeats * 2,
+        frames_table(&r.frames)
+    )
+}
+
+/// Whole frames as a table: one row a method and size.
+pub fn frames_table(frames: &[super::FrameResult]) -> String {
+    let mut t = String::new();
+    let pipeline_width = frames.iter().map(|f| f.pipeline.len()).max().unwrap_or(0).max("pipeline".len());
+    t += &format!(
+        "  {:<34} {:>9} {:<pipeline_width$} {:>10} {:>22} {:>28} {:>9} {:>10} {:>8} {:>7}\n",
+        "method",
+        "size",
+        "pipeline",
+        "compile ms",
+        "warm ms",
+        "pre / temporal / guide / passes",
+        "on device",
+        "ms/Mpx",
+        "/ OIDN",
+        "light"
+    );
+    for f in frames {
+        t += &format!(
+            "  {:<34} {:>9} {:<pipeline_width$} {:>10} {:>22} {:>28} {:>9} {:>10.1} {:>8} {:>7}\n",
+            f.method,
+            format!("{}x{}", f.width, f.height),
+            f.pipeline,
+            f.compile_ms.map_or("-".into(), |v| format!("{v:.1}")),
+            format!("{:.2} [{:.2}, {:.2}]", f.warm_ms.median, f.warm_ms.min, f.warm_ms.max),
+            f.parts_ms.map_or("-".into(), |p| format!(
+                "{:.1} / {:.1} / {:.1} / {:.1}",
+                p.prepass, p.temporal, p.guide, p.passes
+            )),
+            f.device_ms.map_or("-".into(), |d| format!("{d:.3}")),
+            f.ms_per_mpx,
+            f.over_oidn.map_or("-".into(), |v| format!("{v:.2}x")),
+            f.light.map_or("-".into(), |v| format!("{v:.3}")),
+        );
+    }
+    if !frames.iter().any(|f| f.compile_ms.is_none()) {
+        t += "  (OIDN's oidnDenoise not found: FILTERJIT_OIDN, PATH or `pip install pyoidn`)\n";
     }
     t
 }

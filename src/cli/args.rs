@@ -163,6 +163,11 @@ pub(crate) enum Command {
         /// `oidnDenoise` is found (FILTERJIT_OIDN, PATH, or the pyoidn Python package).
         #[arg(long)]
         no_oidn: bool,
+        /// Whole frames only, at these sizes (e.g. `256x256,1920x1080`): `filter`'s
+        /// default, `@evolvedAtrous3x3`, the best temporal filter and OIDN, on
+        /// a 256² render of glossy-floor tiled to each size; `bench.json` gets their `frames`.
+        #[arg(long, value_delimiter = ',', value_parser = parse_size)]
+        frames: Vec<(u32, u32)>,
     },
     /// Compare filters on scenes with references: error (relMSE both ways, MSE)
     /// against device time per megapixel, in tables, scatter plots with the
@@ -198,6 +203,17 @@ pub(crate) enum Command {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub(crate) enum Preset {
+    /// The search at work, in about a minute on a 2-core CPU with the scenes
+    /// rendered: seeded with the hand-set cross-bilateral filter
+    /// (`@crossBilateral`) in the tuned one's pipeline
+    /// (`outliers=2,demodulate,atrous=5`) and scored against it
+    /// (`--fitness-pool guarded`, the light charged), 4 islands of 20, 12
+    /// generations, 2 elites, 64x64 scenes with 256-spp references (the
+    /// shipped preset's renders), only what a Mitsuba or engine G-buffer
+    /// holds. The test compares the best with the seed, the tuned
+    /// cross-bilateral filter and the best shipped filter, each through its
+    /// own pipeline; `--preset shipped` searches from that one.
+    Start,
     /// Improve on the best shipped filter (`filter`'s default): seeded with it
     /// in its pipeline and scored against it (`--fitness-pool guarded`, 2
     /// elites, so the best is never worse than it on the training scenes; the
@@ -224,7 +240,7 @@ pub(crate) enum Preset {
     /// A temporal filter for sequences at one sample per pixel: the built-in
     /// training sequences (96x96, 1 spp, 256-spp references, each frame
     /// scored after the temporal stage), pipeline
-    /// `demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5`, seeded with
+    /// `outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5`, seeded with
     /// `@svgf` and scored against it (`--fitness-pool guarded`, the light
     /// charged), 4 islands of 20, 10 generations, 2 elites, and only what an
     /// engine's G-buffer holds plus the temporal stage's measures.
@@ -330,7 +346,7 @@ pub(crate) struct TuneArgs {
 #[derive(clap::Args)]
 pub(crate) struct EvolveArgs {
     /// Values for every flag not given.
-    #[arg(long, value_enum, default_value_t = Preset::Shipped)]
+    #[arg(long, value_enum, default_value_t = Preset::Start)]
     pub(crate) preset: Preset,
     /// Training scenes: built-in names, .toml files, dataset directories, or folders whose subfolders are datasets (each is a scene) [default: the built-in training scenes].
     #[arg(long, value_delimiter = ',')]
@@ -413,8 +429,8 @@ pub(crate) struct EvolveArgs {
     /// Threads that compile kernels [default: the number of cores].
     #[arg(long)]
     pub(crate) threads: Option<usize>,
-    /// Filters to compare with on the test scenes at the end (repeatable).
-    #[arg(long, default_value = "@crossBilateral")]
+    /// Filters to compare with on the test scenes at the end (repeatable), a shipped one through its own pipeline [start: @crossBilateralTuned and the best shipped filter; others: @crossBilateral].
+    #[arg(long)]
     pub(crate) baseline: Vec<String>,
     /// Stage fitness kernels' windows in workgroup memory: auto = on hardware GPUs, off on software adapters (same results either way).
     #[arg(long, value_enum, default_value_t = filterjit::fitness::Tiles::Auto)]

@@ -62,7 +62,9 @@ pub(crate) fn evolve_on(
     use filterjit::evolve as ev;
     let root = transport.is_root();
     let (settings, config) = run_settings(&args)?;
-    let seed_name = args.seed_expr.clone().unwrap_or_else(|| PresetValues::of(args.preset).seed_expr);
+    let preset = PresetValues::of(args.preset);
+    let seed_name = args.seed_expr.clone().unwrap_or(preset.seed_expr);
+    let baselines = if args.baseline.is_empty() { preset.baselines } else { args.baseline.clone() };
     let threads = args.threads.unwrap_or(cores);
     let output = match &args.output {
         Some(dir) => dir.clone(),
@@ -165,7 +167,13 @@ pub(crate) fn evolve_on(
             stop_after: None,
             on_report: &mut on_report,
             on_render: &mut on_render,
-            baselines: args.baseline.iter().map(|b| resolve_expr(b)).collect::<Result<_>>()?,
+            baselines: baselines
+                .iter()
+                .map(|b| {
+                    let resolved = filterjit::corpus::resolve_with_pipeline(b)?;
+                    Ok((resolved.expr, resolved.pipeline))
+                })
+                .collect::<Result<_>>()?,
             tiles: args.tiles,
             fusion: args.fuse,
             cache: env.cache.clone(),
@@ -269,6 +277,25 @@ pub(crate) fn evolve_on(
         ev::FEATURES_FILE,
         ev::SUMMARY_FILE
     );
+    // The best shipped filter, where the test compared it: how far the search got, and which search goes on from it.
+    let best_shipped = filterjit::denoise::SHIPPED_BY_QUALITY[0];
+    let shipped_row = baselines.iter().position(|b| b.trim_start_matches('@') == best_shipped);
+    if let Some(b) = shipped_row.and_then(|k| summary.test_baselines.get(k)) {
+        let best = summary.test_best.normalised;
+        let verdict = match best < b.normalised {
+            true => format!(
+                "below it: `filterjit filter --expr @{}/{}` filters with the evolved one",
+                output.display(),
+                ev::HALL_OF_FAME_FILE
+            ),
+            false => "the shipped one is better".to_string(),
+        };
+        println!(
+            "shipped   @{best_shipped}, the best shipped filter: mean relMSE / noisy {:.5} on the test scenes against the \
+             best's {best:.5} ({verdict}); `filterjit evolve --preset shipped` searches from it",
+            b.normalised
+        );
+    }
     if let Some(line) = compared {
         println!("{line}");
         // On a GPU the default's generations take seconds (docs/BENCHMARKS.md,
@@ -301,6 +328,8 @@ struct PresetValues {
     pool: filterjit::fitness::Pool,
     light_tolerance: Option<f64>,
     cost_model: fn() -> filterjit::cost::CostModel,
+    /// Filters the test compares besides the seed when no `--baseline` is given.
+    baselines: Vec<String>,
 }
 
 /// What a Mitsuba or engine G-buffer holds (colour, position, normal,
@@ -318,11 +347,12 @@ const G_BUFFER: &[&str] = &[
     "clampedShare",
 ];
 
-/// The temporal preset's pipeline: SVGF's, its history the blend itself
-/// (`feedback=0`, which `evolve` scores exactly), clamped (`clamp=2`) and
-/// cut where the light changed (`antilag=3`): chosen with SVGF's weight on
-/// the built-in training sequences (docs/BENCHMARKS.md, "Sequences").
-const TEMPORAL_PIPELINE: &str = "demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5";
+/// The temporal preset's pipeline: fireflies clamped and their light kept,
+/// then SVGF's, its history the blend itself (`feedback=0`, which `evolve`
+/// scores exactly), clamped (`clamp=2`) and cut where the light changed
+/// (`antilag=3`): chosen with SVGF's weight on the built-in training
+/// sequences (docs/BENCHMARKS.md, "Sequences").
+const TEMPORAL_PIPELINE: &str = "outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5";
 
 /// What an engine's G-buffer holds (no colour variance: a real-time
 /// renderer keeps none) plus the temporal stage's measures.
@@ -348,6 +378,7 @@ impl PresetValues {
             pool: Pool::Mean,
             light_tolerance: None,
             cost_model: filterjit::cost::CostModel::table,
+            baselines: vec!["@crossBilateral".into()],
         };
         let quick = || PresetValues {
             gp: Settings { island_size: 25, generations: 15, ..Settings::default() },
@@ -356,9 +387,33 @@ impl PresetValues {
             radius: 3,
             ..thesis()
         };
+        let shipped_filter = || format!("@{}", filterjit::denoise::SHIPPED_BY_QUALITY[0]);
         match preset {
             Preset::Thesis => thesis(),
             Preset::Quick => quick(),
+            Preset::Start => {
+                // The tuned cross-bilateral filter's pipeline and radius; the seed is its hand-set form.
+                let pipeline = filterjit::corpus::resolve_with_pipeline("@crossBilateralAtrous")
+                    .ok()
+                    .and_then(|r| r.pipeline)
+                    .expect("the cross-bilateral à-trous filter is stored with its pipeline");
+                PresetValues {
+                    gp: Settings { island_size: 20, generations: 12, ..Settings::default() },
+                    // The shipped preset's renders: one cache serves both.
+                    size: (64, 64),
+                    reference_spp: 256,
+                    radius: 3,
+                    pipeline,
+                    features: G_BUFFER,
+                    seed_expr: "@crossBilateral".into(),
+                    relative_to: Some("@crossBilateral".into()),
+                    pool: Pool::Guarded,
+                    light_tolerance: Some(0.05),
+                    elites: 2,
+                    baselines: vec!["@crossBilateralAtrous".into(), shipped_filter()],
+                    ..thesis()
+                }
+            }
             Preset::Shipped => {
                 let best = format!("@{}", filterjit::denoise::SHIPPED_BY_QUALITY[0]);
                 let pipeline = filterjit::corpus::resolve_with_pipeline(&best)
@@ -529,8 +584,20 @@ mod tests {
     }
 
     #[test]
-    fn the_default_search_starts_from_the_best_shipped_filter_in_its_pipeline() {
+    fn the_default_search_starts_from_the_hand_set_cross_bilateral_filter() {
         let (settings, config) = settings_of(&[]);
+        assert_eq!((settings.island_size, settings.generations, settings.elites), (20, 12, 2));
+        assert_eq!((config.render.width, config.render.height, config.render.reference_spp), (64, 64, 256));
+        let seed = resolve_expr("@crossBilateral").unwrap().to_string();
+        assert_eq!(config.seed_expr, seed);
+        assert_eq!((config.fitness.relative_to, config.fitness.pool), (Some(seed), filterjit::fitness::Pool::Guarded));
+        let tuned = filterjit::corpus::resolve_with_pipeline("@crossBilateralAtrous").unwrap();
+        assert_eq!(Some(config.pipeline), tuned.pipeline, "the tuned cross-bilateral filter's pipeline");
+    }
+
+    #[test]
+    fn the_shipped_search_starts_from_the_best_shipped_filter_in_its_pipeline() {
+        let (settings, config) = settings_of(&["--preset", "shipped"]);
         assert_eq!((settings.island_size, settings.generations, settings.elites), (12, 6, 2));
         assert_eq!((config.render.width, config.render.height, config.render.reference_spp), (64, 64, 256));
         let best = filterjit::corpus::resolve_with_pipeline(&format!("@{}", filterjit::denoise::SHIPPED_BY_QUALITY[0]))

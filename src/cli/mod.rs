@@ -4,6 +4,7 @@
 
 mod args;
 mod evolve;
+mod export;
 mod hints;
 
 pub(crate) use hints::flag_for;
@@ -42,99 +43,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             Ok(())
         }
         Command::Export { expr, target, format, output, pipeline, budget_ms, size } => {
-            let resolved = match budget_ms {
-                None => corpus::resolve_with_pipeline(&expr)?,
-                Some(budget) => {
-                    let front = filterjit::evolve::Front::read(Path::new(&expr))?;
-                    let (w, h) = size.expect("clap requires --size with --budget-ms");
-                    let member = front.within_budget(budget, w as f64 * h as f64)?;
-                    eprintln!(
-                        "chose     {} (radius {}, fitness {:.5}, {:.2} ms at {w}x{h} on {}) of {} members",
-                        member.name,
-                        member.radius,
-                        member.fitness,
-                        member.ms_per_mpx * (w * h) as f64 / 1e6,
-                        front.device,
-                        front.members.len()
-                    );
-                    corpus::Resolved {
-                        name: Some(member.name.clone()),
-                        expr: filterjit::parse_expr(&member.expr).map_err(|e| anyhow::anyhow!("{e}"))?,
-                        pipeline: Some(front.pipeline),
-                        radius: Some(member.radius),
-                    }
-                }
-            };
-            let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
-            let mut exported =
-                filterjit::export::export_filter(&resolved.expr, &pipeline, resolved.radius, target, format)?;
-            let manifest_path = manifest_path(&output);
-            let mut files = vec![(output.clone(), exported.code.to_bytes())];
-            let stages = [
-                ("prepass", &exported.prepass, exported.manifest.prepass.as_mut()),
-                ("spread", &exported.spread, exported.manifest.spread.as_mut()),
-                ("guide", &exported.guide, exported.manifest.guide.as_mut()),
-                ("planefit", &exported.planefit, exported.manifest.planefit.as_mut()),
-            ];
-            for (name, code, stage) in stages {
-                if let (Some(code), Some(stage)) = (code, stage) {
-                    let path = stage_path(&output, name);
-                    stage.file = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-                    files.push((path, code.to_bytes()));
-                }
-            }
-            let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
-            files.push((manifest_path.clone(), manifest.into_bytes()));
-            for (path, bytes) in &files {
-                filterjit::io::write_bytes_atomically(path, bytes)
-                    .with_context(|| format!("writing {}", path.display()))?;
-            }
-            if let Some(stage) = &exported.manifest.prepass {
-                println!("wrote {} (the pre-pass)", output.with_file_name(&stage.file).display());
-            }
-            if let Some(stage) = &exported.manifest.spread {
-                println!(
-                    "wrote {} (keep's spread: {} dispatches after the pre-pass)",
-                    output.with_file_name(&stage.file).display(),
-                    stage.sequence.len()
-                );
-            }
-            if let Some(stage) = &exported.manifest.guide {
-                println!(
-                    "wrote {} (the guide: one dispatch before the form)",
-                    output.with_file_name(&stage.file).display()
-                );
-            }
-            if let Some(stage) = &exported.manifest.planefit {
-                println!(
-                    "wrote {} (planefit: one dispatch after the form)",
-                    output.with_file_name(&stage.file).display()
-                );
-            }
-            if exported.manifest.passes > 1 {
-                println!(
-                    "pipeline  {pipeline}: dispatch the form's shader {} times (the manifest's `order`)",
-                    exported.manifest.passes
-                );
-            }
-            println!(
-                "wrote {} ({}) and its manifest {}",
-                output.display(),
-                exported.manifest.language,
-                manifest_path.display()
-            );
-            println!("entry point `{}`, workgroup 8x8x1; bindings:", exported.manifest.entry_point);
-            for b in &exported.manifest.bindings {
-                println!("  {:<26} {:<16} {}", b.target_slot, b.kind, b.role);
-            }
-            if exported.manifest.sampled_textures > filterjit::export::PORTABLE_SAMPLED_TEXTURES {
-                eprintln!(
-                    "warning: the shader binds {} sampled textures; WebGPU guarantees {} per stage, so it needs a device that allows more",
-                    exported.manifest.sampled_textures,
-                    filterjit::export::PORTABLE_SAMPLED_TEXTURES
-                );
-            }
-            Ok(())
+            export::export(&expr, target, format, &output, pipeline, budget_ms, size)
         }
         Command::Check { expr, latex: true } => {
             println!("{}", lang::latex(&resolve_expr(&expr)?));
@@ -220,7 +129,11 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             fuse,
             output,
             no_oidn,
+            frames,
         } => {
+            if !frames.is_empty() {
+                return bench_frames(env, &frames, repeats.max(1), no_oidn, &output);
+            }
             let settings = filterjit::bench::BenchSettings {
                 radius,
                 repeats: repeats.max(1),
@@ -572,6 +485,38 @@ pub(crate) fn bench(
     Ok(())
 }
 
+/// `bench --frames SIZES`: whole frames only, from a 256² render of
+/// glossy-floor tiled to each size.
+pub(crate) fn bench_frames(
+    env: &Environment,
+    sizes: &[(u32, u32)],
+    repeats: usize,
+    no_oidn: bool,
+    output: &Path,
+) -> Result<()> {
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
+    eprintln!("bench     whole frames on {}", gpu.describe());
+    let d = render::builtin("glossy-floor").expect("built in")?;
+    let rs = render::RenderSettings { width: 256, height: 256, spp: 4, reference_spp: 64, seed: 0 };
+    let dir = render::cached(&gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
+    let methods = filterjit::bench::frame_methods()?;
+    let mut features: std::collections::BTreeSet<lang::Feature> =
+        methods.iter().flat_map(|m| m.expr.features()).collect();
+    features.extend(methods.iter().flat_map(|m| m.pipeline.features()));
+    let variances = methods.iter().flat_map(|m| m.expr.stored_variables()).collect();
+    let request = scene::Request { features, variances, reference: true, albedo: true, ..Default::default() };
+    let scene = scene::load(&dir, &request)?;
+    let sizes: Vec<(usize, usize)> = sizes.iter().map(|&(w, h)| (w as usize, h as usize)).collect();
+    let mut progress = |what: &str| eprintln!("          {what}");
+    let settings = filterjit::bench::FramesSettings { sizes: &sizes, repeats, scratch: &env.scratch };
+    let report = filterjit::bench::frames_at(&gpu, &scene, &methods, &settings, peer.as_ref(), &mut progress)?;
+    print!("{}", filterjit::bench::frames_report(&report));
+    filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())?;
+    println!("wrote     {}", output.display());
+    Ok(())
+}
+
 pub(crate) fn print_errors(label: &str, e: &Errors, flip: f64) {
     let m2 = e.relmse_half_spp.map_or("-".to_string(), |v| format!("{v:.6}"));
     let light = e.light.map_or("-".to_string(), |l| format!("{l:.4}"));
@@ -587,22 +532,4 @@ pub(crate) fn print_errors(label: &str, e: &Errors, flip: f64) {
 
 pub(crate) fn ms(d: std::time::Duration) -> f64 {
     d.as_secs_f64() * 1e3
-}
-
-/// Where a stage of an exported pipeline goes: `NAME.STAGE.EXT` beside
-/// `NAME.EXT` (`prepass`, `spread`).
-pub(crate) fn stage_path(shader: &Path, stage: &str) -> PathBuf {
-    let stem = shader.file_stem().map(|n| n.to_string_lossy().into_owned()).unwrap_or_else(|| "filter".into());
-    let name = match shader.extension() {
-        Some(ext) => format!("{stem}.{stage}.{}", ext.to_string_lossy()),
-        None => format!("{stem}.{stage}"),
-    };
-    shader.with_file_name(name)
-}
-
-/// Where `export` writes the manifest of the shader at `shader`: `shader` + `.json`.
-pub(crate) fn manifest_path(shader: &Path) -> PathBuf {
-    let mut name = shader.as_os_str().to_owned();
-    name.push(".json");
-    PathBuf::from(name)
 }

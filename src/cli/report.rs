@@ -20,7 +20,12 @@ pub(crate) fn scene_context(args: &SceneArgs) -> Result<SceneContext> {
         ),
         None => None,
     };
-    let builtin = |split| render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>();
+    let pipeline = args.render.pipeline.or(run.as_ref().map(|r| r.pipeline)).unwrap_or_default();
+    // A temporal pipeline is tuned and reported on sequences, any other on stills.
+    let builtin = |split| match pipeline.is_temporal() {
+        true => render::builtin_sequences(split).into_iter().map(|d| d.name).collect::<Vec<_>>(),
+        false => render::builtin_split(split).into_iter().map(|d| d.name).collect::<Vec<_>>(),
+    };
     let base = run.as_ref().map(|r| r.render).unwrap_or(render::RenderSettings {
         width: 64,
         height: 64,
@@ -38,7 +43,7 @@ pub(crate) fn scene_context(args: &SceneArgs) -> Result<SceneContext> {
             seed: base.seed,
         },
         radius: args.render.radius.or(run.as_ref().map(|r| r.radius)).unwrap_or(5),
-        pipeline: args.render.pipeline.or(run.as_ref().map(|r| r.pipeline)).unwrap_or_default(),
+        pipeline,
         training: if !args.training_scenes.is_empty() {
             args.training_scenes.clone()
         } else {
@@ -81,7 +86,8 @@ pub(crate) fn tune_on_training(
     let (features, variances) = datasets::common_terminals(&datasets)?;
     let scenes = datasets::load_all(&datasets, &features, &variances, &context.pipeline)?;
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
-    let mut scoring = filterjit::fitness::Settings::for_pipeline(context.radius, context.pipeline, threads);
+    // A temporal pipeline's frames come with its pre-pass and stage already run (`datasets::accumulated`).
+    let mut scoring = filterjit::fitness::Settings::for_pipeline(context.radius, context.pipeline.spatial(), threads);
     scoring.rule.light_tolerance = light_tolerance;
     let mut evaluator = filterjit::fitness::Scorer::new(gpu, scenes, &scoring)?;
     eprintln!(

@@ -22,7 +22,7 @@ pub use front::{time_filters, Front, FrontMember, FRONT_FILE, FRONT_TIMING_SIDE}
 pub use hall::{hall_of_fame_text, Rescored};
 pub use results::{mean_light, test, test_each, Summary, TestResult};
 pub use run_dir::{
-    append_log, default_run_dir, log_upto, read_checkpoint, write_checkpoint, Checkpoint, CHECKPOINT_FILE,
+    append_log, default_run_dir, log_upto, read_checkpoint, write_checkpoint, Checkpoint, RunDirError, CHECKPOINT_FILE,
     DEFAULT_RUN_DIR, FEATURES_FILE, HALL_OF_FAME_FILE, LOG_FILE, SUMMARY_FILE,
 };
 
@@ -32,6 +32,7 @@ use crate::gp::transport::{InProcess, Transport};
 use crate::gp::{self, Settings, State};
 use crate::gpu::Gpu;
 use crate::lang::{Expr, Feature, ScalarVar};
+use crate::pipeline::FilterPipeline;
 use crate::render;
 use crate::scene::{Holds, Needs};
 
@@ -62,8 +63,10 @@ pub struct RunOptions<'a> {
     pub stop_after: Option<u32>,
     pub on_report: &'a mut dyn FnMut(&gp::Report),
     pub on_render: render::Progress<'a>,
-    /// Expressions to compare with on the test scenes (they do not affect the search).
-    pub baselines: Vec<Expr>,
+    /// Filters to compare with on the test scenes (they do not affect the
+    /// search): each through its own pipeline where it has one (a shipped
+    /// filter's), else through the run's.
+    pub baselines: Vec<(Expr, Option<FilterPipeline>)>,
     /// Whether fitness kernels stage their windows in workgroup memory
     /// (results are identical either way; only the time differs).
     pub tiles: Tiles,
@@ -269,16 +272,28 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let scoring = fitness::Settings::for_pipeline(config.radius, config.pipeline.spatial(), threads);
     let mut tester = Scorer::new(gpu, test_scenes, &scoring)?;
     let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let mut compared = vec![best_expr, seed_expr];
-    compared.extend(
-        baselines
-            .into_iter()
-            .filter(|b| b.features().is_subset(&features) && b.stored_variables().is_subset(&variances)),
-    );
+    let compared = vec![best_expr, seed_expr];
     let mut results = test(&mut tester, &compared)?.into_iter();
     let test_best = results.next().expect("best");
     let test_seed = results.next().expect("seed");
-    let test_baselines = results.collect();
+    let mut test_baselines = Vec::new();
+    for (baseline, pipeline) in baselines {
+        match pipeline.filter(|p| *p != config.pipeline) {
+            // Through the run's pipeline, where the scenes hold what it reads.
+            None if baseline.features().is_subset(&features) && baseline.stored_variables().is_subset(&variances) => {
+                test_baselines.extend(test(&mut tester, std::slice::from_ref(&baseline))?)
+            }
+            None => {}
+            // Through its own: the test scenes loaded again with what it reads.
+            Some(own) => {
+                let reads: BTreeSet<Feature> = baseline.features().into_iter().filter(|f| f.needs_data()).collect();
+                let scenes = datasets::load_all(&test_sets, &reads, &baseline.stored_variables(), &own)?;
+                let scoring = fitness::Settings::for_pipeline(config.radius, own.spatial(), threads);
+                let mut own_tester = Scorer::new(gpu, scenes, &scoring)?;
+                test_baselines.extend(test(&mut own_tester, std::slice::from_ref(&baseline))?);
+            }
+        }
+    }
     if !front.is_empty() {
         let front = front::measure_front(gpu, &mut tester, &front, &config)?;
         crate::io::write_bytes_atomically(&output.join(FRONT_FILE), serde_json::to_string_pretty(&front)?.as_bytes())?;

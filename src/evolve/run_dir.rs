@@ -25,6 +25,21 @@ pub const HALL_OF_FAME_FILE: &str = "hall_of_fame.txt";
 pub const FEATURES_FILE: &str = "features.json";
 pub const SUMMARY_FILE: &str = "summary.json";
 
+/// Why a run directory cannot be used as asked; the command line says
+/// which of its flags changes that.
+#[derive(Debug, thiserror::Error)]
+pub enum RunDirError {
+    /// Resuming a checkpoint made with other settings or scenes.
+    #[error("{} was made with other settings or scenes", .0.display())]
+    OtherSettings(std::path::PathBuf),
+    /// A new run where one is already.
+    #[error("{} holds a run already", .0.display())]
+    Occupied(std::path::PathBuf),
+    /// Resuming where nothing was checkpointed.
+    #[error("nothing to resume: {} has no {CHECKPOINT_FILE}", .0.display())]
+    NothingToResume(std::path::PathBuf),
+}
+
 pub fn write_checkpoint(dir: &Path, checkpoint: &Checkpoint) -> Result<()> {
     let text = serde_json::to_string(checkpoint)?;
     crate::io::write_bytes_atomically(&dir.join(CHECKPOINT_FILE), text.as_bytes()).map_err(anyhow::Error::from)
@@ -112,18 +127,13 @@ pub(super) fn prepare_run_dir(
         (true, true) => {
             let checkpoint = read_checkpoint(output)?;
             if checkpoint.settings != *settings || checkpoint.run != *config {
-                bail!(
-                    "{} was made with other settings or scenes; resume with the same flags, or choose another --output",
-                    output.join(CHECKPOINT_FILE).display()
-                );
+                return Err(RunDirError::OtherSettings(output.join(CHECKPOINT_FILE)).into());
             }
             log_upto(output, checkpoint.state.generation)?;
             Ok(Some(checkpoint.state))
         }
-        (true, false) => {
-            bail!("{} holds a run already; pass --resume to continue it, or choose another --output", output.display())
-        }
-        (false, true) => bail!("nothing to resume: {} has no {CHECKPOINT_FILE}", output.display()),
+        (true, false) => Err(RunDirError::Occupied(output.to_path_buf()).into()),
+        (false, true) => Err(RunDirError::NothingToResume(output.to_path_buf()).into()),
         (false, false) => {
             let _ = std::fs::remove_file(output.join(LOG_FILE));
             Ok(None)

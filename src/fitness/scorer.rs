@@ -332,9 +332,13 @@ impl Evaluator for Scorer<'_> {
             .iter()
             .zip(&at)
             .map(|(result, (expr, radius))| {
-                let fitness = match self.fitness(result) {
-                    Ok(value) => Fitness::valid(value),
-                    Err(reason) => Fitness::invalid(reason.to_string()),
+                // Beside the rule's value, the error against the noisy input's: whether it filters at all.
+                let fitness = match (self.fitness(result), result) {
+                    (Ok(value), Ok(per_scene)) => {
+                        Fitness::valid(value).with_versus_noisy(normalised_error(per_scene, &self.noisy))
+                    }
+                    (Err(reason), _) => Fitness::invalid(reason.to_string()),
+                    (Ok(_), Err(_)) => unreachable!("a fitness is made of a candidate's errors"),
                 };
                 let settings = &self.settings;
                 fitness.with_cost(crate::cost::model_with(expr, &settings.pipeline, *radius, &settings.cost_model))

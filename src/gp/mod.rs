@@ -10,10 +10,12 @@
 //! would, and islands spread over processes ([`transport`]) evolve exactly as
 //! they do in one.
 
+mod fitness;
 #[cfg(feature = "mpi")]
 pub mod mpi;
 pub mod operators;
 pub mod pareto;
+mod settings;
 pub mod transport;
 pub mod tree;
 
@@ -28,216 +30,8 @@ use crate::rng::Rng;
 use operators::{crossover, mutate, Codebook, Mutation, Terminals};
 use transport::{InProcess, Transport};
 
-/// Fitness of an invalid expression (the thesis used the largest float).
-pub const WORST: f64 = 1e30;
-
-/// Mean over training scenes of relMSE(filtered) / relMSE(noisy); lower is better.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Fitness {
-    pub value: f64,
-    /// Why the expression is invalid, if it is (it then has the worst fitness).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub invalid: Option<String>,
-    /// The filter's modelled cost per pixel ([`crate::cost::model`]), where the evaluator gives one.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub cost: Option<f64>,
-}
-
-impl Fitness {
-    pub fn valid(value: f64) -> Self {
-        Fitness { value, invalid: None, cost: None }
-    }
-    pub fn invalid(reason: impl Into<String>) -> Self {
-        Fitness { value: WORST, invalid: Some(reason.into()), cost: None }
-    }
-    pub fn with_cost(self, cost: f64) -> Self {
-        Fitness { cost: Some(cost), ..self }
-    }
-
-    /// The point the multi-objective search compares: (error, cost), both
-    /// to minimise. An invalid expression, and one that filters nothing
-    /// (fitness [`NO_CHOICE`] or worse: say, a weight that is zero
-    /// everywhere, the cheapest of all), is worse than every other in both:
-    /// it is no trade-off.
-    pub fn objectives(&self) -> Vec<f64> {
-        match self.invalid {
-            None if self.value < NO_CHOICE => vec![self.value, self.cost.unwrap_or(0.0)],
-            _ => vec![WORST.max(self.value), WORST],
-        }
-    }
-
-    /// Its point's exact identity, for keeping one individual per point.
-    fn point_key(&self) -> Vec<u64> {
-        self.objectives().iter().map(|v| v.to_bits()).collect()
-    }
-}
-
-/// What the search minimises.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum Objectives {
-    /// The thesis's single objective: fitness (error) alone.
-    #[default]
-    #[serde(rename = "error")]
-    Error,
-    /// Error and modelled cost: NSGA-II's non-dominated sorting and crowding
-    /// distance choose parents and survivors; the result is a front.
-    #[serde(rename = "error,cost")]
-    ErrorCost,
-}
-
-impl std::str::FromStr for Objectives {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s.replace(' ', "").as_str() {
-            "error" => Ok(Objectives::Error),
-            "error,cost" | "cost,error" => Ok(Objectives::ErrorCost),
-            other => Err(format!("`{other}`: the objectives are `error` or `error,cost`")),
-        }
-    }
-}
-
-impl std::fmt::Display for Objectives {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Objectives::Error => "error",
-            Objectives::ErrorCost => "error,cost",
-        })
-    }
-}
-
-/// Time an evaluator spent, split as the progress report shows it.
-#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize)]
-pub struct EvalTime {
-    pub compile: Duration,
-    pub evaluate: Duration,
-}
-
-/// An individual to score: its weight expression and, where the search
-/// evolves it too, its window radius (`None`: the run's radius).
-#[derive(Clone, Debug)]
-pub struct Candidate {
-    pub expr: Expr,
-    pub radius: Option<u32>,
-}
-
-impl Candidate {
-    /// Candidates of `exprs`, each at the run's radius.
-    pub fn at_run_radius(exprs: &[Expr]) -> Vec<Candidate> {
-        exprs.iter().map(|e| Candidate { expr: e.clone(), radius: None }).collect()
-    }
-}
-
-/// Computes fitness. Implementations compile and run kernels; the engine only sees numbers.
-pub trait Evaluator {
-    /// Fitness of each candidate, in order.
-    fn evaluate(&mut self, candidates: &[Candidate]) -> anyhow::Result<Vec<Fitness>>;
-    /// Time spent since the last call.
-    fn take_time(&mut self) -> EvalTime;
-}
-
-/// Every parameter of the search, with the thesis's defaults.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct Settings {
-    /// Number of islands.
-    pub islands: usize,
-    /// Individuals per island.
-    pub island_size: usize,
-    /// Generations to run (the stopping rule).
-    pub generations: u32,
-    /// Longest expression allowed, in nodes.
-    pub max_length: usize,
-    /// Tournament size.
-    pub tournament: usize,
-    /// Share of each new generation copied unchanged.
-    pub replication: f64,
-    /// Share made by crossover; the rest is made by mutation.
-    pub crossover: f64,
-    /// Probability that a crossover child is also mutated.
-    pub crossover_mutation: f64,
-    /// Relative weights of the mutations insert, replace, swap, delete.
-    pub mutation_weights: Vec<f64>,
-    /// Migrate the best of island i to island (i+1) mod n every this many generations.
-    pub migration_interval: u32,
-    /// Share of each initial island that is the seed expression itself.
-    pub seed_share: f64,
-    /// Hall of fame: the best this many of every island.
-    pub hall_of_fame: usize,
-    /// Random seed.
-    pub seed: u64,
-    /// Replace every new individual by its simplified form (`crate::simplify`,
-    /// the same weights) before it is evaluated.
-    #[serde(default)]
-    pub simplify_offspring: bool,
-    /// What the search minimises (runs made before there was a choice: error).
-    #[serde(default)]
-    pub objectives: Objectives,
-    /// With two objectives: how many islands (the first) still minimise
-    /// error alone at the largest radius, as the thesis's search does, so
-    /// that the front's accurate end evolves as fast as a single-objective run's.
-    #[serde(default)]
-    pub error_islands: usize,
-    /// The best this many of each island pass to the next generation
-    /// unchanged, before the replication share is drawn by tournament (and
-    /// count towards it): the best filter found is never lost. 0 is the
-    /// thesis's search (runs made before it existed: 0).
-    #[serde(default)]
-    pub elites: usize,
-}
-
-impl Default for Settings {
-    fn default() -> Self {
-        Settings {
-            islands: 4,
-            island_size: 100,
-            generations: 200,
-            max_length: 75,
-            tournament: 8,
-            replication: 0.1,
-            crossover: 0.45,
-            crossover_mutation: 0.85,
-            mutation_weights: vec![0.3, 0.3, 0.3, 0.1],
-            migration_interval: 5,
-            seed_share: 0.1,
-            hall_of_fame: 10,
-            seed: 0,
-            simplify_offspring: false,
-            objectives: Objectives::Error,
-            error_islands: 0,
-            elites: 0,
-        }
-    }
-}
-
-impl Settings {
-    pub fn check(&self) -> Result<(), String> {
-        if self.islands == 0 || self.island_size < 2 {
-            return Err("need at least one island of at least two individuals".into());
-        }
-        if self.elites > self.island_size {
-            return Err(format!("--elites {} is more than an island's {} individuals", self.elites, self.island_size));
-        }
-        if self.tournament == 0 {
-            return Err("the tournament size must be at least 1".into());
-        }
-        if self.mutation_weights.len() != 4
-            || self.mutation_weights.iter().any(|w| w.is_nan() || *w < 0.0)
-            || self.mutation_weights.iter().sum::<f64>() <= 0.0
-        {
-            return Err("--mutation-weights takes four non-negative weights (insert, replace, swap, delete)".into());
-        }
-        let shares = [self.replication, self.crossover, self.crossover_mutation, self.seed_share];
-        if shares.iter().any(|s| !(0.0..=1.0).contains(s)) || self.replication + self.crossover > 1.0 {
-            return Err("shares and probabilities lie in [0, 1], and replication + crossover ≤ 1".into());
-        }
-        if self.error_islands > self.islands {
-            return Err(format!("--error-islands {} is more than the {} islands", self.error_islands, self.islands));
-        }
-        if self.max_length < 3 {
-            return Err("--max-length must be at least 3".into());
-        }
-        Ok(())
-    }
-}
+pub use fitness::{Candidate, EvalTime, Evaluator, Fitness, Objectives, NO_CHOICE, WORST};
+pub use settings::Settings;
 
 /// An expression with its fitness.
 #[derive(Clone, Debug)]
@@ -783,10 +577,6 @@ fn best_of(island: &[Member]) -> &Member {
     island.iter().min_by(|a, b| a.fitness.value.total_cmp(&b.fitness.value)).expect("non-empty island")
 }
 
-/// Fitness from which a filter is no choice: within 0.1 % of the noisy
-/// input's error (a weight that is zero everywhere scores 1 up to rounding).
-pub const NO_CHOICE: f64 = 0.999;
-
 /// The valid members better than the noisy input that no other member
 /// dominates in (error, cost), one per point, cheapest first (the most
 /// accurate last).
@@ -796,7 +586,7 @@ pub fn pareto_front(state: &State) -> Vec<StoredMember> {
         .islands
         .iter()
         .flatten()
-        .filter(|m| m.fitness.invalid.is_none() && m.fitness.value < NO_CHOICE)
+        .filter(|m| m.fitness.is_choice())
         .filter(|m| seen.insert(m.fitness.point_key()))
         .collect();
     let points: Vec<Vec<f64>> = members.iter().map(|m| m.fitness.objectives()).collect();
@@ -968,6 +758,33 @@ mod tests {
         let best = |s: &State| pareto_front(s).iter().map(|m| m.fitness.value).fold(f64::INFINITY, f64::min);
         assert!(states.windows(2).all(|w| best(&w[1]) <= best(&w[0])));
         assert_eq!(texts(&run_shared(multi(4), 3)), texts(&states));
+    }
+
+    /// A fitness relative to a baseline filter is above 1 wherever the
+    /// baseline is better; such a member still filters (its error against
+    /// the noisy input's is below 1) and is a trade-off on the front. Only
+    /// what filters nothing is left off it.
+    #[test]
+    fn members_worse_than_a_fitness_baseline_stay_on_the_front() {
+        let member = |expr: &str, value: f64, versus_noisy: f64, cost: f64| StoredMember {
+            expr: expr.into(),
+            fitness: Fitness::valid(value).with_versus_noisy(versus_noisy).with_cost(cost),
+            radius: None,
+        };
+        let state = State {
+            generation: 1,
+            islands: vec![vec![
+                member("seed", 1.0, 0.2, 100.0),
+                member("cheap", 1.4, 0.3, 10.0),
+                member("cheapest", 2.5, 0.5, 1.0),
+                member("nothing", 5.0, 1.0, 0.5),
+                member("dominated", 1.5, 0.31, 20.0),
+            ]],
+        };
+        let front: Vec<String> = pareto_front(&state).into_iter().map(|m| m.expr).collect();
+        assert_eq!(front, ["cheapest", "cheap", "seed"]);
+        // Without the measure against the noisy input, the value itself says it (the thesis's rule).
+        assert!(Fitness::valid(0.5).is_choice() && !Fitness::valid(1.0).is_choice());
     }
 
     #[test]

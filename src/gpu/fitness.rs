@@ -8,7 +8,8 @@ use std::sync::Arc;
 
 use wgpu::util::DeviceExt;
 
-use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
+use super::buffers::SceneBuffers;
+use super::filter::{rows_per_dispatch, uniform_bytes};
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::{own_params, Element};
 use crate::jit::{BuiltIn, Input, KernelKind, Params, ReduceParams, Role, ValidatedKernel, WORKGROUP};

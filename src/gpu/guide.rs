@@ -6,7 +6,8 @@
 
 use std::sync::OnceLock;
 
-use super::filter::{rows_per_dispatch, uniform_bytes, SceneBuffers};
+use super::buffers::SceneBuffers;
+use super::filter::{rows_per_dispatch, uniform_bytes};
 use super::{Gpu, GpuError};
 use crate::jit::interface::Element;
 use crate::jit::{self, Input, KernelKind, Params, Role, ValidatedKernel, WORKGROUP};

@@ -2,6 +2,7 @@
 //! buffers and filter dispatches. Only validated kernels come in.
 
 pub mod adapter;
+mod buffers;
 mod clock;
 mod filter;
 mod fitness;
@@ -18,8 +19,9 @@ use std::sync::{Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
 pub use crate::jit::builtin::PATHTRACE_WGSL;
+pub use buffers::SceneBuffers;
 pub use clock::Span;
-pub use filter::{Filtered, SceneBuffers, MAX_WEIGHTS_PER_DISPATCH};
+pub use filter::{Filtered, MAX_WEIGHTS_PER_DISPATCH};
 pub use fitness::{FitnessScene, Region, SceneError as FitnessError};
 pub use raw::{RawBuffer, RawKernel};
 pub use temporal::TemporalState;

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use super::filter::SceneBuffers;
+use super::buffers::SceneBuffers;
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::Element;
 use crate::jit::{BindingInterface, BuiltIn, Input, PlaneFitParams, Role, WORKGROUP};

@@ -1,6 +1,6 @@
 //! The textures of the images a kernel samples
 //! ([`crate::jit::BindingInterface::samples_images`]: filterjit's à-trous
-//! form). [`SceneBuffers`] keeps every image in a storage buffer, which the
+//! form). [`super::buffers::SceneBuffers`] keeps every image in a storage buffer, which the
 //! other kernels read; a kernel that samples gets textures of the same
 //! values, copied or blitted on the device (`jit::blit`): the scene's once,
 //! the pass images before each pass that reads them.
@@ -8,7 +8,6 @@
 use std::collections::HashMap;
 use std::sync::Arc;
 
-use super::filter::SceneBuffers;
 use super::{Gpu, GpuError, Pipeline};
 use crate::jit::interface::{Element, Resource};
 use crate::jit::{BindingInterface, BlitParams, BuiltIn, Input, Role, ValidatedKernel, WORKGROUP};
@@ -143,45 +142,57 @@ fn element_of(role: Role) -> Element {
     }
 }
 
-impl SceneBuffers {
+/// The storage buffers a kernel's sampled images are made from: a scene's
+/// ([`super::buffers::SceneBuffers`] lends its own).
+pub(super) struct Sources<'a> {
+    pub(super) size: (u32, u32),
+    pub(super) color: &'a wgpu::Buffer,
+    pub(super) modulation: Option<&'a wgpu::Buffer>,
+    pub(super) inputs: &'a HashMap<Input, wgpu::Buffer>,
+    /// The à-trous passes' images and carried variances (ping-ponged), where the form has passes.
+    pub(super) passes: Option<(&'a [wgpu::Buffer; 2], &'a [wgpu::Buffer; 2])>,
+}
+
+impl Sampled {
     /// Views of the textures pass `level` samples for `roles`, blitting into
     /// `encoder` what is not on a texture yet: the scene's images the first
     /// time, the previous pass's image and carried variance every pass.
-    pub(super) fn sampled_views(
+    pub(super) fn views(
         &mut self,
         gpu: &Gpu,
         encoder: &mut wgpu::CommandEncoder,
+        sources: Sources<'_>,
         roles: &[Role],
         level: u32,
         carried: Option<ScalarVar>,
     ) -> Result<HashMap<Role, wgpu::TextureView>, GpuError> {
-        let size = (self.width, self.height);
+        let size = sources.size;
         let read = (level as usize + 1) % 2;
         let mut views = HashMap::new();
         for &role in roles {
             let carried = carried.map(|v| Role::Input(Input::Variance(v)));
             let pass_image = level > 0 && (role == Role::Color || Some(role) == carried);
             let texture = if pass_image {
-                let scratch = self.scratch.as_ref().expect("an à-trous form has pass images");
+                let (images, variances) = sources.passes.expect("an à-trous form has pass images");
                 let (source, slot, element) = if role == Role::Color {
-                    (&scratch.images[read], &mut self.sampled.images[read], Element::Vec4F32)
+                    (&images[read], &mut self.images[read], Element::Vec4F32)
                 } else {
-                    (&scratch.variances[read], &mut self.sampled.variances[read], Element::F32)
+                    (&variances[read], &mut self.variances[read], Element::F32)
                 };
                 let texture = slot.get_or_insert_with(|| gpu.sampled_texture(element, size)).clone();
                 gpu.record_blit(encoder, source, &texture, element, size)?;
                 texture
-            } else if let Some(texture) = self.sampled.scene.get(&role) {
+            } else if let Some(texture) = self.scene.get(&role) {
                 texture.clone()
             } else {
                 let source = match role {
-                    Role::Color => &self.color,
-                    Role::Modulation => self.modulation.as_ref().expect("a remodulating form's buffers hold it"),
-                    Role::Input(input) => self.inputs.get(&input).expect("inputs are uploaded before binding"),
+                    Role::Color => sources.color,
+                    Role::Modulation => sources.modulation.expect("a remodulating form's buffers hold it"),
+                    Role::Input(input) => sources.inputs.get(&input).expect("inputs are uploaded before binding"),
                     other => unreachable!("a form samples no {other:?}"),
                 };
                 let texture = gpu.blitted(encoder, source, element_of(role), size)?;
-                self.sampled.scene.insert(role, texture.clone());
+                self.scene.insert(role, texture.clone());
                 texture
             };
             views.insert(role, texture.create_view(&Default::default()));

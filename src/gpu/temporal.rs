@@ -4,7 +4,7 @@
 //! pass that the pipeline feeds back becomes the next frame's history.
 //! `cpu::temporal` is its reference.
 
-use super::filter::SceneBuffers;
+use super::buffers::SceneBuffers;
 use super::{Gpu, GpuError};
 use crate::jit::interface::Element;
 use crate::jit::{BindingInterface, BuiltIn, Input, Role, TemporalParams, WORKGROUP};
@@ -70,16 +70,6 @@ pub(super) struct Recorded {
     pub(super) feedback: u32,
     /// The image fed back, once recorded.
     pub(super) color: Option<wgpu::Buffer>,
-}
-
-/// The frame's own inputs to the stage, uploaded with its colour.
-pub(super) struct FrameMotion {
-    /// (dx, dy, 0, 0) per pixel.
-    pub(super) vectors: wgpu::Buffer,
-    /// The normal's direction and the depth per pixel.
-    pub(super) surface: wgpu::Buffer,
-    /// The albedo clipped to [0, 1] per pixel.
-    pub(super) albedo: wgpu::Buffer,
 }
 
 impl Gpu {

@@ -72,10 +72,12 @@ impl Input {
     }
 
     /// Whether the input is normalised (features and variances, scaled by
-    /// their 99.9th percentile); what the outlier pre-pass measures is in the
-    /// colour's own units, like the colour.
+    /// their 99.9th percentile); what the outlier pre-pass measures and what
+    /// the temporal stage accumulates are in their own units (the colour's,
+    /// frames), like the colour.
     pub fn is_normalised(self) -> bool {
-        !matches!(self, Input::Variance(v) if v.from_prepass()) && self != Input::Feature(Feature::Guide)
+        !matches!(self, Input::Variance(v) if v.from_prepass() || v.from_temporal())
+            && self != Input::Feature(Feature::Guide)
     }
 }
 

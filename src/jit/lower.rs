@@ -437,6 +437,13 @@ impl<'a> Loads<'a> {
                     ["x", "y", "z"][ScalarVar::FROM_PREPASS.iter().position(|w| *w == v).expect("measured")];
                 format!("{}.{component}", texel(i.ident(Role::Input(input)), ("x", "y")))
             }
+            // The temporal stage's, raw: historyLength from its packed
+            // `accumulated` texture's y, temporalVariance (the frame's, or
+            // carried from the last pass) from its own texture's x.
+            Loads::Textures(i) if v.from_temporal() => {
+                let component = if v == ScalarVar::HistoryLength { "y" } else { "x" };
+                format!("{}.{component}", texel(i.ident(Role::Input(input)), ("x", "y")))
+            }
             Loads::Textures(i) if i.carried_variance() == Some(v) => {
                 let texel = texel(i.ident(Role::Input(input)), ("x", "y"));
                 format!("fj_carried({texel}.x, {})", scale_of(i, input))
@@ -450,12 +457,16 @@ impl<'a> Loads<'a> {
 
     /// The variance `v` carried from the last à-trous pass at neighbour j:
     /// already normalised in filterjit's buffers; in an exported shader the
-    /// frame's (normalised here) in the first pass, the carried one after.
+    /// frame's (normalised here) in the first pass, the carried one after;
+    /// the temporal stage's never normalised.
     fn carried_variance_at_neighbour(&self, v: ScalarVar) -> String {
         let input = Input::Variance(v);
         match self {
             Loads::Buffers(i) => format!("{}[j]", i.ident(Role::Input(input))),
             Loads::OwnTextures(i) => format!("{}.x", texel(i.ident(Role::Input(input)), ("xj", "yj"))),
+            Loads::Textures(i) if v.from_temporal() => {
+                format!("{}.x", texel(i.ident(Role::Input(input)), ("xj", "yj")))
+            }
             Loads::Textures(i) => {
                 let texel = texel(i.ident(Role::Input(input)), ("xj", "yj"));
                 format!("fj_carried({texel}.x, {})", scale_of(i, input))

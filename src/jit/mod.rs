@@ -3,6 +3,7 @@
 
 pub mod blit;
 pub mod builtin;
+mod builtin_interface;
 mod context;
 pub mod helpers;
 pub mod interface;

@@ -1,9 +1,20 @@
 //! Errors in expression text, as data: a kind, a position and a message.
 //! `Display` renders them with the offending line and a caret.
 
-use pest::error::{Error as PestError, ErrorVariant, InputLocation, LineColLocation};
+use pest::error::{Error as PestError, ErrorVariant, LineColLocation};
 
-use super::parse::{Rule, Span};
+/// Byte range in the source text.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Span {
+    pub start: usize,
+    pub end: usize,
+}
+
+impl From<pest::Span<'_>> for Span {
+    fn from(s: pest::Span<'_>) -> Self {
+        Span { start: s.start(), end: s.end() }
+    }
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ExprErrorKind {
@@ -37,16 +48,9 @@ pub struct ExprError {
 }
 
 impl ExprError {
-    pub(crate) fn from_pest(e: PestError<Rule>, _source: &str) -> Self {
-        let (line, column) = match e.line_col {
-            LineColLocation::Pos(p) | LineColLocation::Span(p, _) => p,
-        };
-        let offset = match e.location {
-            InputLocation::Pos(p) | InputLocation::Span((p, _)) => p,
-        };
-        let e = e.renamed_rules(describe_rule);
-        let message = e.variant.message().into_owned();
-        ExprError { kind: ExprErrorKind::Syntax, line, column, offset, message, rendered: e.to_string() }
+    /// A syntax error the parser found, already rendered (`super::parse` owns the grammar's words).
+    pub(crate) fn syntax(line: usize, column: usize, offset: usize, message: String, rendered: String) -> Self {
+        ExprError { kind: ExprErrorKind::Syntax, line, column, offset, message, rendered }
     }
 
     pub(crate) fn at(source: &str, span: Span, message: String) -> Self {
@@ -57,24 +61,12 @@ impl ExprError {
         let pest_span = pest::Span::new(source, span.start, span.end)
             .or_else(|| pest::Span::new(source, span.start, span.start))
             .expect("span lies inside the source");
-        let e: PestError<Rule> =
+        // Rendered by pest's caret printer; a custom message names no grammar rule.
+        let e: PestError<()> =
             PestError::new_from_span(ErrorVariant::CustomError { message: message.clone() }, pest_span);
         let (line, column) = match e.line_col {
             LineColLocation::Pos(p) | LineColLocation::Span(p, _) => p,
         };
         ExprError { kind, line, column, offset: span.start, message, rendered: e.to_string() }
-    }
-}
-
-fn describe_rule(rule: &Rule) -> String {
-    match rule {
-        Rule::EOI => "end of input".into(),
-        Rule::expr | Rule::primary => "an expression".into(),
-        Rule::add | Rule::sub | Rule::mul | Rule::div => "an operator (+ - * /)".into(),
-        Rule::neg => "`-`".into(),
-        Rule::call => "a call".into(),
-        Rule::name => "a name".into(),
-        Rule::number => "a number".into(),
-        other => format!("{other:?}"),
     }
 }

@@ -9,25 +9,13 @@ use pest::iterators::Pair;
 use pest::pratt_parser::{Assoc, Op, PrattParser};
 use pest::Parser;
 
+pub use super::error::Span;
 use super::error::{ExprError, ExprErrorKind};
 use super::ops::{BinaryOp, Fixity};
 
 #[derive(pest_derive::Parser)]
 #[grammar = "../grammar/expr.pest"]
 struct ExprParser;
-
-/// Byte range in the source text.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Span {
-    pub start: usize,
-    pub end: usize,
-}
-
-impl From<pest::Span<'_>> for Span {
-    fn from(s: pest::Span<'_>) -> Self {
-        Span { start: s.start(), end: s.end() }
-    }
-}
 
 /// An untyped syntax tree; names are not resolved yet.
 #[derive(Clone, Debug, PartialEq)]
@@ -105,7 +93,7 @@ const MAX_NESTING: usize = MAX_DEPTH;
 /// Parse an expression's text into a syntax tree.
 pub fn parse(source: &str) -> Result<Syntax, ExprError> {
     check_nesting(source)?;
-    let mut pairs = ExprParser::parse(Rule::weight, source).map_err(|e| ExprError::from_pest(e, source))?;
+    let mut pairs = ExprParser::parse(Rule::weight, source).map_err(syntax_error)?;
     let weight = pairs.next().expect("weight rule matched");
     let expr = weight.into_inner().next().expect("weight holds an expr");
     lower_expr(expr, source, 0)
@@ -192,5 +180,32 @@ fn lower_primary(pair: Pair<'_, Rule>, source: &str, depth: usize) -> Result<Syn
             Ok(Syntax::Call { name: name.as_str().to_string(), name_span: name.as_span().into(), args, span })
         }
         other => unreachable!("unexpected primary rule {other:?}"),
+    }
+}
+
+/// pest's error as filterjit's, the grammar's rules named in words.
+fn syntax_error(e: pest::error::Error<Rule>) -> ExprError {
+    use pest::error::{InputLocation, LineColLocation};
+    let (line, column) = match e.line_col {
+        LineColLocation::Pos(p) | LineColLocation::Span(p, _) => p,
+    };
+    let offset = match e.location {
+        InputLocation::Pos(p) | InputLocation::Span((p, _)) => p,
+    };
+    let e = e.renamed_rules(describe_rule);
+    let message = e.variant.message().into_owned();
+    ExprError::syntax(line, column, offset, message, e.to_string())
+}
+
+fn describe_rule(rule: &Rule) -> String {
+    match rule {
+        Rule::EOI => "end of input".into(),
+        Rule::expr | Rule::primary => "an expression".into(),
+        Rule::add | Rule::sub | Rule::mul | Rule::div => "an operator (+ - * /)".into(),
+        Rule::neg => "`-`".into(),
+        Rule::call => "a call".into(),
+        Rule::name => "a name".into(),
+        Rule::number => "a number".into(),
+        other => format!("{other:?}"),
     }
 }

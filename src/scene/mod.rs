@@ -270,8 +270,13 @@ impl Scene {
     /// This scene repeated to at least `side` pixels each way (colour, features and
     /// variances; no reference): the same content statistics, a larger dispatch.
     pub fn tiled(&self, side: usize) -> Scene {
+        self.tiled_to(self.width.max(side), self.height.max(side))
+    }
+
+    /// This scene repeated (or cut) to `tw`×`th` pixels: colour, features,
+    /// variances and the temporal stage's inputs (no reference).
+    pub fn tiled_to(&self, tw: usize, th: usize) -> Scene {
         let (w, h) = (self.width, self.height);
-        let (tw, th) = (w.max(side), h.max(side));
         fn tiled<T: Copy>(data: &[T], (w, h): (usize, usize), (tw, th): (usize, usize)) -> Vec<T> {
             (0..th).flat_map(|y| (0..tw).map(move |x| data[(y % h) * w + x % w])).collect()
         }
@@ -286,6 +291,22 @@ impl Scene {
             albedo: tiled(&m.albedo, (w, h), (tw, th)),
         });
         out
+    }
+
+    /// This scene as a frame of a still sequence (a camera and a world that
+    /// do not move): no motion, the surface from its normal and depth
+    /// features and the albedo from its raw albedo (zero where it has
+    /// none), as a temporal stage reads them. For timing and tests of a
+    /// temporal pipeline on a still render.
+    pub fn still(&self) -> Scene {
+        let n = self.pixels();
+        let normal = self.features.get(&Feature::Normal);
+        let depth = self.features.get(&Feature::Depth);
+        let surface = (0..n)
+            .map(|p| Motion::surface_of(normal.map_or([0.0; 3], |v| v[p]), depth.map_or(0.0, |v| v[p][0])))
+            .collect();
+        let albedo = (0..n).map(|p| Motion::albedo_of(self.albedo.as_ref().map_or([0.0; 3], |a| a[p]))).collect();
+        Scene { motion: Some(Motion { vectors: vec![[0.0; 2]; n], surface, albedo }), ..self.clone() }
     }
 
     /// The `width`×`height` pixels from (`x`, `y`) of every image the scene

@@ -1,0 +1,217 @@
+//! The manifest written beside an exported shader: its types are the
+//! contract every host reads (`web/filterjit.js`, `examples/run_exported`;
+//! examples/README.md, "The interface").
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use super::Target;
+use crate::jit::interface::UniformField;
+use crate::jit::OutputFormat;
+
+/// The binding interface of an exported shader, written beside it as JSON.
+#[derive(Clone, Debug, Serialize)]
+pub struct Manifest {
+    /// The manifest's layout ([`MANIFEST_VERSION`]): a host checks it before reading the rest.
+    pub version: u32,
+    pub generator: String,
+    pub expression: String,
+    pub target: Target,
+    pub language: &'static str,
+    /// Name of the compute entry point in this target's code.
+    pub entry_point: String,
+    pub workgroup_size: [u32; 3],
+    pub dispatch: String,
+    pub output_format: OutputFormat,
+    pub uniform: Uniform,
+    /// Every resource, group 0, by binding.
+    pub bindings: Vec<Binding>,
+    pub normalisation: &'static str,
+    pub semantics: &'static str,
+    /// Sampled textures the shader binds; more than WebGPU's guaranteed 16
+    /// per stage ([`PORTABLE_SAMPLED_TEXTURES`]) needs a device that allows them.
+    pub sampled_textures: usize,
+    /// The window radius the filter was scored with (set `params.radius` to
+    /// it), where the expression came with one (a front member).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub radius: Option<u32>,
+    /// The filter pipeline (docs/SEMANTICS.md, "The pipeline") this shader is the form of.
+    pub pipeline: String,
+    /// How many times to dispatch this shader per frame: 1 for the window
+    /// form, K for `atrous=K` (pass k with `step` = 2^k, `level` = k, `last`
+    /// = 1 when k = K - 1, colour and carried variance ping-ponged; `order`).
+    pub passes: u32,
+    /// The pre-pass shader, dispatched once before the form, where the pipeline has one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub prepass: Option<Stage>,
+    /// `keep`'s spread shader, dispatched after the pre-pass as its
+    /// `sequence` says, where the pipeline keeps what its clamp removed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub spread: Option<Stage>,
+    /// The temporal stage's blend (docs/SEMANTICS.md, "The temporal
+    /// stage"), dispatched once after the pre-pass and the spread, where the
+    /// pipeline has `temporal=A`: it blends the image the form would filter
+    /// into the history and writes `blend` (what the form filters instead),
+    /// `moments_out`, `temporal_modulation` (what the form multiplies back)
+    /// and `accumulated` (x the sample variance, y historyLength). Its
+    /// uniform's `history` is 0 on a sequence's first frame (`first_frame`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub temporal: Option<Stage>,
+    /// The temporal stage's second shader, dispatched once after `temporal`:
+    /// the sample variance blurred and scaled, `temporalVariance`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub temporal_variance: Option<Stage>,
+    /// The guide's shader (docs/SEMANTICS.md, "The guide"), dispatched once
+    /// after the pre-pass and the spread, where the weight reads `guide`: it
+    /// reads the image the form filters and writes `guide`, which the form's
+    /// first pass binds as its `guide`; later passes bind their own input.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub guide: Option<Stage>,
+    /// `planefit`'s shader, dispatched once after the form's last pass, where
+    /// the pipeline has it: it reads `filtered` (the last pass's output) and
+    /// writes `fitted`, the filtered frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub planefit: Option<Stage>,
+    /// The image the form's first pass filters: `color` (the noisy colour),
+    /// `prepared` (the pre-pass's), `kept` (the spread's) or `blend` (the
+    /// temporal stage's).
+    pub filters: String,
+    /// The variance the form's passes carry (`colorVariance` or
+    /// `temporalVariance`), where its weight reads one and it has passes:
+    /// pass 0 binds the frame's, pass k the `variance_out` of pass k - 1.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub carries: Option<String>,
+    /// What a sequence keeps from frame to frame (empty without the temporal
+    /// stage): each image takes what `from` holds, in `from`'s format,
+    /// copied at the end of the frame or right after form pass `after_pass`.
+    /// Before a sequence's first frame any texture of a float format will
+    /// do: the blend reads none of them then.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub history: Vec<Kept>,
+    /// What runs in which order and which image each binding is, in words.
+    pub order: Vec<String>,
+}
+
+/// A shader of the pipeline besides the form's (the pre-pass, the spread).
+#[derive(Clone, Debug, Serialize)]
+pub struct Stage {
+    /// The shader's file, beside this manifest (set by whoever writes the files).
+    pub file: String,
+    pub entry_point: String,
+    pub dispatch: String,
+    pub uniform: Uniform,
+    /// Values for the uniform's fields other than width and height.
+    pub uniform_values: BTreeMap<String, f64>,
+    pub bindings: Vec<Binding>,
+    /// Values that replace `uniform_values` on a sequence's first frame
+    /// (and after a cut): the temporal stage's `history` = 0.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub first_frame: BTreeMap<String, f64>,
+    /// Its dispatches in order, where there are several (the spread); a
+    /// stage without one is dispatched once, its images named by role.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub sequence: Vec<StageDispatch>,
+}
+
+/// One dispatch of a stage's shader.
+#[derive(Clone, Debug, Serialize)]
+pub struct StageDispatch {
+    /// Values for the uniform's fields other than width and height.
+    pub uniform_values: BTreeMap<String, f64>,
+    /// The image each binding role reads or writes: `color` (the noisy
+    /// colour), the pre-pass's `prepared` and `modulation`, or a texture of
+    /// the stage's own (`spread0`, `spread1`, `kept`), made in the format of
+    /// the storage binding that first writes it.
+    pub images: BTreeMap<String, String>,
+}
+
+/// An image a sequence keeps for its next frame (`Manifest::history`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Kept {
+    /// The name the next frame's bindings read it by (`history`, `moments`…).
+    pub image: String,
+    /// The image of this frame it takes: a stage's output or an input.
+    pub from: String,
+    /// Copied right after this pass of the form (`from` is that pass's
+    /// output, which a later pass overwrites); else at the end of the frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub after_pass: Option<u32>,
+    pub content: String,
+}
+
+/// The version of the manifest's layout, raised whenever a host would have
+/// to read it differently (2: `keep`'s `spread` stage and `filters`; 3: the
+/// `guide` stage, and the form's `guide` binding, which changes by pass; 4:
+/// the `planefit` stage after the form; 5: the temporal stage, its
+/// `history`, `carries` and a stage's `first_frame`).
+pub const MANIFEST_VERSION: u32 = 5;
+
+/// Sampled textures per shader stage every WebGPU device allows.
+pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Uniform {
+    pub binding: u32,
+    pub size_bytes: u32,
+    pub fields: Vec<UniformField>,
+}
+
+/// What a binding is; written `uniform`, `sampled_texture`, `storage_texture`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BindingKind {
+    Uniform,
+    SampledTexture,
+    StorageTexture,
+}
+
+impl std::fmt::Display for BindingKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.pad(match self {
+            BindingKind::Uniform => "uniform",
+            BindingKind::SampledTexture => "sampled_texture",
+            BindingKind::StorageTexture => "storage_texture",
+        })
+    }
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Binding {
+    pub group: u32,
+    pub binding: u32,
+    pub kind: BindingKind,
+    /// The WGSL declaration's name.
+    pub name: String,
+    /// The input's name in filterjit's expression language (`color`, `normal`, `wpVariance`…), or `output`/`params`.
+    pub role: String,
+    /// Texel components read or written.
+    pub components: &'static str,
+    /// What the texture must hold.
+    pub content: String,
+    /// Index into `params.scale` (normalised features and variances only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scale_index: Option<usize>,
+    /// A storage texture's texel format.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub format: Option<&'static str>,
+    /// The image to bind when it is not the one named by `role` (what the
+    /// outlier rule measured: the pre-pass's `local`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub image: Option<&'static str>,
+    /// Where this binding is in the target's own terms (GLSL binding, HLSL register, Metal slot),
+    /// derived from `binding` and `kind`.
+    pub target_slot: String,
+}
+
+pub(super) const NORMALISATION: &str =
+    "Each feature or variance texel v is used as v * scale (scale = params.scale[scale_index].x), \
+     shortened to length 1 when it is longer. filterjit uses scale = 1 / (99.9th percentile of |v| over the frame); \
+     gradients are the per-channel Sobel magnitude of the normalised feature, normalised the same way. A fixed scale \
+     (1 / scene extent for world positions, 1 for normals and albedo) is a good engine approximation; pass 1 when the \
+     texture already holds normalised values.";
+
+pub(super) const SEMANTICS: &str =
+    "f_i = sum_j w_ij c_j / sum_j w_ij over the (2r+1)^2 window around i clipped to the image; \
+     negative weights count as zero; a zero weight sum keeps the noisy colour; every operator is total (filterjit's \
+     docs/SEMANTICS.md). Colour is linear RGB, not normalised; alpha is passed through.";

@@ -1,0 +1,412 @@
+//! The manifest of an exported pipeline, stage by stage: each stage's
+//! shader, its dispatches and the images they bind, and the order in words.
+
+use std::collections::BTreeMap;
+
+use super::bindings::{bindings, Stages};
+use super::translate::translate;
+use super::{
+    Code, ExportError, Kept, Manifest, Stage, StageDispatch, StageName, Target, Uniform, MANIFEST_VERSION,
+    NORMALISATION, SEMANTICS,
+};
+use crate::jit::interface::BindingInterface;
+use crate::jit::{self, KernelKind, OutputFormat, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
+use crate::pipeline::{FilterPipeline, Keep, Temporal};
+
+/// Stage `name`'s manifest entry and shader, where `pipeline` has the stage;
+/// `manifest` holds the stages before it ([`place`]d).
+pub(super) fn build(
+    name: StageName,
+    kernel: &ValidatedKernel,
+    pipeline: &FilterPipeline,
+    manifest: &Manifest,
+    target: Target,
+    format: OutputFormat,
+) -> Result<Option<(Stage, Code)>, ExportError> {
+    let stage = |interface: &BindingInterface, module: &ValidatedModule, wgsl: &str| {
+        let (code, entry_point) = translate(module, wgsl, interface, target)?;
+        Ok::<_, ExportError>((Stage::of(interface, entry_point, &manifest.dispatch, target, format, name.into()), code))
+    };
+    let images = |pairs: &[(&str, &str)]| -> BTreeMap<String, String> {
+        pairs.iter().map(|(role, image)| (role.to_string(), image.to_string())).collect()
+    };
+    let once = |values: &[(&str, f64)], pairs: &[(&str, &str)]| {
+        let uniform_values = values.iter().map(|(field, value)| (field.to_string(), *value)).collect();
+        (uniform_values, vec![StageDispatch { uniform_values: BTreeMap::new(), images: images(pairs) }])
+    };
+    let built = match name {
+        StageName::Prepass if pipeline.outliers.is_some() || pipeline.demodulate => {
+            let interface = jit::BindingInterface::prepass(Some(format));
+            let module = jit::prepass_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (mut stage, code) = stage(&interface, &module, &jit::prepass_wgsl(Some(format)))?;
+            let params = jit::PrepassParams::of(pipeline, 0, 0);
+            stage.uniform_values = [("k", params.k as f64), ("stages", params.stages as f64)]
+                .map(|(field, value)| (field.to_string(), value))
+                .into();
+            (stage, code)
+        }
+        StageName::Spread => {
+            let Some(keep) = pipeline.keep() else { return Ok(None) };
+            let (interface, wgsl, module) = jit::spread_kernel(keep, Some(format));
+            let module = module.map_err(jit::CompileError::from)?;
+            let (mut stage, code) = stage(&interface, &module, &wgsl)?;
+            stage.sequence = spread_sequence(keep);
+            (stage, code)
+        }
+        StageName::Temporal => {
+            let Some(temporal) = pipeline.temporal else { return Ok(None) };
+            let interface = jit::BindingInterface::temporal(Some(format));
+            let module = jit::temporal_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (mut stage, code) = stage(&interface, &module, &jit::temporal_wgsl(Some(format)))?;
+            let params = jit::TemporalParams::of(temporal, 0, 0, true);
+            // As written (0.2, not 0.2's f32 widened); a host stores them as f32 again.
+            let decimal = |v: f32| v.to_string().parse::<f64>().expect("a float's text");
+            let values = [
+                ("alpha", decimal(params.alpha)),
+                ("gamma", decimal(params.gamma)),
+                ("antilag", decimal(params.antilag)),
+                ("history", 1.0),
+            ];
+            let read = ["geometry", "albedo", "motion", "history", "moments", "previous_geometry", "previous_albedo"];
+            let mut pairs: Vec<(&str, &str)> = read.map(|image| (image, image)).to_vec();
+            pairs.extend([
+                ("color", manifest.filters.as_str()),
+                ("past_modulation", "past_modulation"),
+                ("blend", "blend"),
+                ("moments_out", "moments_out"),
+                ("temporal_modulation", "temporal_modulation"),
+                ("accumulated", "accumulated"),
+            ]);
+            (stage.uniform_values, stage.sequence) = once(&values, &pairs);
+            stage.first_frame = [("history".to_string(), 0.0)].into();
+            (stage, code)
+        }
+        StageName::TemporalVariance if pipeline.temporal.is_some() => {
+            let interface = jit::BindingInterface::temporal_variance(Some(format));
+            let module = jit::temporal_variance_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (mut stage, code) = stage(&interface, &module, &jit::temporal_variance_wgsl(Some(format)))?;
+            let pairs = [
+                ("sample_variance", "accumulated"),
+                ("moments", "moments_out"),
+                ("temporalVariance", "temporalVariance"),
+            ];
+            (stage.uniform_values, stage.sequence) = once(&[], &pairs);
+            (stage, code)
+        }
+        StageName::Guide if kernel.source().layout.reads_guide() => {
+            let guide = jit::compile_guide(KernelKind::Export(format))?;
+            let (mut stage, code) = stage(&guide.source().interface, guide.validated(), guide.wgsl())?;
+            let values = [("radius", 0.0), ("step", 1.0), ("level", 0.0), ("last", 1.0)];
+            (stage.uniform_values, stage.sequence) =
+                once(&values, &[("color", manifest.filters.as_str()), ("guide", "guide")]);
+            (stage, code)
+        }
+        StageName::PlaneFit => {
+            let Some(fit) = pipeline.planefit else { return Ok(None) };
+            let interface = jit::BindingInterface::planefit(Some(format));
+            let module = jit::planefit_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (mut stage, code) = stage(&interface, &module, &jit::planefit_wgsl(Some(format)))?;
+            let params = jit::PlaneFitParams::of(pipeline, fit, 0, 0);
+            // Without demodulation the modulation is not read: the form's output stands in.
+            let modulation = match (pipeline.demodulate, pipeline.temporal) {
+                (false, _) => "filtered",
+                (true, None) => "modulation",
+                (true, Some(_)) => "temporal_modulation",
+            };
+            let values = [("radius", params.radius as f64), ("demodulate", params.demodulate as f64)];
+            let pairs = [("color", "filtered"), ("normal", "normal"), ("modulation", modulation), ("fitted", "fitted")];
+            (stage.uniform_values, stage.sequence) = once(&values, &pairs);
+            (stage, code)
+        }
+        StageName::Prepass | StageName::TemporalVariance | StageName::Guide => return Ok(None),
+    };
+    Ok(Some(built))
+}
+
+/// Put stage `name` into `manifest`, with what it changes for the stages
+/// after it: the image the form filters, the modulation it multiplies back,
+/// what a sequence keeps.
+pub(super) fn place(manifest: &mut Manifest, name: StageName, stage: Stage, pipeline: &FilterPipeline) {
+    match name {
+        StageName::Prepass => manifest.filters = "prepared".into(),
+        StageName::Spread => manifest.filters = "kept".into(),
+        StageName::Temporal => {
+            manifest.filters = "blend".into();
+            if let Some(modulation) = manifest.bindings.iter_mut().find(|b| b.role == "modulation") {
+                modulation.image = Some("temporal_modulation");
+                modulation.content = "the temporal stage's `temporal_modulation`, multiplied back".into();
+            }
+            let temporal = pipeline.temporal.expect("a temporal stage where the pipeline has one");
+            manifest.history = history(temporal);
+        }
+        StageName::TemporalVariance | StageName::Guide | StageName::PlaneFit => {}
+    }
+    *manifest.stage_mut(name) = Some(stage);
+}
+
+/// What a sequence keeps: the image fed back (the blend, or form pass
+/// `feedback - 1`'s output), the moments and the blended modulation, and
+/// the frame's surface and albedo to test the next frame's against.
+fn history(temporal: Temporal) -> Vec<Kept> {
+    let kept = |image: &str, from: String, after_pass, content: &str| Kept {
+        image: image.into(),
+        from,
+        after_pass,
+        content: content.into(),
+    };
+    let fed_back = match temporal.feedback {
+        0 => kept("history", "blend".into(), None, "the blend"),
+        k => kept(
+            "history",
+            // The form's passes write `image0`, `image1`, `image0`… (the manifest's `order`).
+            format!("image{}", (k - 1) % 2),
+            Some(k - 1),
+            "the output of the form's pass feedback - 1 (demodulated)",
+        ),
+    };
+    vec![
+        fed_back,
+        kept("moments", "moments_out".into(), None, "the luminance's moments"),
+        kept("past_modulation", "temporal_modulation".into(), None, "the blended modulation"),
+        kept("previous_geometry", "geometry".into(), None, "the frame's `geometry` input"),
+        kept("previous_albedo", "albedo".into(), None, "the frame's `albedo` input"),
+    ]
+}
+
+impl Manifest {
+    /// Stage `name`'s entry.
+    pub fn stage(&self, name: StageName) -> Option<&Stage> {
+        match name {
+            StageName::Prepass => self.prepass.as_ref(),
+            StageName::Spread => self.spread.as_ref(),
+            StageName::Temporal => self.temporal.as_ref(),
+            StageName::TemporalVariance => self.temporal_variance.as_ref(),
+            StageName::Guide => self.guide.as_ref(),
+            StageName::PlaneFit => self.planefit.as_ref(),
+        }
+    }
+
+    /// Stage `name`'s entry, to fill in.
+    pub fn stage_mut(&mut self, name: StageName) -> &mut Option<Stage> {
+        match name {
+            StageName::Prepass => &mut self.prepass,
+            StageName::Spread => &mut self.spread,
+            StageName::Temporal => &mut self.temporal,
+            StageName::TemporalVariance => &mut self.temporal_variance,
+            StageName::Guide => &mut self.guide,
+            StageName::PlaneFit => &mut self.planefit,
+        }
+    }
+}
+
+impl Stage {
+    /// A stage's shader with `interface`, dispatched once with no uniform
+    /// values of its own until the caller sets them.
+    pub(super) fn of(
+        interface: &BindingInterface,
+        entry_point: String,
+        dispatch: &str,
+        target: Target,
+        format: OutputFormat,
+        stage: Stages,
+    ) -> Stage {
+        Stage {
+            file: String::new(),
+            entry_point,
+            dispatch: dispatch.to_string(),
+            uniform: Uniform {
+                binding: interface.slot(Role::Params),
+                size_bytes: interface.uniform_bytes,
+                fields: interface.uniform.clone(),
+            },
+            uniform_values: BTreeMap::new(),
+            bindings: bindings(interface, target, format, stage),
+            first_frame: BTreeMap::new(),
+            sequence: Vec::new(),
+        }
+    }
+}
+
+/// The spread's dispatches (`jit::SpreadParams::sequence`) with the images
+/// each binds: the noisy colour or a scratch image (`spread0`, `spread1`)
+/// in, a scratch image out, except the last, which writes `kept`, the colour
+/// the form filters. `keep=surface`'s also bind the `normal` input,
+/// `surface` and `total`, which its first and second dispatches write
+/// (binding `modulation` in their place, unread, until they are written).
+pub(super) fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
+    let sequence = jit::SpreadParams::sequence(keep, 0, 0);
+    let last = sequence.len() - 1;
+    sequence
+        .iter()
+        .enumerate()
+        .map(|(n, jit::SpreadDispatch { params, source, target })| {
+            let source = match source {
+                jit::SpreadSource::Noisy => "color".to_string(),
+                jit::SpreadSource::Scratch(k) => format!("spread{k}"),
+            };
+            let output = match target {
+                _ if n == last => "kept".to_string(),
+                jit::SpreadTarget::Scratch(k) => format!("spread{k}"),
+                jit::SpreadTarget::Total => "total".to_string(),
+                jit::SpreadTarget::Surface => "surface".to_string(),
+            };
+            let mut images: BTreeMap<String, String> = [
+                ("color", source),
+                ("image", "prepared".into()),
+                ("modulation", "modulation".into()),
+                ("output", output),
+            ]
+            .map(|(role, image)| (role.to_string(), image))
+            .into();
+            if keep == Keep::Surface {
+                let read = |image, name: &str| {
+                    if jit::written_before(&sequence, n, image) { name } else { "modulation" }.to_string()
+                };
+                images.insert("normal".into(), "normal".into());
+                images.insert("surface".into(), read(jit::SpreadTarget::Surface, "surface"));
+                images.insert("total".into(), read(jit::SpreadTarget::Total, "total"));
+            }
+            StageDispatch {
+                uniform_values: [("step".to_string(), params.step as f64), ("stage".to_string(), params.stage as f64)]
+                    .into(),
+                images,
+            }
+        })
+        .collect()
+}
+
+/// The steps a host takes per frame, in words.
+pub(super) fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
+    let mut steps = Vec::new();
+    let mut colour = "the noisy colour";
+    if let Some(stage) = &manifest.prepass {
+        steps.push(format!(
+            "pre-pass (`prepass`, k = {}, stages = {}): colour = the noisy colour, albedo = the raw albedo (any \
+             texture when the pipeline does not demodulate); writes `prepared` and `modulation` (textures of the \
+             output format)",
+            stage.uniform_values["k"], stage.uniform_values["stages"]
+        ));
+        colour = "`prepared`";
+    }
+    if let Some(stage) = &manifest.spread {
+        let surface = match pipeline.keep() {
+            Some(Keep::Surface) => {
+                " along the surface (the first dispatch writes each pixel's normal direction and clamped luminance \
+                 into `surface`, the second their sum into `total`, which the others read; `normal` is the normal \
+                 input)"
+            }
+            _ => "",
+        };
+        steps.push(format!(
+            "spread (`keep`), {} dispatches of the spread shader as its `sequence` says (uniform `step` and `stage`, \
+             the image each role binds): what the clamp removed (the noisy colour minus `prepared`) is handed out \
+             over the neighbourhood{surface}, then added back and divided by `modulation`; writes `kept` \
+             (rgba32float)",
+            stage.sequence.len()
+        ));
+        colour = "`kept`";
+    }
+    if let Some(stage) = &manifest.temporal {
+        let kept: Vec<String> = manifest.history.iter().map(|k| format!("`{}` (from `{}`)", k.image, k.from)).collect();
+        steps.push(format!(
+            "temporal (`temporal`, one dispatch, alpha = {}, gamma = {}, antilag = {}, history = 1, or 0 on a \
+             sequence's first frame): colour = {colour}; geometry, albedo and motion = the frame's inputs; the \
+             history's images as the frame before kept them; writes `blend`, `moments_out`, \
+             `temporal_modulation` and `accumulated` (rgba32float)",
+            stage.uniform_values["alpha"], stage.uniform_values["gamma"], stage.uniform_values["antilag"]
+        ));
+        steps.push(
+            "temporal variance (`temporal_variance`, one dispatch): sample_variance = `accumulated`, moments = \
+             `moments_out`; writes `temporalVariance` (r32float)"
+                .into(),
+        );
+        steps.push(format!(
+            "at the end of the frame (or right after the form's pass `after_pass`), keep for the next: {}",
+            kept.join(", ")
+        ));
+        colour = "`blend`";
+    }
+    let modulation = if manifest.temporal.is_some() { "`temporal_modulation`" } else { "`modulation`" };
+    let carried = manifest.carries.as_deref().unwrap_or("colorVariance");
+    if manifest.guide.is_some() {
+        steps.push(format!(
+            "guide (`guide`, one dispatch, step = 1, level = 0, last = 1): colour = {colour}; writes `guide`, the \
+             colour the form's first pass compares (blurred by the 3x3 B-spline)"
+        ));
+    }
+    if manifest.passes == 1 {
+        steps.push(format!(
+            "form (window): colour = {colour}{}; writes `output`: the filtered frame",
+            if pipeline.demodulate { format!(", modulation = {modulation}") } else { String::new() }
+        ));
+    } else {
+        steps.push(format!(
+            "form (à-trous), pass k = 0 … {}: params.step = 2^k, params.level = k, params.last = 1 when k = {} \
+             else 0; colour = {colour} in pass 0, else pass k-1's `output`; {carried} (where bound) = the \
+             frame's in pass 0, else pass k-1's `variance_out`{}{}; pass {}'s `output` is the filtered frame",
+            manifest.passes - 1,
+            manifest.passes - 1,
+            if manifest.guide.is_some() { "; guide = `guide` in pass 0, else pass k-1's `output`" } else { "" },
+            if pipeline.demodulate { format!("; modulation = {modulation}") } else { String::new() },
+            manifest.passes - 1
+        ));
+    }
+    if let Some(stage) = &manifest.planefit {
+        steps.push(format!(
+            "planefit (`planefit`, one dispatch, radius = {}, demodulate = {}): colour = `filtered`, the form's \
+             last `output`; normal = the normal input (only its direction counts){}; writes `fitted`: the \
+             filtered frame",
+            stage.uniform_values["radius"],
+            stage.uniform_values["demodulate"],
+            if pipeline.demodulate { format!(", modulation = {modulation}") } else { String::new() }
+        ));
+    }
+    steps
+}
+
+pub(super) fn manifest(
+    kernel: &ValidatedKernel,
+    target: Target,
+    format: OutputFormat,
+    entry_point: String,
+    pipeline: &FilterPipeline,
+) -> Manifest {
+    let interface = &kernel.source().interface;
+    let bindings = bindings(interface, target, format, Stages::Form);
+    Manifest {
+        version: MANIFEST_VERSION,
+        generator: format!("filterjit {}", env!("CARGO_PKG_VERSION")),
+        expression: kernel.source().canonical.clone(),
+        target,
+        language: target.language(),
+        entry_point,
+        workgroup_size: [WORKGROUP[0], WORKGROUP[1], 1],
+        dispatch: format!("ceil(width / {}) x ceil(height / {}) x 1 workgroups", WORKGROUP[0], WORKGROUP[1]),
+        output_format: format,
+        uniform: Uniform {
+            binding: interface.slot(Role::Params),
+            size_bytes: interface.uniform_bytes,
+            fields: interface.uniform.clone(),
+        },
+        sampled_textures: interface.sampled_textures(),
+        bindings,
+        normalisation: NORMALISATION,
+        semantics: SEMANTICS,
+        radius: None,
+        pipeline: pipeline.to_string(),
+        passes: match pipeline.form {
+            crate::pipeline::Form::Window => 1,
+            crate::pipeline::Form::Atrous { passes, .. } => passes,
+        },
+        prepass: None,
+        spread: None,
+        temporal: None,
+        temporal_variance: None,
+        guide: None,
+        planefit: None,
+        filters: "color".into(),
+        carries: interface.carried_variance().map(|v| v.name().to_string()),
+        history: Vec::new(),
+        order: Vec::new(),
+    }
+}
