@@ -3,7 +3,7 @@
 //! images a tap, from storage buffers, from one interleaved storage buffer,
 //! and from sampled textures (`textureLoad`), each with the taps outside the
 //! image skipped (`continue`) or clamped. Median of seven dispatches, ms.
-//! docs/BENCHMARKS.md, "Textures for the form's taps", reads it.
+//! docs/JOURNAL.md, "Textures for the form's taps", reads it.
 //!
 //!     cargo bench --bench image_loads
 

@@ -1,5 +1,5 @@
 """Intel Open Image Denoise on a frame of the given size, timed the way
-docs/BENCHMARKS.md compares it with filterjit's forms: warm `denoise` calls
+docs/JOURNAL.md compares it with filterjit's forms: warm `denoise` calls
 (colour + albedo + normal, HDR, CPU device, quality "high"), median of N.
 
     pip install pyoidn numpy

@@ -9,7 +9,7 @@
 //! (`UnaryOp::cost` and friends), the cheaper forms the lowering gives some of
 //! them what they compute ([`CostModel::instruction`]); the form decides the
 //! taps. How well it ranks measured times is reported with every front
-//! (`pareto.json`, docs/BENCHMARKS.md).
+//! (`pareto.json`, docs/JOURNAL.md).
 //!
 //! The weights are the operator table's unless a [`CostModel`] measured on a
 //! device replaces them: `filterjit bench` measures one (`bench.json`'s

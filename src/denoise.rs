@@ -23,7 +23,7 @@ use crate::scene::{Holds, Needs, Request};
 /// ([`crate::fitness::charged`], tolerance 0.05: bias is an error like any
 /// other), then the window filters. The first whose inputs a render has is
 /// taken; `bilateral` reads colour alone, so there always is one
-/// (docs/BENCHMARKS.md, "Fitness that charges the light").
+/// (docs/JOURNAL.md, "Fitness that charges the light").
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
     "evolvedAtrous64Plane",
     "evolvedAtrous64Surface",
@@ -43,7 +43,7 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
 ];
 
 /// The shipped temporal filters a sequence gets when none is asked for,
-/// best first (docs/BENCHMARKS.md, "Sequences"); the first whose inputs the
+/// best first (docs/SEQUENCES.md, "Measured"); the first whose inputs the
 /// frames have is taken.
 pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["temporal", "svgf"];
 
@@ -53,7 +53,7 @@ pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["temporal", "svgf"];
 /// to its variant where the noisy input's median pixel is black or nearly
 /// ([`SPARSE_MEDIAN_OVER_MEAN`]): at a few samples a pixel most pixels
 /// caught no light, and the filter must gather from farther to estimate it
-/// (docs/BENCHMARKS.md, "A wider reach where the light is sparse").
+/// (docs/JOURNAL.md, "A wider reach where the light is sparse").
 pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] = &[
     ("evolvedAtrous64Plane", "evolvedAtrous64PlaneSparse"),
     ("evolvedAtrous64Surface", "evolvedAtrous64SurfaceSparse"),

@@ -104,11 +104,11 @@ pub struct Outliers {
     pub k: f32,
     /// Whether the rule's mean and deviation leave out the brightest neighbour
     /// (`trim`): two bright samples side by side otherwise raise each other's
-    /// limit and both pass (docs/BENCHMARKS.md, "A trimmed outlier rule").
+    /// limit and both pass (docs/JOURNAL.md, "A trimmed outlier rule").
     pub trim: bool,
     /// Whether and how what the clamp removed is put back, spread over the
     /// neighbourhood (`keep`, `keep=surface`): a clamp alone darkens renders
-    /// whose light arrives in rare bright samples (docs/BENCHMARKS.md, "Where
+    /// whose light arrives in rare bright samples (docs/JOURNAL.md, "Where
     /// the light goes").
     pub keep: Option<Keep>,
 }
@@ -125,7 +125,7 @@ pub enum Keep {
     /// (the clamped luminance plus [`SURFACE_KEEP_LIGHT_FLOOR`] times the
     /// image's mean): a rare bright sample's light goes back where light of
     /// its kind lands, not as a blotch on whatever is beside it
-    /// (docs/BENCHMARKS.md, "Handing the light back along the surface").
+    /// (docs/JOURNAL.md, "Handing the light back along the surface").
     Surface,
 }
 
@@ -145,7 +145,7 @@ impl Keep {
 }
 
 /// `keep=surface`'s passes: out to ±127 pixels. Chosen with the next two
-/// constants on the seventeen built-in scenes only (docs/BENCHMARKS.md,
+/// constants on the seventeen built-in scenes only (docs/JOURNAL.md,
 /// "Handing the light back along the surface"): 6 passes gained less, 8 no more.
 pub const SURFACE_KEEP_PASSES: u32 = 7;
 
@@ -346,7 +346,7 @@ pub const PLANEFIT_TINY: f64 = 1e-30;
 /// (docs/SEMANTICS.md, "The pipeline"). An average over a surface leaves
 /// blotches where the form's last pass left them, and flattens gradients where
 /// it reaches farther; a plane removes the blotches and keeps the gradient
-/// (docs/BENCHMARKS.md, "A plane fitted after the form").
+/// (docs/JOURNAL.md, "A plane fitted after the form").
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct PlaneFit {
     pub radius: u32,

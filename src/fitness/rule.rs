@@ -10,7 +10,7 @@
 //! where no small change helps every scene at once, and `mean` lets one scene
 //! where the baseline fails badly buy losses on all the others; `guarded`
 //! takes the mean but charges every scene's loss against the baseline in full
-//! (docs/BENCHMARKS.md, "Fitness that keeps every scene").
+//! (docs/JOURNAL.md, "Fitness that keeps every scene").
 //!
 //! relMSE divides each pixel's error by its reference value squared, so a
 //! weight that averages the few bright pixels carrying a render's light into

@@ -74,7 +74,7 @@ pub struct FitnessTiles {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum Tiles {
     /// On hardware adapters; off on software ones, whose compilers make
-    /// barriers expensive (`filterjit bench` shows it: docs/BENCHMARKS.md).
+    /// barriers expensive (`filterjit bench` shows it: docs/JOURNAL.md).
     #[default]
     Auto,
     On,
@@ -106,7 +106,7 @@ pub enum Fusion {
 }
 
 /// Individuals per fitness kernel on software adapters, by measurement
-/// (docs/BENCHMARKS.md, "Fused fitness kernels").
+/// (docs/JOURNAL.md, "Fused fitness kernels").
 pub const FUSED_ON_SOFTWARE: usize = 12;
 
 impl Fusion {

@@ -108,7 +108,7 @@ impl SceneBuffers {
     /// leave the pre-pass to the first [`Gpu::filter`] on these buffers: it
     /// records the pre-pass, the guide and the form in one submission,
     /// waited for once, a frame as a renderer would run it. On a hardware GPU
-    /// each submit–wait round trip saved is 0.25–0.3 ms (docs/BENCHMARKS.md,
+    /// each submit–wait round trip saved is 0.25–0.3 ms (docs/JOURNAL.md,
     /// "One submission a frame").
     pub fn for_frame(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline) -> Result<Self, GpuError> {
         Self::upload(gpu, scene, pipeline, true)

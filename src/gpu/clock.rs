@@ -2,7 +2,7 @@
 //! end of a command buffer, where the adapter offers them (wgpu's
 //! `TIMESTAMP_QUERY` with `TIMESTAMP_QUERY_INSIDE_ENCODERS`). On a hardware
 //! GPU a small dispatch's wall time is mostly the submit–wait round trip
-//! (about 0.2 ms on an NVIDIA H200 whatever the kernel, docs/BENCHMARKS.md,
+//! (about 0.2 ms on an NVIDIA H200 whatever the kernel, docs/JOURNAL.md,
 //! "On a GPU"); the device's clock measures the work itself, so kernels
 //! compare by what they cost rather than by that floor.
 

@@ -199,7 +199,7 @@ impl Gpu {
         let mut dispatches = 0;
         // The whole frame is one submission, waited for once: on a hardware
         // GPU each submit–wait round trip costs 0.25–0.3 ms, several times a
-        // 256² pass's own work (docs/BENCHMARKS.md, "On a GPU"). Bands keep
+        // 256² pass's own work (docs/JOURNAL.md, "On a GPU"). Bands keep
         // each dispatch short for watchdogs; they need no wait between them.
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         stopwatch.start(&mut encoder);

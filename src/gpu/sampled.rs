@@ -43,7 +43,7 @@ impl Gpu {
     /// alignment (and `source` may be copied from), else the blit kernel. The
     /// texel values are the same either way; the copy skips a dispatch and
     /// the clear wgpu gives a texture a kernel writes first (about 0.8 ms a
-    /// 256² image on lavapipe; docs/BENCHMARKS.md, "Where the default's frame goes").
+    /// 256² image on lavapipe; docs/JOURNAL.md, "Where the default's frame goes").
     fn record_blit(
         &self,
         encoder: &mut wgpu::CommandEncoder,

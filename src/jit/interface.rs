@@ -353,7 +353,7 @@ impl BindingInterface {
     /// à-trous filter and fitness kernels, whose taps are most of a frame's loads. A
     /// texel fetch loads a pixel's channels for every lane at once on software
     /// drivers, where a storage-buffer load goes lane by lane, channel by
-    /// channel (docs/BENCHMARKS.md, "Textures for the form's taps"). Window
+    /// channel (docs/JOURNAL.md, "Textures for the form's taps"). Window
     /// kernels keep storage buffers: their workgroup tiles stage them.
     pub fn samples_images(kind: KernelKind, shape: Shape) -> bool {
         match kind {
@@ -480,7 +480,7 @@ impl BindingInterface {
 /// recompiles it with LLVM at every dispatch that binds new values, with no
 /// cache of the variants: a small kernel was compiled again in every à-trous
 /// pass and for every scene of a fitness batch. Storage loads are opaque to
-/// that pass, so each pipeline compiles once (docs/BENCHMARKS.md, "Uniforms
+/// that pass, so each pipeline compiles once (docs/JOURNAL.md, "Uniforms
 /// that recompile"). A few scalars read from a storage buffer cost a real GPU
 /// nothing measurable; exported shaders keep the uniform an engine expects.
 pub const fn own_params() -> Resource {

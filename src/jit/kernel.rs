@@ -23,7 +23,7 @@ pub const WORKGROUP: [u32; 2] = [8, 8];
 /// one that loads the guide (docs/SEMANTICS.md, "The guide"). A dispatch's
 /// role is known when its pipeline is made, so the kernel holds no branch on
 /// it: software drivers execute both sides of a branch on a uniform, and
-/// the guide's load is one of a tap's few costs (docs/BENCHMARKS.md).
+/// the guide's load is one of a tap's few costs (docs/JOURNAL.md).
 pub const FIRST_PASS: &str = "FIRST_PASS";
 
 /// Which passes of an à-trous form one pipeline of a kernel runs: the

@@ -83,7 +83,7 @@ pub fn lower_shaped(
 /// terms and domain flags are its own, computed by exactly the code its own
 /// kernel would run (member m's terms at `m * width * height + pixel`). Fewer,
 /// larger modules are what software drivers compile fastest
-/// (docs/BENCHMARKS.md); the fitness is the same as the members' own kernels'.
+/// (docs/JOURNAL.md); the fitness is the same as the members' own kernels'.
 pub fn lower_fused(exprs: &[Expr], options: LowerOptions, shape: Shape) -> Result<KernelSource, LowerError> {
     lower_members(exprs, KernelKind::Fitness, options, shape)
 }
