@@ -728,6 +728,33 @@ fn the_default_search_starts_from_a_cross_bilateral_filter_and_compares_with_wha
     assert!(stdout.contains(&format!("baseline1 = {canonical}")), "the tuned one is compared: {stdout}");
 }
 
+/// `--objectives error,cost` on a search scored against a baseline filter
+/// (the default and the shipped presets): members worse than the baseline
+/// still filter, so the front is written (it was left empty, silently).
+#[test]
+fn a_search_scored_against_a_baseline_writes_its_front() {
+    let (training, test) = datasets();
+    for preset in ["start", "shipped"] {
+        let dir = temp_dir(&format!("front-{preset}"));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_filterjit"))
+            .args(["evolve", "--preset", preset, "--objectives", "error,cost", "--islands", "2"])
+            .args(["--island-size", "6", "--generations", "2", "--seed", "3"])
+            .arg("--scenes")
+            .arg(training)
+            .arg("--test-scenes")
+            .arg(test)
+            .arg("-o")
+            .arg(&dir)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let front: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(dir.join(filterjit::evolve::FRONT_FILE)).unwrap()).unwrap();
+        let members = front["members"].as_array().unwrap();
+        assert!(!members.is_empty(), "{preset}: a front of at least one member");
+    }
+}
+
 /// `filterjit evolve --preset shipped` improves on the best shipped filter:
 /// it is the seed, scored against, and kept (2 elites), so the best's
 /// training fitness is at most the seed's (1), and the last lines compare
