@@ -524,3 +524,30 @@ fn bench_frames_times_whole_frames_at_each_size() {
     }
     assert!(stdout.contains("96x64") && stdout.contains(&format!("@{temporal}")), "{stdout}");
 }
+
+/// A flag the pipeline cannot honour is refused with why, not ignored:
+/// `--radius` sets a window's size, and an à-trous form has a fixed stencil.
+#[test]
+fn a_radius_for_an_a_trous_form_is_refused() {
+    let sample = mitsuba_sample();
+    let out = std::env::temp_dir().join(format!("filterjit-cli-radius-{}", std::process::id()));
+    let filter = filterjit(&[
+        "filter",
+        "--expr",
+        "@crossBilateralAtrous",
+        "--radius",
+        "7",
+        sample.to_str().unwrap(),
+        "-o",
+        out.join("x.exr").to_str().unwrap(),
+    ]);
+    assert!(!filter.status.success());
+    let said = text(&filter.stderr);
+    assert!(said.contains("--radius 7 sets a window's size") && said.contains("atrous=5"), "{said}");
+    assert!(!out.join("x.exr").exists(), "nothing written");
+    let evolve =
+        filterjit(&["evolve", "--pipeline", "atrous=4", "--radius", "4", "-o", out.join("run").to_str().unwrap()]);
+    assert!(!evolve.status.success());
+    assert!(text(&evolve.stderr).contains("--radius 4 sets a window's size"), "{}", text(&evolve.stderr));
+    assert!(!out.join("run").exists(), "no run directory made");
+}

@@ -514,6 +514,7 @@ fn run_settings(args: &EvolveArgs) -> Result<(filterjit::gp::Settings, filterjit
     };
     let size = args.render.size.unwrap_or(preset.size);
     let pipeline = args.render.pipeline.unwrap_or(preset.pipeline);
+    super::refuse_radius(args.render.radius, &pipeline)?;
     // A temporal pipeline trains and is tested on sequences; any other on stills.
     let builtin = |split| match pipeline.is_temporal() {
         true => render::builtin_sequences(split).into_iter().map(|d| d.name).collect::<Vec<_>>(),

@@ -239,6 +239,7 @@ pub(crate) fn filter(
             Choice::asked_or_best(None, pipeline, radius, &Provided::new(features, variances))?
         }
     };
+    refuse_radius(radius, &choice.pipeline)?;
     let ReadScene { reference, spp, absent, view_layer } = read;
     let request = Request { reference_path: reference, spp, absent, view_layer, ..choice.request() };
     let load_start = Instant::now();
@@ -532,4 +533,16 @@ pub(crate) fn print_errors(label: &str, e: &Errors, flip: f64) {
 
 pub(crate) fn ms(d: std::time::Duration) -> f64 {
     d.as_secs_f64() * 1e3
+}
+
+/// `--radius` sets a window's size; an à-trous form has its own stencil and
+/// would ignore it: say so rather than run without it.
+pub(crate) fn refuse_radius(radius: Option<u32>, pipeline: &filterjit::pipeline::FilterPipeline) -> Result<()> {
+    if let (Some(r), true) = (radius, pipeline.is_atrous()) {
+        bail!(
+            "--radius {r} sets a window's size, and the pipeline `{pipeline}` filters with à-trous passes of a fixed \
+             stencil: leave --radius out, or give a pipeline that ends in `window`"
+        );
+    }
+    Ok(())
 }

@@ -99,6 +99,7 @@ pub(crate) fn filter_sequence(
             Choice::asked_or_best(None, pipeline, radius, &provided)?
         }
     };
+    super::refuse_radius(radius, &choice.pipeline)?;
     if let Some(because) = &choice.chosen_because {
         eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
     }
