@@ -711,6 +711,9 @@ fn the_default_search_starts_from_a_cross_bilateral_filter_and_compares_with_wha
     assert!(o.status.success(), "{stderr}");
     let said = format!("{stdout}{stderr}");
     assert!(said.contains("@crossBilateral,"), "seeded with the cross-bilateral filter: {said}");
+    let generations: Vec<&str> = stderr.lines().filter(|l| l.starts_with("gen ")).collect();
+    assert_eq!(generations.len(), 4, "a line a generation, the initial population's first: {stderr}");
+    assert!(generations[3].starts_with("gen    3  best "), "{}", generations[3]);
     let bests: Vec<f64> = std::fs::read_to_string(dir.join(filterjit::evolve::LOG_FILE))
         .unwrap()
         .lines()

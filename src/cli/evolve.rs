@@ -151,6 +151,15 @@ pub(crate) fn evolve_on(
             "best {:.4} median {:.4} invalid {} | compile {:.1}s evaluate {:.1}s gp {:.2}s",
             r.best, r.median, r.invalid, r.compile_s, r.evaluate_s, r.gp_s
         ));
+        // A line a generation, kept above the bar (or in the log where there is no terminal):
+        // the best error falling is what the search is for.
+        if root {
+            let line = format!("gen {:>4}  best {:.5}  median {:.5}", r.generation, r.best, r.median);
+            match bar.is_hidden() {
+                true => eprintln!("{line}"),
+                false => bar.println(line),
+            }
+        }
     };
     // The run's fitness rule in words, so that the final figure is read as what it is
     // (a resumed run must have the same settings, so these are the checkpoint's).
