@@ -688,6 +688,27 @@ fn test_results_state_each_outputs_light() {
     assert_eq!(evolve::mean_light(&results[0].light), Some((kept[0].unwrap() + kept[1].unwrap()) / 2.0));
 }
 
+/// `filterjit evolve ARGS` on the small test datasets, into `dir`: its
+/// stdout and stderr, once it succeeded.
+fn evolve_on_datasets(args: &[&str], dir: &Path) -> (String, String) {
+    let (training, test) = datasets();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_filterjit"))
+        .arg("evolve")
+        .args(args)
+        .arg("--scenes")
+        .arg(training)
+        .arg("--test-scenes")
+        .arg(test)
+        .arg("-o")
+        .arg(dir)
+        .output()
+        .unwrap();
+    let (stdout, stderr) =
+        (String::from_utf8_lossy(&o.stdout).into_owned(), String::from_utf8_lossy(&o.stderr).into_owned());
+    assert!(o.status.success(), "evolve {args:?}: {stderr}");
+    (stdout, stderr)
+}
+
 /// `filterjit evolve` with no preset shows the search at work: seeded with
 /// the hand-set cross-bilateral filter, its best error never rises from one
 /// generation to the next (2 elites), and it ends by comparing the best with
@@ -695,20 +716,9 @@ fn test_results_state_each_outputs_light() {
 /// from that one.
 #[test]
 fn the_default_search_starts_from_a_cross_bilateral_filter_and_compares_with_what_ships() {
-    let (training, test) = datasets();
     let dir = temp_dir("start-search");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_filterjit"))
-        .args(["evolve", "--islands", "2", "--island-size", "6", "--generations", "3", "--seed", "3"])
-        .arg("--scenes")
-        .arg(training)
-        .arg("--test-scenes")
-        .arg(test)
-        .arg("-o")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "{stderr}");
+    let (stdout, stderr) =
+        evolve_on_datasets(&["--islands", "2", "--island-size", "6", "--generations", "3", "--seed", "3"], &dir);
     let said = format!("{stdout}{stderr}");
     assert!(said.contains("@crossBilateral,"), "seeded with the cross-bilateral filter: {said}");
     let generations: Vec<&str> = stderr.lines().filter(|l| l.starts_with("gen ")).collect();
@@ -736,21 +746,10 @@ fn the_default_search_starts_from_a_cross_bilateral_filter_and_compares_with_wha
 /// still filter, so the front is written (it was left empty, silently).
 #[test]
 fn a_search_scored_against_a_baseline_writes_its_front() {
-    let (training, test) = datasets();
     for preset in ["start", "shipped"] {
         let dir = temp_dir(&format!("front-{preset}"));
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_filterjit"))
-            .args(["evolve", "--preset", preset, "--objectives", "error,cost", "--islands", "2"])
-            .args(["--island-size", "6", "--generations", "2", "--seed", "3"])
-            .arg("--scenes")
-            .arg(training)
-            .arg("--test-scenes")
-            .arg(test)
-            .arg("-o")
-            .arg(&dir)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let args = ["--preset", preset, "--objectives", "error,cost", "--islands", "2", "--island-size", "6"];
+        evolve_on_datasets(&[&args[..], &["--generations", "2", "--seed", "3"]].concat(), &dir);
         let front: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(dir.join(filterjit::evolve::FRONT_FILE)).unwrap()).unwrap();
         let members = front["members"].as_array().unwrap();
@@ -764,21 +763,9 @@ fn a_search_scored_against_a_baseline_writes_its_front() {
 /// the two (then, where the seed stayed best, say how to search longer).
 #[test]
 fn the_shipped_search_starts_from_the_shipped_filter_and_says_how_it_compares() {
-    let (training, test) = datasets();
     let dir = temp_dir("default-search");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_filterjit"))
-        .args(["evolve", "--preset", "shipped", "--islands", "2", "--island-size", "6", "--generations", "2"])
-        .args(["--seed", "3"])
-        .arg("--scenes")
-        .arg(training)
-        .arg("--test-scenes")
-        .arg(test)
-        .arg("-o")
-        .arg(&dir)
-        .output()
-        .unwrap();
-    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    assert!(o.status.success(), "{stderr}");
+    let args = ["--preset", "shipped", "--islands", "2", "--island-size", "6", "--generations", "2", "--seed", "3"];
+    let (stdout, stderr) = evolve_on_datasets(&args, &dir);
     let shipped = filterjit::denoise::SHIPPED_BY_QUALITY[0];
     let said = format!("{stdout}{stderr}");
     let pipeline = filterjit::corpus::resolve_with_pipeline(&format!("@{shipped}")).unwrap().pipeline.unwrap();
