@@ -280,8 +280,8 @@ pub fn shipped() -> Result<Vec<Shipped>> {
                 pipeline: choice.pipeline,
                 reads,
                 rank: SHIPPED_BY_QUALITY.iter().position(|n| *n == name).map(|k| k + 1),
-                measured: corpus::measured_of(corpus::EXPRESSIONS, name),
-                weight_of: corpus::alias_of(corpus::EXPRESSIONS, name),
+                measured: corpus::shipped().get(name).and_then(|e| e.measured()),
+                weight_of: corpus::shipped().get(name).and_then(|e| e.alias_of()),
                 sparse_light_variant_of: SPARSE_LIGHT_VARIANTS.iter().find(|(_, v)| *v == name).map(|(base, _)| *base),
                 text,
             })

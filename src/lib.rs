@@ -21,6 +21,7 @@ pub mod io;
 pub mod jit;
 pub mod lang;
 pub mod metrics;
+pub mod named;
 pub mod oidn;
 pub mod parallel;
 pub mod pipeline;

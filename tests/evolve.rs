@@ -192,7 +192,8 @@ fn the_hall_of_fame_reads_back_through_the_grammar() {
     let dir = temp_dir("hof");
     run(&dir, Settings { generations: 1, ..small() }, config(training, test), false, None).expect("finished");
     let text = read(dir.join(evolve::HALL_OF_FAME_FILE));
-    let entries = corpus::parse_named(&text);
+    let file = filterjit::named::NamedFile::parse(&text).unwrap();
+    let entries = file.resolved();
     assert!(!entries.is_empty() && entries.len() <= 2 * 3, "{text}");
     for (name, expr) in entries {
         assert!(name.starts_with("island"), "{name}");

@@ -199,7 +199,7 @@ fn corpus_filters_agree_with_the_cpu() {
     let scene = synthetic_scene(20, 14, 3);
     let mut buffers = SceneBuffers::new(&gpu, &scene);
     let mut cases = corpus::named();
-    cases.extend(corpus::parse_named(include_str!("data/corpus.txt")));
+    cases.extend(crate::common::named_entries(include_str!("data/corpus.txt")));
     for (name, text) in cases {
         let expr = parse_expr(text).unwrap();
         let kernel = jit::compile(&expr).unwrap();
@@ -315,7 +315,9 @@ fn each_optimisation_gives_the_plain_kernels_results() {
     let scene = synthetic_scene(16, 12, 8);
     let mut buffers = SceneBuffers::new(&gpu, &scene);
     let mut exprs: Vec<Expr> = corpus::named().iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
-    exprs.extend(corpus::parse_named(include_str!("data/corpus.txt")).iter().map(|(_, t)| parse_expr(t).unwrap()));
+    exprs.extend(
+        crate::common::named_entries(include_str!("data/corpus.txt")).iter().map(|(_, t)| parse_expr(t).unwrap()),
+    );
     let alphabet = Alphabet::full();
     let mut rng = Rng::seeded(404);
     for _ in 0..env_usize("FILTERJIT_RANDOM_EXPRS", 40) / 4 {

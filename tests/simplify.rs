@@ -235,7 +235,12 @@ fn a_run_that_simplifies_offspring_has_a_hall_of_fame_whose_simplified_forms_sco
     let settings = filterjit::gp::Settings { simplify_offspring: true, ..crate::evolve::small() };
     crate::evolve::run(&dir, settings, crate::evolve::config(training, test), false, None).expect("finished");
     let text = std::fs::read_to_string(dir.join(filterjit::evolve::HALL_OF_FAME_FILE)).unwrap();
-    let raw: Vec<Expr> = filterjit::corpus::parse_named(&text).iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
+    let raw: Vec<Expr> = filterjit::named::NamedFile::parse(&text)
+        .unwrap()
+        .resolved()
+        .iter()
+        .map(|(_, t)| parse_expr(t).unwrap())
+        .collect();
     let noted = text.lines().filter(|l| l.starts_with("# simplified (length ")).count();
     assert_eq!(noted, raw.len(), "every entry carries its simplified form");
     let simplified: Vec<Expr> = raw.iter().map(simplify::simplify).collect();

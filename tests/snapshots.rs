@@ -16,7 +16,7 @@ fn settings() -> insta::Settings {
 #[test]
 fn generated_wgsl_matches_snapshots() {
     let mut cases = corpus::named();
-    cases.extend(corpus::parse_named(CORPUS));
+    cases.extend(crate::common::named_entries(CORPUS));
     assert!(cases.len() >= 15);
     settings().bind(|| {
         for (name, text) in cases {
@@ -83,7 +83,8 @@ fn pipeline_kernels_match_snapshots() {
 #[test]
 fn fitness_kernels_match_snapshots() {
     use filterjit::jit::{KernelKind, LowerOptions, Shape};
-    let domains = corpus::parse_named(CORPUS).into_iter().find(|(n, _)| *n == "domains").expect("in the corpus").1;
+    let domains =
+        crate::common::named_entries(CORPUS).into_iter().find(|(n, _)| *n == "domains").expect("in the corpus").1;
     let members: Vec<_> = [corpus::lookup("thesis1").unwrap(), corpus::lookup("bilateral").unwrap(), domains]
         .iter()
         .map(|text| parse_expr(text).unwrap())
@@ -165,7 +166,7 @@ fn exported_shaders_match_snapshots() {
 #[test]
 fn simplified_corpus_matches_snapshots() {
     let mut cases = corpus::named();
-    cases.extend(corpus::parse_named(CORPUS));
+    cases.extend(crate::common::named_entries(CORPUS));
     let bloated: Vec<(String, &str)> =
         filterjit::bench::BLOATED.iter().enumerate().map(|(k, t)| (format!("bloated{}", k + 1), *t)).collect();
     let mut table = String::new();

@@ -171,7 +171,7 @@ pub(super) fn whole_frames(
     let methods: Vec<FrameMethod> = crate::corpus::named()
         .into_iter()
         .filter_map(|(name, text)| {
-            let pipeline = crate::corpus::pipeline_of(crate::corpus::EXPRESSIONS, name)?.ok()?;
+            let pipeline = crate::corpus::shipped().get(name)?.pipeline?;
             pipeline
                 .is_atrous()
                 .then(|| Ok(FrameMethod { name: format!("@{name}"), expr: parse_expr(text)?, pipeline }))

@@ -101,8 +101,9 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
             };
             println!("{name} = {}", tuned.expr);
             if let Some(path) = &args.output {
-                let text = format!(
-                    "# tuned on {} at {}x{}, radius {}: training fitness {:.5} (the starting values' {:.5}; {})\n{} {}\n{name} = {}\n",
+                let mut entry = filterjit::named::Entry::new(name, tuned.expr.to_string());
+                entry.notes.push(format!(
+                    "tuned on {} at {}x{}, radius {}: training fitness {:.5} (the starting values' {:.5}; {})",
                     tuned.scenes.join(", "),
                     context.render.width,
                     context.render.height,
@@ -110,11 +111,10 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
                     tuned.fitness,
                     tuned.hand_set_fitness,
                     tuned.rule,
-                    corpus::PIPELINE_PREFIX,
-                    context.pipeline,
-                    tuned.expr
-                );
-                filterjit::io::write_bytes_atomically(path, text.as_bytes())?;
+                ));
+                entry.pipeline = Some(context.pipeline);
+                let file = filterjit::named::NamedFile { header: Vec::new(), entries: vec![entry] };
+                filterjit::io::write_bytes_atomically(path, file.to_string().as_bytes())?;
             }
             Ok(())
         }

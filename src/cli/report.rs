@@ -183,18 +183,16 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
     if let Some(path) = &hall_path {
         let content = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
         let mut taken = 0;
-        for (name, text) in corpus::parse_named(&content) {
+        let file = filterjit::named::NamedFile::parse(&content).with_context(|| path.display().to_string())?;
+        for entry in &file.entries {
+            let name = &entry.name;
+            let text = file.expression(name).expect("its own entry");
             let expr =
                 lang::parse_expr(text).map_err(|e| anyhow::anyhow!("{}: entry `{name}`:\n{e}", path.display()))?;
             // Reported as people read them: simplified (the same weights).
             let expr = filterjit::simplify::simplify(&expr);
-            let pipeline = corpus::pipeline_of(&content, name)
-                .transpose()
-                .with_context(|| format!("{}: the pipeline of `{name}`", path.display()))?
-                .unwrap_or(context.pipeline);
-            let radius = corpus::radius_of(&content, name)
-                .transpose()
-                .with_context(|| format!("{}: the radius of `{name}`", path.display()))?;
+            let pipeline = entry.pipeline.unwrap_or(context.pipeline);
+            let radius = entry.radius;
             // A multi-objective run's front is drawn whole: it is the run's answer.
             let on_front = name.starts_with("front");
             let known = methods.iter().any(|m| m.expr == expr && m.pipeline == pipeline && m.radius == radius);

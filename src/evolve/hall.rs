@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use crate::fitness::{FitnessRule, Scorer};
 use crate::gp::{self, State};
+use crate::named::{Entry, NamedFile};
 use crate::pipeline::FilterPipeline;
 
 /// A hall-of-fame member scored again on whole training images, after a run on tiles.
@@ -53,28 +54,39 @@ pub(super) fn rescore(whole: &mut Scorer<'_>, hall: &[(usize, gp::StoredMember)]
 /// a multi-objective run's front follows as `front1` (cheapest) … `frontN`.
 /// `rescored`, after a run on tiles: each member's fitness on whole training
 /// images, which then orders the entries (the first is the one to use).
-pub fn hall_of_fame_text(
+pub fn hall_of_fame(
     state: &State,
     k: usize,
     pipeline: &FilterPipeline,
     rule: &FitnessRule,
     front: &[gp::StoredMember],
     rescored: &[Rescored],
-) -> String {
-    let mut text = String::from("# filterjit hall of fame: the best expressions of every island, best first.\n# Use one with `filterjit filter --expr @hall_of_fame.txt:NAME` (the first without :NAME);\n# it is filtered through the pipeline it was scored with:\n");
-    text.push_str(&format!("{} {pipeline}\n", crate::corpus::PIPELINE_PREFIX));
-    text.push_str(&format!("# fitness: {}\n", rule.describe()));
+) -> NamedFile {
+    let mut header = vec![
+        "filterjit hall of fame: the best expressions of every island, best first.".to_string(),
+        "Use one with `filterjit filter --expr @hall_of_fame.txt:NAME` (the first without :NAME);".into(),
+        "each is filtered through the pipeline it was scored with (`# pipeline:` before it).".into(),
+        format!("fitness: {}", rule.describe()),
+    ];
     if !rescored.is_empty() {
-        text.push_str("# The search scored fitness on tiles; `fitness` below is on the whole training images.\n");
+        header.push("The search scored fitness on tiles; `fitness` below is on the whole training images.".into());
     }
+    let entry = |name: String, m: &gp::StoredMember, notes: Vec<String>| Entry {
+        name,
+        text: m.expr.clone(),
+        notes,
+        pipeline: Some(*pipeline),
+        radius: m.radius,
+    };
     let whole = |expr: &str| rescored.iter().find(|r| r.expr == expr).map(|r| r.fitness.unwrap_or(f64::INFINITY));
-    let mut entries = gp::hall_of_fame(state, k);
-    entries.sort_by(|a, b| {
+    let mut members = gp::hall_of_fame(state, k);
+    members.sort_by(|a, b| {
         let key = |m: &gp::StoredMember| whole(&m.expr).unwrap_or(m.fitness.value);
         key(&a.1).total_cmp(&key(&b.1))
     });
+    let mut entries = Vec::new();
     let mut rank_in_island = vec![0usize; state.islands.len()];
-    for (island, m) in entries {
+    for (island, m) in members {
         rank_in_island[island] += 1;
         let parsed = crate::lang::parse_expr(&m.expr).ok();
         let len = parsed.as_ref().map_or(0, |e| e.len());
@@ -86,26 +98,25 @@ pub fn hall_of_fame_text(
             },
             (None, None) => format!("{:.6}", m.fitness.value),
         };
-        text.push_str(&format!("# fitness {fitness}, length {len}\n"));
+        let mut notes = vec![format!("fitness {fitness}, length {len}")];
         if let Some(simplified) = parsed.map(|e| crate::simplify::simplify(&e)) {
             // Beside the raw form that was scored: the same weights, for people.
-            text.push_str(&format!("# simplified (length {}): {simplified}\n", simplified.len()));
+            notes.push(format!("simplified (length {}): {simplified}", simplified.len()));
         }
-        if let Some(r) = m.radius {
-            text.push_str(&format!("{} {r}\n", crate::corpus::RADIUS_PREFIX));
-        }
-        text.push_str(&format!("island{island}_rank{} = {}\n", rank_in_island[island], m.expr));
+        entries.push(entry(format!("island{island}_rank{}", rank_in_island[island]), &m, notes));
     }
-    if !front.is_empty() {
-        text.push_str("#\n# The front of (error, modelled cost per pixel), cheapest first: no member is both\n# more accurate and cheaper than another (pareto.json has their measured times).\n");
-        for (n, m) in front.iter().enumerate() {
-            let cost = m.fitness.cost.unwrap_or(0.0);
-            text.push_str(&format!("# fitness {:.6}, cost {cost:.0}\n", m.fitness.value));
-            if let Some(r) = m.radius {
-                text.push_str(&format!("{} {r}\n", crate::corpus::RADIUS_PREFIX));
-            }
-            text.push_str(&format!("front{} = {}\n", n + 1, m.expr));
+    for (n, m) in front.iter().enumerate() {
+        let cost = m.fitness.cost.unwrap_or(0.0);
+        let mut notes = Vec::new();
+        if n == 0 {
+            notes.extend([
+                String::new(),
+                "The front of (error, modelled cost per pixel), cheapest first: no member is both".into(),
+                "more accurate and cheaper than another (pareto.json has their measured times).".into(),
+            ]);
         }
+        notes.push(format!("fitness {:.6}, cost {cost:.0}", m.fitness.value));
+        entries.push(entry(format!("front{}", n + 1), m, notes));
     }
-    text
+    NamedFile { header, entries }
 }

@@ -19,7 +19,7 @@ use anyhow::Result;
 
 pub use config::RunConfig;
 pub use front::{time_filters, Front, FrontMember, FRONT_FILE, FRONT_TIMING_SIDE};
-pub use hall::{hall_of_fame_text, Rescored};
+pub use hall::{hall_of_fame, Rescored};
 pub use results::{mean_light, test, test_each, Summary, TestResult};
 pub use run_dir::{
     append_log, default_run_dir, log_upto, read_checkpoint, write_checkpoint, Checkpoint, RunDirError, CHECKPOINT_FILE,
@@ -245,8 +245,8 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         gp::Objectives::Error => Vec::new(),
         gp::Objectives::ErrorCost => gp::pareto_front(&state),
     };
-    let hall = hall_of_fame_text(&state, settings.hall_of_fame, &config.pipeline, &config.fitness, &front, &rescored);
-    crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.as_bytes())?;
+    let hall = hall_of_fame(&state, settings.hall_of_fame, &config.pipeline, &config.fitness, &front, &rescored);
+    crate::io::write_bytes_atomically(&output.join(HALL_OF_FAME_FILE), hall.to_string().as_bytes())?;
     let frequencies = gp::feature_frequencies(&state);
     crate::io::write_bytes_atomically(
         &output.join(FEATURES_FILE),

@@ -12,6 +12,14 @@ use filterjit::lang::{Feature, ScalarVar};
 use filterjit::rng::Rng;
 use filterjit::Scene;
 
+/// The `(name, expression)` entries of a named-expression file the tests
+/// hold for their whole run (`tests/data/corpus.txt`), aliases followed.
+pub fn named_entries(text: &'static str) -> Vec<(&'static str, &'static str)> {
+    let file: &'static filterjit::named::NamedFile =
+        Box::leak(Box::new(filterjit::named::NamedFile::parse(text).expect("the test corpus reads")));
+    file.resolved()
+}
+
 /// The device every GPU test shares, held for as long as the returned value
 /// lives. Call it first in a test (`let gpu = gpu();`) so the turn covers the
 /// whole test, drops of its buffers included.
