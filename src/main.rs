@@ -24,7 +24,7 @@ fn main() -> ExitCode {
     let cli = cli::Cli::parse();
     // Compile timings must include the driver's compilation: Mesa would
     // otherwise answer from its on-disk shader cache.
-    if matches!(cli.command, cli::Command::Bench { .. }) && std::env::var_os("MESA_SHADER_CACHE_DISABLE").is_none() {
+    if matches!(cli.command, cli::Command::Bench(_)) && std::env::var_os("MESA_SHADER_CACHE_DISABLE").is_none() {
         std::env::set_var("MESA_SHADER_CACHE_DISABLE", "true");
     }
     match cli::run(cli) {

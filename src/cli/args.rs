@@ -134,41 +134,7 @@ pub(crate) enum Command {
     Evolve(Box<EvolveArgs>),
     /// Measure the JIT: compile latency, throughput, against a stack interpreter
     /// and a hand-written kernel, and one GP generation. Prints a table, writes JSON.
-    Bench {
-        /// Size of the benchmark scene (a render of glossy-floor).
-        #[arg(long, default_value = "64x64", value_parser = parse_size)]
-        size: (u32, u32),
-        #[arg(long, default_value_t = 5)]
-        radius: u32,
-        /// Repeats of every timing.
-        #[arg(long, default_value_t = 5)]
-        repeats: usize,
-        /// Individuals compiled together for the amortised compile cost, and in the generation.
-        #[arg(long, default_value_t = 400)]
-        population: usize,
-        /// Expression lengths of the corpus (two random expressions each).
-        #[arg(long, value_delimiter = ',', default_value = "5,10,20,40,75,100,150")]
-        lengths: Vec<usize>,
-        /// Square sizes of the one-generation measurement; the flag without values skips it.
-        #[arg(long, value_delimiter = ',', num_args = 0.., default_value = "64,128,256")]
-        generation_sizes: Vec<u32>,
-        #[arg(long, default_value_t = 10)]
-        generation_radius: u32,
-        /// Individuals per fitness kernel, as `evolve --fuse` (auto: 12 on software adapters, 1 on hardware).
-        #[arg(long, default_value = "auto")]
-        fuse: filterjit::fitness::Fusion,
-        #[arg(short, long, default_value = "bench.json")]
-        output: PathBuf,
-        /// Leave out Intel Open Image Denoise's whole-frame time even where its
-        /// `oidnDenoise` is found (FILTERJIT_OIDN, PATH, or the pyoidn Python package).
-        #[arg(long)]
-        no_oidn: bool,
-        /// Whole frames only, at these sizes (e.g. `256x256,1920x1080`): `filter`'s
-        /// default, `@evolvedAtrous3x3`, the best temporal filter and OIDN, on
-        /// a 256² render of glossy-floor tiled to each size; `bench.json` gets their `frames`.
-        #[arg(long, value_delimiter = ',', value_parser = parse_size)]
-        frames: Vec<(u32, u32)>,
-    },
+    Bench(Box<BenchArgs>),
     /// Compare filters on scenes with references: error (relMSE both ways, MSE)
     /// against device time per megapixel, in tables, scatter plots with the
     /// Pareto front, image crops and an index.html, all in one folder. Scenes,
@@ -323,6 +289,43 @@ pub(crate) struct ReportArgs {
     /// (FILTERJIT_OIDN, PATH, or the pyoidn Python package).
     #[arg(long)]
     pub(crate) no_oidn: bool,
+}
+
+#[derive(clap::Args)]
+pub(crate) struct BenchArgs {
+    /// Size of the benchmark scene (a render of glossy-floor).
+    #[arg(long, default_value = "64x64", value_parser = parse_size)]
+    pub(crate) size: (u32, u32),
+    #[arg(long, default_value_t = 5)]
+    pub(crate) radius: u32,
+    /// Repeats of every timing.
+    #[arg(long, default_value_t = 5)]
+    pub(crate) repeats: usize,
+    /// Individuals compiled together for the amortised compile cost, and in the generation.
+    #[arg(long, default_value_t = 400)]
+    pub(crate) population: usize,
+    /// Expression lengths of the corpus (two random expressions each).
+    #[arg(long, value_delimiter = ',', default_value = "5,10,20,40,75,100,150")]
+    pub(crate) lengths: Vec<usize>,
+    /// Square sizes of the one-generation measurement; the flag without values skips it.
+    #[arg(long, value_delimiter = ',', num_args = 0.., default_value = "64,128,256")]
+    pub(crate) generation_sizes: Vec<u32>,
+    #[arg(long, default_value_t = 10)]
+    pub(crate) generation_radius: u32,
+    /// Individuals per fitness kernel, as `evolve --fuse` (auto: 12 on software adapters, 1 on hardware).
+    #[arg(long, default_value = "auto")]
+    pub(crate) fuse: filterjit::fitness::Fusion,
+    #[arg(short, long, default_value = "bench.json")]
+    pub(crate) output: PathBuf,
+    /// Leave out Intel Open Image Denoise's whole-frame time even where its
+    /// `oidnDenoise` is found (FILTERJIT_OIDN, PATH, or the pyoidn Python package).
+    #[arg(long)]
+    pub(crate) no_oidn: bool,
+    /// Whole frames only, at these sizes (e.g. `256x256,1920x1080`): `filter`'s
+    /// default, `@evolvedAtrous3x3`, the best temporal filter and OIDN, on
+    /// a 256² render of glossy-floor tiled to each size; `bench.json` gets their `frames`.
+    #[arg(long, value_delimiter = ',', value_parser = parse_size)]
+    pub(crate) frames: Vec<(u32, u32)>,
 }
 
 #[derive(clap::Args)]

@@ -1,0 +1,167 @@
+//! `filterjit filter`: one render (or a sequence folder, `sequence`) filtered,
+//! written, and scored where it has a reference.
+
+use super::*;
+
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn filter(
+    env: &Environment,
+    expr: Option<&str>,
+    radius: Option<u32>,
+    scene_path: &Path,
+    output: &Path,
+    read: ReadScene,
+    cpu_check: bool,
+    pipeline: Option<filterjit::pipeline::FilterPipeline>,
+) -> Result<()> {
+    if scene::is_sequence(scene_path) {
+        if cpu_check {
+            bail!("--cpu-check compares one render with the CPU reference; filter one frame of the sequence for it");
+        }
+        return sequence::filter_sequence(env, expr, radius, scene_path, output, read, pipeline);
+    }
+    let choice = match expr {
+        Some(expr) => Choice::asked(expr, pipeline, radius)?,
+        None => {
+            let (features, variances) = scene::provides(scene_path, read.view_layer.as_deref())
+                .with_context(|| format!("reading scene {}", scene_path.display()))?;
+            Choice::asked_or_best(None, pipeline, radius, &Provided::new(features, variances))?
+        }
+    };
+    refuse_radius(radius, &choice.pipeline)?;
+    let ReadScene { reference, spp, absent, view_layer } = read;
+    let request = Request { reference_path: reference, spp, absent, view_layer, ..choice.request() };
+    let load_start = Instant::now();
+    let scene = scene::load(scene_path, &request).with_context(|| format!("loading scene {}", scene_path.display()))?;
+    let load_time = load_start.elapsed();
+    // A chosen filter may give way to its variant for the render's light (one read by the same request).
+    let choice = choice.for_light(&scene.color)?;
+    if let Some(because) = &choice.chosen_because {
+        eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
+    }
+    let (expr, pipeline, radius) = (&choice.expr, choice.pipeline, choice.radius);
+    for note in &scene.notes {
+        if note.contains("absent") || note.contains("non-finite") {
+            eprintln!("note: {note}");
+        }
+    }
+
+    let compile_start = Instant::now();
+    let kernel = choice.compile()?;
+    let lower_validate = compile_start.elapsed();
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let prepass_start = Instant::now();
+    let mut buffers = gpu::SceneBuffers::for_pipeline(&gpu, &scene, &pipeline)?;
+    let prepass_time = prepass_start.elapsed();
+    let first = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
+    // A second, warm run: software drivers compile the pipeline at its first dispatch.
+    let warm = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
+    let rgb = warm.rgb();
+
+    filterjit::scene::exr_io::write_rgb(output, scene.width, scene.height, &rgb)
+        .with_context(|| format!("writing {}", output.display()))?;
+    let png = output.with_extension("png");
+    preview::write_png(&png, scene.width, scene.height, &rgb)
+        .map_err(anyhow::Error::from)
+        .with_context(|| format!("writing {}", png.display()))?;
+
+    let megapixels = scene.pixels() as f64 / 1e6;
+    println!(
+        "scene     {} ({}x{}, {}, spp {})",
+        scene.name,
+        scene.width,
+        scene.height,
+        scene.layout.unwrap_or("?"),
+        scene.spp.map_or("unknown".into(), |s| s.to_string())
+    );
+    println!("device    {}", gpu.describe());
+    println!(
+        "kernel    {} nodes, reads color{}",
+        expr.len(),
+        kernel.source().layout.inputs.iter().map(|i| format!(", {}", i.describe())).collect::<String>()
+    );
+    let form = match pipeline.form {
+        filterjit::pipeline::Form::Window => format!("radius {radius}"),
+        filterjit::pipeline::Form::Atrous { passes, stencil } => {
+            let side = 2 * stencil.half_width() + 1;
+            format!("{passes} a-trous passes of {side}x{side}")
+        }
+    };
+    let form = match pipeline.planefit {
+        Some(fit) => format!("{form}, a plane fitted over {0}x{0}", 2 * fit.radius + 1),
+        None => form,
+    };
+    println!("pipeline  {pipeline}");
+    println!(
+        "time      load {:.1} ms | lower+validate {:.2} ms | pre-pass {:.1} ms (first, compile included) | pipeline {:.1} ms | first dispatch {:.1} ms | filter {:.1} ms ({:.1} ms/Mpx, {form}, {} dispatch{})",
+        ms(load_time),
+        ms(lower_validate),
+        ms(prepass_time),
+        ms(first.pipeline.create),
+        ms(first.time.wall),
+        ms(warm.time.wall),
+        ms(warm.time.wall) / megapixels,
+        warm.dispatches,
+        if warm.dispatches == 1 { "" } else { "es" }
+    );
+    if warm.flagged_pixels() > 0 {
+        println!(
+            "domain    {} of {} pixels had domain errors: {}",
+            warm.flagged_pixels(),
+            scene.pixels(),
+            semantics::flag::describe(warm.all_flags()).join("; ")
+        );
+    }
+    match &scene.reference {
+        Some(reference) => {
+            let noisy = metrics::errors(&scene.color, reference, scene.spp);
+            let filtered = metrics::errors(&rgb, reference, scene.spp);
+            let flip =
+                |image: &[[f32; 3]]| filterjit::flip::hdr_flip(reference, image, scene.width, scene.height).mean();
+            println!(
+                "error     {:<10} {:>12} {:>14} {:>12} {:>8} {:>10}",
+                "", "relMSE", "relMSE*m/2", "MSE", "light", "HDR-FLIP"
+            );
+            println!("          (light: the image's mean luminance over the reference's; 1 keeps the light)");
+            print_errors("noisy", &noisy, flip(&scene.color));
+            print_errors("filtered", &filtered, flip(&rgb));
+        }
+        None => println!("error     no reference image: errors not computed"),
+    }
+    if cpu_check {
+        let reference = cpu::filter_pipeline(expr, &scene, &pipeline, radius)?;
+        let worst = rgb
+            .iter()
+            .zip(&reference.color)
+            .flat_map(|(g, c)| (0..3).map(move |q| (g[q] as f64 - c[q]).abs() / (c[q].abs() + 1e-3)))
+            .fold(0.0f64, f64::max);
+        println!("cpu       max relative difference GPU f32 vs CPU f64: {worst:.3e}");
+    }
+    println!("wrote     {} and {}", output.display(), png.display());
+    Ok(())
+}
+
+pub(crate) fn print_errors(label: &str, e: &Errors, flip: f64) {
+    let m2 = e.relmse_half_spp.map_or("-".to_string(), |v| format!("{v:.6}"));
+    let light = e.light.map_or("-".to_string(), |l| format!("{l:.4}"));
+    println!("          {label:<10} {:>12.6} {:>14} {:>12.6} {light:>8} {flip:>10.6}", e.relmse, m2, e.mse);
+    if let Some(l) = e.light.filter(|l| (l - 1.0).abs() > metrics::LIGHT_TOLERANCE) {
+        println!(
+            "light     {label}: mean luminance {:+.1} % from the reference's (more than {} %): it changes the light",
+            (l - 1.0) * 100.0,
+            metrics::LIGHT_TOLERANCE * 100.0
+        );
+    }
+}
+
+/// `--radius` sets a window's size; an à-trous form has its own stencil and
+/// would ignore it: say so rather than run without it.
+pub(crate) fn refuse_radius(radius: Option<u32>, pipeline: &filterjit::pipeline::FilterPipeline) -> Result<()> {
+    if let (Some(r), true) = (radius, pipeline.is_atrous()) {
+        bail!(
+            "--radius {r} sets a window's size, and the pipeline `{pipeline}` filters with à-trous passes of a fixed \
+             stencil: leave --radius out, or give a pipeline that ends in `window`"
+        );
+    }
+    Ok(())
+}
