@@ -237,7 +237,7 @@ impl Choice {
     /// The filter's kernel for its pipeline, lowered and validated.
     pub fn compile(&self) -> Result<jit::ValidatedKernel> {
         let shape = jit::Shape::of(&self.pipeline);
-        Ok(jit::compile_shaped(&self.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?)
+        Ok(jit::compile(&self.expr, jit::KernelSpec { shape, ..jit::KernelSpec::default() })?)
     }
 }
 

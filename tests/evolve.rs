@@ -606,7 +606,7 @@ fn scoring_leaves_what_others_cached_on_a_shared_device() {
     let turn = gpu();
     let device = Gpu::open_like(&turn).unwrap();
     let shape = jit::Shape::of(&FilterPipeline::WINDOW);
-    let other = jit::compile_shaped(&parse_expr("1").unwrap(), jit::KernelKind::Filter, jit::LowerOptions::ALL, shape);
+    let other = jit::compile(&parse_expr("1").unwrap(), jit::KernelSpec { shape, ..jit::KernelSpec::default() });
     device.pipeline(&other.unwrap()).unwrap();
     assert_eq!(device.cached_pipelines(), 1);
     let expr = parse_expr("exp(-distance2(color))").unwrap();

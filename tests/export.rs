@@ -81,7 +81,7 @@ fn compare(expr: &Expr, scene: &Scene, radius: u32, format: OutputFormat) -> f64
     let ours = host::filter(&device, &queue, &shaders, &manifest, &frame_of(scene, &manifest), radius)
         .unwrap_or_else(|e| panic!("the exported shader of `{expr}` fails in plain wgpu: {e}"));
 
-    let kernel = jit::compile(expr).unwrap();
+    let kernel = jit::compile(expr, jit::KernelSpec::default()).unwrap();
     let mut buffers = SceneBuffers::new(&gpu, scene);
     let filtered = gpu.filter(&kernel, &mut buffers, scene, radius).unwrap();
     ours.iter()
@@ -132,7 +132,7 @@ fn exported_wgsl_in_plain_wgpu_matches_filter() {
 #[test]
 fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
     use filterjit::export::export_pipeline;
-    use filterjit::jit::{KernelKind, LowerOptions, Shape};
+    use filterjit::jit::Shape;
     let mut scene = unit_length(synthetic_scene(37, 29, 5));
     // Albedo as real renders have it: black (emitters), ordinary, far above 1.
     scene.albedo = Some(
@@ -218,7 +218,8 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         let ours = host::filter(&device, &queue, &shaders, &manifest, &frame, 2)
             .unwrap_or_else(|e| panic!("the exported `{text}` pipeline fails in plain wgpu: {e}"));
 
-        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&pipeline)).unwrap();
+        let kernel =
+            jit::compile(&expr, jit::KernelSpec { shape: Shape::of(&pipeline), ..jit::KernelSpec::default() }).unwrap();
         let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &pipeline).unwrap();
         let staged = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap();
         let filtered = staged.rgb();
@@ -351,7 +352,7 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
 fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
     use filterjit::export::export_pipeline;
     use filterjit::gpu::TemporalState;
-    use filterjit::jit::{KernelKind, LowerOptions, Shape};
+    use filterjit::jit::Shape;
     let scenes =
         crate::temporal::frames(&crate::temporal::committed().join("noisy"), &crate::temporal::temporal_request());
     let cases = [
@@ -388,7 +389,8 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
             k => assert_eq!(fed_back["after_pass"], k as u64 - 1, "{text}: kept right after the pass fed back"),
         }
         let shaders = shaders_of(&exported);
-        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&pipeline)).unwrap();
+        let kernel =
+            jit::compile(&expr, jit::KernelSpec { shape: Shape::of(&pipeline), ..jit::KernelSpec::default() }).unwrap();
         let mut state = TemporalState::new();
         let mut sequence = host::Sequence::new();
         let frame_of_scene = |scene: &Scene| {

@@ -124,7 +124,7 @@ fn wgsl_accuracy(op: &str, a: f64, b: f64, c: f64) -> f64 {
 /// Returns the worst relative error seen on well-conditioned inputs.
 fn check_probe(op: &str, expr: &Expr, scene: &Scene, perturbed: impl Fn(usize) -> Vec<Scene>) -> f64 {
     let gpu = gpu();
-    let kernel = jit::compile_kind(expr, KernelKind::Probe).unwrap();
+    let kernel = jit::compile(expr, jit::KernelSpec::of(KernelKind::Probe)).unwrap();
     let mut buffers = SceneBuffers::new(&gpu, scene);
     let (values, flags) = gpu.probe(&kernel, &mut buffers, scene).unwrap();
     let mut worst = 0.0f64;
@@ -202,7 +202,7 @@ fn corpus_filters_agree_with_the_cpu() {
     cases.extend(crate::common::named_entries(include_str!("data/corpus.txt")));
     for (name, text) in cases {
         let expr = parse_expr(text).unwrap();
-        let kernel = jit::compile(&expr).unwrap();
+        let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap();
         let out = gpu.filter(&kernel, &mut buffers, &scene, 3).unwrap();
         let reference = cpu::filter(&expr, &scene, 3).unwrap();
         let (fraction, worst) = agree_fraction(&out.rgb(), &reference.color);
@@ -224,7 +224,7 @@ fn random_expressions_agree_with_the_cpu() {
     for _ in 0..count {
         let depth = 2 + rng.below(6);
         let expr = alphabet.grow(&mut rng, depth);
-        let kernel = jit::compile(&expr).unwrap_or_else(|e| panic!("{expr}: {e}"));
+        let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap_or_else(|e| panic!("{expr}: {e}"));
         let out = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap();
         let reference = cpu::filter(&expr, &scene, 2).unwrap();
         let (fraction, worst) = agree_fraction(&out.rgb(), &reference.color);
@@ -241,7 +241,7 @@ fn split_dispatches_and_windows_larger_than_the_image_match_the_cpu() {
     let scene = synthetic_scene(64, 20, 5);
     let radius = 40; // window of 81x81 over a 64x20 image: several bands, every window clipped
     let expr = parse_expr("exp(-(distance2(normal) / 0.3 + distance1(pixel) / 20))").unwrap();
-    let kernel = jit::compile(&expr).unwrap();
+    let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap();
     let mut buffers = SceneBuffers::new(&gpu, &scene);
     let out = gpu.filter(&kernel, &mut buffers, &scene, radius).unwrap();
     assert!(out.dispatches > 1, "expected several dispatches, got {}", out.dispatches);
@@ -256,7 +256,7 @@ fn zero_weights_keep_the_noisy_colour_and_negative_weights_count_as_zero() {
     let scene = synthetic_scene(8, 8, 1);
     let mut buffers = SceneBuffers::new(&gpu, &scene);
     for text in ["0", "-1", "0 * distance2(normal)", "-exp(distance2(color))"] {
-        let kernel = jit::compile(&parse_expr(text).unwrap()).unwrap();
+        let kernel = jit::compile(&parse_expr(text).unwrap(), jit::KernelSpec::default()).unwrap();
         let out = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap();
         assert_eq!(out.rgb(), scene.color, "`{text}` leaves the image as it was");
     }
@@ -268,7 +268,7 @@ fn thesis1_on_the_mitsuba_sample_beats_the_noisy_input() {
     let expr = parse_expr(corpus::lookup("thesis1").unwrap()).unwrap();
     let request = Request { absent: Absent::Zero, ..Request::for_expr(&expr) };
     let scene = scene::load(&mitsuba_sample(), &request).unwrap();
-    let kernel = jit::compile(&expr).unwrap();
+    let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap();
     let mut buffers = SceneBuffers::new(&gpu, &scene);
     let out = gpu.filter(&kernel, &mut buffers, &scene, 5).unwrap();
     let reference = scene.reference.as_ref().unwrap();
@@ -286,7 +286,7 @@ fn a_kernel_binds_only_what_its_expression_reads() {
     let expr = parse_expr("exp(-distance2(normal)) * mitchell(colorVariance) + distance1(pixel) + dot(color)").unwrap();
     let layout = KernelLayout::of(&expr);
     assert_eq!(layout.describe(), "normal,colorVariance");
-    let kernel = jit::compile(&expr).unwrap();
+    let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap();
     let bindings = kernel.wgsl().matches("@binding(").count();
     assert_eq!(bindings, 4 + 2, "params, colour, output, flags and the two inputs");
     for f in Feature::ALL.iter().filter(|f| **f != Feature::Normal) {
@@ -297,9 +297,9 @@ fn a_kernel_binds_only_what_its_expression_reads() {
 #[test]
 fn equal_canonical_text_hits_the_pipeline_cache() {
     let gpu = gpu();
-    let a = jit::compile(&parse_expr("1 + 2 * distance2(normal)").unwrap()).unwrap();
-    let b = jit::compile(&parse_expr("(1) + (2 * distance2( normal ))").unwrap()).unwrap();
-    let c = jit::compile(&parse_expr("2 + 2 * distance2(normal)").unwrap()).unwrap();
+    let a = jit::compile(&parse_expr("1 + 2 * distance2(normal)").unwrap(), jit::KernelSpec::default()).unwrap();
+    let b = jit::compile(&parse_expr("(1) + (2 * distance2( normal ))").unwrap(), jit::KernelSpec::default()).unwrap();
+    let c = jit::compile(&parse_expr("2 + 2 * distance2(normal)").unwrap(), jit::KernelSpec::default()).unwrap();
     assert_eq!(a.key(), b.key());
     assert_ne!(a.key(), c.key());
     let (_, first) = gpu.pipeline(&a).unwrap();
@@ -335,7 +335,8 @@ fn each_optimisation_gives_the_plain_kernels_results() {
         ("all+tiles", LowerOptions::ALL.with_tiles(2)),
     ];
     let run = |e: &Expr, options: LowerOptions, buffers: &mut SceneBuffers| {
-        let kernel = jit::validate(jit::lower_with(e, KernelKind::Filter, options).unwrap()).unwrap();
+        let kernel =
+            jit::validate(jit::lower(e, jit::KernelSpec { options, ..jit::KernelSpec::default() }).unwrap()).unwrap();
         gpu.filter(&kernel, buffers, &scene, 2).unwrap()
     };
     for e in &exprs {
@@ -361,7 +362,9 @@ fn tiled_kernels_agree_across_bands_and_edges() {
     let check = |scene: &Scene, name: &str, radius: u32| {
         let mut buffers = SceneBuffers::new(&gpu, scene);
         let e = parse_expr(corpus::lookup(name).unwrap()).unwrap();
-        let lower = |options| jit::validate(jit::lower_with(&e, KernelKind::Filter, options).unwrap()).unwrap();
+        let lower = |options| {
+            jit::validate(jit::lower(&e, jit::KernelSpec { options, ..jit::KernelSpec::default() }).unwrap()).unwrap()
+        };
         let (plain, tiled) = (lower(LowerOptions::ALL), lower(LowerOptions::ALL.with_tiles(radius)));
         assert_eq!(tiled.source().tile_radius, Some(radius), "{name} fits in workgroup memory at radius {radius}");
         assert!(tiled.wgsl().contains("var<workgroup> tile_color"));
@@ -384,6 +387,8 @@ fn tiled_kernels_agree_across_bands_and_edges() {
     assert!(check(&wide, "bilateral", 10) > 1, "the image is split into bands");
     // Too large to fit: the kernel is made without tiles and says so.
     let e = parse_expr(corpus::lookup("thesis1").unwrap()).unwrap();
-    let source = jit::lower_with(&e, KernelKind::Filter, LowerOptions::ALL.with_tiles(30)).unwrap();
+    let source =
+        jit::lower(&e, jit::KernelSpec { options: LowerOptions::ALL.with_tiles(30), ..jit::KernelSpec::default() })
+            .unwrap();
     assert_eq!(source.tile_radius, None);
 }

@@ -114,7 +114,7 @@ fn expressions_at_the_depth_limit_go_through_every_pass() {
         let expr = parse_expr(&text).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(expr.depth(), MAX_DEPTH);
         assert_eq!(parse_expr(&expr.to_string()).unwrap(), expr, "print → parse round-trips");
-        filterjit::jit::compile(&expr).unwrap();
+        filterjit::jit::compile(&expr, filterjit::jit::KernelSpec::default()).unwrap();
         let simplified = filterjit::simplify::simplify(&expr);
         parse_expr(&simplified.to_string()).unwrap();
         filterjit::cpu::filter(&expr, &scene, 1).unwrap();

@@ -32,7 +32,7 @@ fn pipeline(text: &str) -> FilterPipeline {
 
 /// Run `expr` through `pipeline` on the device.
 fn gpu_filter(gpu: &filterjit::gpu::Gpu, expr: &Expr, scene: &Scene, p: &FilterPipeline, radius: u32) -> Vec<[f32; 3]> {
-    let kernel = jit::compile_shaped(expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(p)).unwrap();
+    let kernel = jit::compile(expr, jit::KernelSpec { shape: Shape::of(p), ..jit::KernelSpec::default() }).unwrap();
     let mut buffers = SceneBuffers::for_pipeline(gpu, scene, p).unwrap();
     gpu.filter(&kernel, &mut buffers, scene, radius).unwrap().rgb()
 }
@@ -288,7 +288,13 @@ fn fitness_runs_the_whole_pipeline_on_the_device() {
         let p = pipeline(text);
         let kernels: Vec<_> = exprs
             .iter()
-            .map(|e| jit::compile_shaped(e, KernelKind::Fitness, LowerOptions::ALL, Shape::of(&p)).unwrap())
+            .map(|e| {
+                jit::compile(
+                    e,
+                    jit::KernelSpec { kind: KernelKind::Fitness, options: LowerOptions::ALL, shape: Shape::of(&p) },
+                )
+                .unwrap()
+            })
             .collect();
         let refs: Vec<_> = kernels.iter().collect();
         let mut scenes = vec![FitnessScene::for_pipeline(&gpu, &scene, &p).unwrap()];
@@ -335,7 +341,7 @@ fn the_guide_is_the_colour_blurred_in_the_first_pass_and_the_input_after() {
         let expr = parse_expr("distance2(guide, color)").unwrap();
         let p = pipeline(text);
         let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &p).unwrap();
-        let kernel = jit::compile_kind(&expr, KernelKind::Probe).unwrap();
+        let kernel = jit::compile(&expr, jit::KernelSpec::of(KernelKind::Probe)).unwrap();
         let (weights, _) = gpu.probe(&kernel, &mut buffers, &scene).unwrap();
         let guide = cpu::guide(&scene);
         for (i, ((c, g), weight)) in scene.color.iter().zip(&guide).zip(&weights).enumerate() {
@@ -388,7 +394,7 @@ fn level_is_the_pass_index() {
 fn a_kernel_runs_only_on_scenes_prepared_for_its_shape() {
     let gpu = gpu();
     let scene = scene_with_albedo(8, 8, 1);
-    let window = jit::compile(&parse_expr("1").unwrap()).unwrap();
+    let window = jit::compile(&parse_expr("1").unwrap(), jit::KernelSpec::default()).unwrap();
     let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &pipeline("atrous=2")).unwrap();
     let error = gpu.filter(&window, &mut buffers, &scene, 1).unwrap_err().to_string();
     assert!(error.contains("prepared for pipeline `atrous=2`"), "{error}");
@@ -413,7 +419,8 @@ fn trusted_kernels_give_the_same_bits_as_checked_ones() {
         ("outliers=2,demodulate,atrous=4", LowerOptions::ALL),
     ] {
         let p = pipeline(text);
-        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, options, Shape::of(&p)).unwrap();
+        let kernel =
+            jit::compile(&expr, jit::KernelSpec { kind: KernelKind::Filter, options, shape: Shape::of(&p) }).unwrap();
         let run = |checks: bool| {
             gpu.set_kernel_runtime_checks(checks);
             let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &p).unwrap();
@@ -451,11 +458,15 @@ fn fused_fitness_kernels_score_each_member_as_its_own_kernel() {
         for tiles in [None, Some(radius)] {
             let options = LowerOptions { tile_radius: tiles, ..LowerOptions::ALL };
             let shape = Shape::of(&p);
-            let singles: Vec<_> =
-                exprs.iter().map(|e| jit::compile_shaped(e, KernelKind::Fitness, options, shape).unwrap()).collect();
+            let singles: Vec<_> = exprs
+                .iter()
+                .map(|e| jit::compile(e, jit::KernelSpec { kind: KernelKind::Fitness, options, shape }).unwrap())
+                .collect();
             let fused = [
-                jit::compile_fused(&exprs[..3], options, shape).unwrap(),
-                jit::compile_fused(&exprs[3..], options, shape).unwrap(),
+                jit::compile_fused(&exprs[..3], jit::KernelSpec { kind: jit::KernelKind::Fitness, options, shape })
+                    .unwrap(),
+                jit::compile_fused(&exprs[3..], jit::KernelSpec { kind: jit::KernelKind::Fitness, options, shape })
+                    .unwrap(),
             ];
             assert_eq!(fused[0].source().exprs.len(), 3);
             let data: Vec<&Scene> = scenes.iter().collect();
@@ -612,7 +623,8 @@ fn the_outlier_rule_s_measures_are_terminals() {
     // Without outliers there is nothing to read.
     let plain = pipeline("atrous=2");
     let expr = parse_expr("exp(-clampedShare)").unwrap();
-    let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&plain)).unwrap();
+    let kernel =
+        jit::compile(&expr, jit::KernelSpec { shape: Shape::of(&plain), ..jit::KernelSpec::default() }).unwrap();
     let mut buffers = SceneBuffers::for_pipeline(&gpu, &scene, &plain).unwrap();
     let error = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap_err().to_string();
     assert!(error.contains("clampedShare") && error.contains("outliers=k"), "{error}");
@@ -633,7 +645,7 @@ fn a_missing_input_is_a_data_error_naming_scene_and_input() {
     scene.name = "lacking".into();
     let expr = parse_expr("exp(-distance2(normal))").unwrap();
     let want = MissingInput { scene: "lacking".into(), missing: Missing::Feature(Feature::Normal) };
-    let kernel = jit::compile(&expr).unwrap();
+    let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap();
     let mut buffers = SceneBuffers::new(&gpu, &scene);
     match gpu.filter(&kernel, &mut buffers, &scene, 2) {
         Err(GpuError::MissingInput(got)) => assert_eq!(got, want),
@@ -644,7 +656,8 @@ fn a_missing_input_is_a_data_error_naming_scene_and_input() {
     scene.variances.remove(&ScalarVar::LocalStd);
     let mut buffers = SceneBuffers::new(&gpu, &scene);
     let measured = parse_expr("exp(-localStd)").unwrap();
-    let err = gpu.filter(&jit::compile(&measured).unwrap(), &mut buffers, &scene, 2).unwrap_err();
+    let err =
+        gpu.filter(&jit::compile(&measured, jit::KernelSpec::default()).unwrap(), &mut buffers, &scene, 2).unwrap_err();
     assert!(matches!(&err, GpuError::MissingInput(m) if m.missing == Missing::Measured(ScalarVar::LocalStd)), "{err}");
     assert!(err.to_string().contains("outliers=k"), "{err}");
 }

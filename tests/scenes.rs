@@ -152,7 +152,7 @@ fn pbrt_gbuffer_files_load_with_old_and_new_channel_names() {
     // And it filters.
     let expr =
         filterjit::parse_expr("exp(-(distance2(normal) + distance2(texture) + distance2(worldPosition)))").unwrap();
-    let kernel = filterjit::jit::compile(&expr).unwrap();
+    let kernel = filterjit::jit::compile(&expr, filterjit::jit::KernelSpec::default()).unwrap();
     let mut buffers = filterjit::gpu::SceneBuffers::new(&gpu, &scene);
     let out = gpu.filter(&kernel, &mut buffers, &scene, 2).unwrap();
     assert!(out.rgb().iter().flatten().all(|v| v.is_finite()));

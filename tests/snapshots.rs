@@ -21,7 +21,7 @@ fn generated_wgsl_matches_snapshots() {
     settings().bind(|| {
         for (name, text) in cases {
             let expr = parse_expr(text).unwrap_or_else(|e| panic!("{name}:\n{e}"));
-            let kernel = jit::compile(&expr).unwrap_or_else(|e| panic!("{name}: {e}"));
+            let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap_or_else(|e| panic!("{name}: {e}"));
             assert!(kernel.wgsl().contains(&format!("// expression: {expr}")), "the header names the expression");
             insta::assert_snapshot!(format!("wgsl__{name}"), kernel.wgsl());
         }
@@ -59,20 +59,23 @@ fn pipeline_kernels_match_snapshots() {
         // An à-trous pass carrying the temporal stage's variance from pass to pass (SVGF's rule).
         let svgf = corpus::resolve_with_pipeline("@svgf").unwrap();
         let temporal_shape = jit::Shape::of(&svgf.pipeline.expect("shipped with its pipeline"));
-        let kernel = jit::compile_shaped(&svgf.expr, KernelKind::Filter, LowerOptions::ALL, temporal_shape).unwrap();
+        let kernel =
+            jit::compile(&svgf.expr, jit::KernelSpec { shape: temporal_shape, ..jit::KernelSpec::default() }).unwrap();
         assert!(kernel.wgsl().contains("buf_variance_out"), "the temporal variance is carried");
         insta::assert_snapshot!("pipeline__svgf.atrous.filter", kernel.wgsl());
         for (name, expr) in [("crossBilateralAtrous", &pipeline.expr), ("carrying", &carrying), ("guided", &guided)] {
             for (kind, label) in [(KernelKind::Filter, "filter"), (KernelKind::Fitness, "fitness")] {
-                let kernel = jit::compile_shaped(expr, kind, LowerOptions::ALL, shape).unwrap();
+                let kernel = jit::compile(expr, jit::KernelSpec { kind, options: LowerOptions::ALL, shape }).unwrap();
                 insta::assert_snapshot!(format!("pipeline__{name}.atrous.{label}"), kernel.wgsl());
             }
         }
         // The 3x3 stencil's pass: the same kernel but for its taps and their weights.
         let linear: filterjit::pipeline::FilterPipeline = "outliers=2,demodulate,atrous3x3=4".parse().unwrap();
-        let kernel =
-            jit::compile_shaped(&pipeline.expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(&linear))
-                .unwrap();
+        let kernel = jit::compile(
+            &pipeline.expr,
+            jit::KernelSpec { shape: jit::Shape::of(&linear), ..jit::KernelSpec::default() },
+        )
+        .unwrap();
         insta::assert_snapshot!("pipeline__crossBilateralAtrous.atrous3x3.filter", kernel.wgsl());
     });
 }
@@ -90,9 +93,17 @@ fn fitness_kernels_match_snapshots() {
         .map(|text| parse_expr(text).unwrap())
         .collect();
     settings().bind(|| {
-        let single = jit::compile_shaped(&members[0], KernelKind::Fitness, LowerOptions::ALL, Shape::WINDOW).unwrap();
+        let single = jit::compile(
+            &members[0],
+            jit::KernelSpec { kind: KernelKind::Fitness, options: LowerOptions::ALL, shape: Shape::WINDOW },
+        )
+        .unwrap();
         insta::assert_snapshot!("fitness__thesis1", single.wgsl());
-        let fused = jit::compile_fused(&members, LowerOptions::ALL, Shape::WINDOW).unwrap();
+        let fused = jit::compile_fused(
+            &members,
+            jit::KernelSpec { kind: jit::KernelKind::Fitness, options: LowerOptions::ALL, shape: Shape::WINDOW },
+        )
+        .unwrap();
         insta::assert_snapshot!("fitness__fused3", fused.wgsl());
         insta::assert_snapshot!("fitness__reduce", jit::reduce_wgsl());
     });
@@ -176,7 +187,10 @@ fn simplified_corpus_matches_snapshots() {
             let simplified = filterjit::simplify::simplify(&expr);
             table += &format!("{name} ({} -> {} nodes)\n  {expr}\n  {simplified}\n", expr.len(), simplified.len());
             if name.starts_with("bloated") {
-                insta::assert_snapshot!(format!("simplified__{name}"), jit::compile(&simplified).unwrap().wgsl());
+                insta::assert_snapshot!(
+                    format!("simplified__{name}"),
+                    jit::compile(&simplified, jit::KernelSpec::default()).unwrap().wgsl()
+                );
             }
         }
         insta::assert_snapshot!("simplified__corpus", table);

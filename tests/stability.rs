@@ -40,7 +40,7 @@ fn shipped() -> Vec<(&'static str, filterjit::Expr)> {
 /// amplifies the 4096-ulp error WGSL allows asin, and these scenes reach it).
 fn check(scene: &Scene, expr: &filterjit::Expr, radius: u32) -> Vec<[f32; 3]> {
     let gpu = gpu();
-    let kernel = jit::compile(expr).unwrap();
+    let kernel = jit::compile(expr, jit::KernelSpec::default()).unwrap();
     let mut buffers = SceneBuffers::new(&gpu, scene);
     let out = gpu.filter(&kernel, &mut buffers, scene, radius).unwrap().rgb();
     let reference = cpu::filter(expr, scene, radius).unwrap();
@@ -124,7 +124,7 @@ fn large_windows_sum_accurately_in_f32() {
     let mut worst = 0.0f64;
     for text in ["1", "exp(-distance2(color))", "biweight(distance2(normal) / 4) + 1e-6"] {
         let expr = parse_expr(text).unwrap();
-        let kernel = jit::compile(&expr).unwrap();
+        let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap();
         let mut buffers = SceneBuffers::new(&gpu, &scene);
         let out = gpu.filter(&kernel, &mut buffers, &scene, 30).unwrap().rgb();
         let reference = cpu::filter(&expr, &scene, 30).unwrap();
@@ -189,7 +189,7 @@ fn random_expressions_far_past_the_length_limit_compile_and_run() {
     for length in [5, 20, 50, 75, 100, 150, 250, 400] {
         let expr = alphabet.of_length(&mut rng, length);
         assert!(expr.len() >= length);
-        let kernel = jit::compile(&expr).unwrap_or_else(|e| panic!("length {length}: {e}"));
+        let kernel = jit::compile(&expr, jit::KernelSpec::default()).unwrap_or_else(|e| panic!("length {length}: {e}"));
         match gpu.filter(&kernel, &mut buffers, &scene, 1) {
             Ok(out) => assert!(out.rgb().iter().flatten().all(|v| v.is_finite()), "length {}", expr.len()),
             // Some devices (llvmpipe through GL: 16) allow fewer storage buffers than a

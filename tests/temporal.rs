@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use filterjit::cpu;
 use filterjit::gpu::{SceneBuffers, TemporalState};
-use filterjit::jit::{self, KernelKind, LowerOptions, Shape};
+use filterjit::jit::{self, Shape};
 use filterjit::lang::parse_expr;
 use filterjit::pipeline::FilterPipeline;
 use filterjit::scene::{exr_io, Request, Sequence};
@@ -113,7 +113,8 @@ fn the_temporal_stage_on_the_device_matches_the_cpu_reference_frame_after_frame(
     for (text, weight, radius) in cases {
         let pipeline: FilterPipeline = text.parse().unwrap();
         let expr = parse_expr(weight).unwrap();
-        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&pipeline)).unwrap();
+        let kernel =
+            jit::compile(&expr, jit::KernelSpec { shape: Shape::of(&pipeline), ..jit::KernelSpec::default() }).unwrap();
         let mut state = TemporalState::new();
         let mut history: Option<cpu::temporal::History> = None;
         for (k, scene) in scenes.iter().enumerate() {
@@ -151,7 +152,9 @@ fn the_history_lowers_the_error_and_keeps_the_light() {
     let scenes = frames(&committed().join("noisy"), &temporal_request());
     let svgf = filterjit::corpus::resolve_with_pipeline("@svgf").unwrap();
     let pipeline = svgf.pipeline.unwrap();
-    let kernel = jit::compile_shaped(&svgf.expr, KernelKind::Filter, LowerOptions::ALL, Shape::of(&pipeline)).unwrap();
+    let kernel =
+        jit::compile(&svgf.expr, jit::KernelSpec { shape: Shape::of(&pipeline), ..jit::KernelSpec::default() })
+            .unwrap();
     let mut state = TemporalState::new();
     for (k, scene) in scenes.iter().enumerate() {
         let mut buffers = SceneBuffers::for_frame(&gpu, scene, &pipeline).unwrap();

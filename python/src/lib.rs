@@ -490,9 +490,15 @@ fn simplify(expr: &str) -> PyResult<String> {
 fn compile(expr: &str, pipeline: Option<&str>) -> PyResult<String> {
     let resolved = resolve(expr)?;
     let pipeline = parse_pipeline(pipeline)?.or(resolved.pipeline).unwrap_or_default();
-    let kernel =
-        jit::compile_shaped(&resolved.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, jit::Shape::of(&pipeline))
-            .map_err(value)?;
+    let kernel = jit::compile(
+        &resolved.expr,
+        jit::KernelSpec {
+            kind: jit::KernelKind::Filter,
+            options: jit::LowerOptions::ALL,
+            shape: jit::Shape::of(&pipeline),
+        },
+    )
+    .map_err(value)?;
     Ok(kernel.wgsl().to_string())
 }
 

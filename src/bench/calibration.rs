@@ -70,7 +70,8 @@ pub fn calibrate(
         probes.push((op.name().into(), sum));
     }
     let exprs: Vec<Expr> = probes.iter().map(|(_, e)| e.clone()).collect();
-    let kernels: Vec<jit::ValidatedKernel> = exprs.iter().map(jit::compile).collect::<Result<_, _>>()?;
+    let kernels: Vec<jit::ValidatedKernel> =
+        exprs.iter().map(|e| jit::compile(e, jit::KernelSpec::default())).collect::<Result<_, _>>()?;
     let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
     for k in &refs {
         gpu.filter(k, buffers, scene, radius)?;

@@ -10,7 +10,7 @@ use serde::Serialize;
 use super::timing::{interleaved, ms, stat, Stat};
 use super::{interpreter, BenchSettings};
 use crate::gpu::{Gpu, SceneBuffers};
-use crate::jit::{self, KernelKind, LowerOptions};
+use crate::jit::{self, LowerOptions};
 use crate::lang::random::Alphabet;
 use crate::lang::{Expr, Feature, ScalarVar};
 use crate::rng::Rng;
@@ -114,17 +114,23 @@ pub(super) fn measure(
     for (k, expr) in corpus(settings).iter().enumerate() {
         progress(&format!("expression {}/{} (length {})", k + 1, settings.lengths.len() * 2, expr.len()));
         let t = Instant::now();
-        let source = jit::lower_with(expr, KernelKind::Filter, LowerOptions::ALL)?;
+        let source = jit::lower(expr, jit::KernelSpec::default())?;
         let lower = t.elapsed();
         let t = Instant::now();
         let kernel = jit::validate(source)?;
         let validate = t.elapsed();
         let first = gpu.filter(&kernel, buffers, scene, settings.radius)?;
         // The default kernel, the unoptimised one and each variant, timed in rounds.
-        let plain = jit::validate(jit::lower_with(expr, KernelKind::Filter, LowerOptions::NONE)?)?;
+        let plain = jit::validate(jit::lower(
+            expr,
+            jit::KernelSpec { options: LowerOptions::NONE, ..jit::KernelSpec::default() },
+        )?)?;
         let mut variants = Vec::new();
         for name in VARIANTS {
-            let source = jit::lower_with(expr, KernelKind::Filter, variant(name, settings.radius))?;
+            let source = jit::lower(
+                expr,
+                jit::KernelSpec { options: variant(name, settings.radius), ..jit::KernelSpec::default() },
+            )?;
             // Tiles that do not fit leave the default kernel: nothing to time.
             let fits = name != "+tiles" || source.tile_radius.is_some();
             variants.push(if fits { Some(jit::validate(source)?) } else { None });

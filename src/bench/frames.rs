@@ -7,7 +7,7 @@ use serde::Serialize;
 
 use super::timing::{ms, stat, Stat};
 use crate::gpu::{Gpu, SceneBuffers, Span};
-use crate::jit::{self, KernelKind, LowerOptions};
+use crate::jit::{self};
 use crate::lang::{parse_expr, Expr};
 use crate::metrics;
 use crate::scene::Scene;
@@ -132,7 +132,8 @@ pub(super) fn pipeline_stages(gpu: &Gpu, scene: &Scene, repeats: usize) -> anyho
     let mut prepared = Vec::new();
     for (name, pipeline, radius) in forms {
         let t = Instant::now();
-        let kernel = jit::compile_shaped(&expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(&pipeline))?;
+        let kernel =
+            jit::compile(&expr, jit::KernelSpec { shape: jit::Shape::of(&pipeline), ..jit::KernelSpec::default() })?;
         let lower_validate = ms(t.elapsed());
         let mut buffers = SceneBuffers::for_pipeline(gpu, &frame, &pipeline)?;
         let t = Instant::now();
@@ -205,7 +206,8 @@ pub fn frames(
     for method in methods {
         let FrameMethod { expr, pipeline, .. } = method;
         let t = Instant::now();
-        let kernel = jit::compile_shaped(expr, KernelKind::Filter, LowerOptions::ALL, jit::Shape::of(pipeline))?;
+        let kernel =
+            jit::compile(expr, jit::KernelSpec { shape: jit::Shape::of(pipeline), ..jit::KernelSpec::default() })?;
         let mut state = crate::gpu::TemporalState::new();
         let mut buffers = SceneBuffers::for_frame(gpu, &frame, pipeline)?;
         gpu.filter_frame(&kernel, &mut buffers, &frame, radius, &mut state)?;

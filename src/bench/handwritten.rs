@@ -46,10 +46,15 @@ pub(super) fn measure(
         exprs: vec![bilateral.clone()],
         wgsl: HANDWRITTEN_BILATERAL.to_string(),
     })?;
-    let generated = jit::compile(&bilateral)?;
-    let generated_plain = jit::validate(jit::lower_with(&bilateral, KernelKind::Filter, LowerOptions::NONE)?)?;
-    let generated_tiled =
-        jit::validate(jit::lower_with(&bilateral, KernelKind::Filter, LowerOptions::ALL.with_tiles(settings.radius))?)?;
+    let generated = jit::compile(&bilateral, jit::KernelSpec::default())?;
+    let generated_plain = jit::validate(jit::lower(
+        &bilateral,
+        jit::KernelSpec { options: LowerOptions::NONE, ..jit::KernelSpec::default() },
+    )?)?;
+    let generated_tiled = jit::validate(jit::lower(
+        &bilateral,
+        jit::KernelSpec { options: LowerOptions::ALL.with_tiles(settings.radius), ..jit::KernelSpec::default() },
+    )?)?;
     let kernels = [&handwritten, &generated, &generated_plain, &generated_tiled];
     for k in kernels {
         gpu.filter(k, buffers, scene, settings.radius)?;

@@ -54,7 +54,9 @@ pub(super) fn measure(gpu: &Gpu, scene: &Scene, settings: &BenchSettings) -> any
     }
     let threads = std::thread::available_parallelism().map_or(2, |n| n.get());
     let t = Instant::now();
-    let kernels = jit::compile_all(&distinct, KernelKind::Fitness, threads)?;
+    let kernels = jit::compile_each(&distinct, jit::KernelSpec::of(KernelKind::Fitness), threads)
+        .into_iter()
+        .collect::<Result<Vec<_>, _>>()?;
     let lower_validate = t.elapsed();
     let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
     let t = Instant::now();

@@ -40,7 +40,8 @@ pub(super) fn measure(
     for text in BLOATED {
         let raw = parse_expr(text)?;
         let simple = crate::simplify::simplify(&raw);
-        let kernels = [jit::compile(&raw)?, jit::compile(&simple)?];
+        let kernels =
+            [jit::compile(&raw, jit::KernelSpec::default())?, jit::compile(&simple, jit::KernelSpec::default())?];
         let refs: Vec<&jit::ValidatedKernel> = kernels.iter().collect();
         for k in &refs {
             gpu.filter(k, buffers, scene, settings.radius)?;

@@ -11,7 +11,7 @@ pub(crate) fn compile(
 ) -> Result<()> {
     let resolved = corpus::resolve_with_pipeline(expr)?;
     let shape = jit::Shape::of(&pipeline.or(resolved.pipeline).unwrap_or_default());
-    let kernel = jit::compile_shaped(&resolved.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
+    let kernel = jit::compile(&resolved.expr, jit::KernelSpec { shape, ..jit::KernelSpec::default() })?;
     match output {
         Some(path) => filterjit::io::write_bytes_atomically(path, kernel.wgsl().as_bytes())
             .map_err(anyhow::Error::from)

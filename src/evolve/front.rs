@@ -11,7 +11,7 @@ use super::RunConfig;
 use crate::fitness::Scorer;
 use crate::gp;
 use crate::gpu::Gpu;
-use crate::jit::{self, KernelKind};
+use crate::jit::{self};
 use crate::lang::Expr;
 use crate::pipeline::FilterPipeline;
 use crate::scene::Scene;
@@ -100,7 +100,7 @@ pub fn time_filters(
         .iter()
         .map(|(e, radius)| {
             let radius = *radius;
-            let kernel = jit::compile_shaped(e, KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
+            let kernel = jit::compile(e, jit::KernelSpec { shape, ..jit::KernelSpec::default() })?;
             gpu.filter(&kernel, &mut buffers, scene, radius)?;
             let mut times: Vec<f64> = (0..repeats.max(1))
                 .map(|_| Ok(gpu.filter(&kernel, &mut buffers, scene, radius)?.kernel_time().as_secs_f64()))

@@ -176,7 +176,8 @@ pub fn export_pipeline(
     format: OutputFormat,
 ) -> Result<Exported, ExportError> {
     let shape = jit::Shape::of(pipeline);
-    let kernel = jit::compile_shaped(expr, KernelKind::Export(format), jit::LowerOptions::default(), shape)?;
+    let kernel =
+        jit::compile(expr, jit::KernelSpec { kind: KernelKind::Export(format), shape, ..jit::KernelSpec::default() })?;
     let interface = &kernel.source().interface;
     let (code, entry_point) = translate(kernel.validated(), kernel.wgsl(), interface, target)?;
     let mut manifest = manifest(&kernel, target, format, entry_point, pipeline);

@@ -43,7 +43,8 @@ pub(super) fn kernels(
 ) -> (Vec<jit::ValidatedKernel>, Vec<Option<Invalid>>) {
     let groups = groups(exprs, fuse, gpu.storage_buffer_limit(), shape);
     let kernel_for = |g: &[Expr]| -> Result<jit::ValidatedKernel, Invalid> {
-        let kernel = jit::compile_fused(g, options, shape).map_err(|e| Invalid::DoesNotCompile(e.to_string()))?;
+        let kernel = jit::compile_fused(g, jit::KernelSpec { kind: jit::KernelKind::Fitness, options, shape })
+            .map_err(|e| Invalid::DoesNotCompile(e.to_string()))?;
         gpu.check_bindings(&kernel).map_err(|e| match e {
             GpuError::TooManyBindings { expression, needed, limit, adapter } => {
                 Invalid::TooManyBindings { expression, needed, limit, adapter }

@@ -266,7 +266,7 @@ impl<'g> Scorer<'g> {
     pub fn light(&self, expr: &Expr, radius: u32) -> Result<Vec<Option<f64>>> {
         let pipeline = &self.settings.pipeline;
         let shape = jit::Shape::of(pipeline);
-        let kernel = jit::compile_shaped(expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)?;
+        let kernel = jit::compile(expr, jit::KernelSpec { shape, ..jit::KernelSpec::default() })?;
         self.scenes
             .iter()
             .map(|scene| {

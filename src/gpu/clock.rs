@@ -144,7 +144,7 @@ mod tests {
         let color = (0..width * height).map(|i| [(i as f32 * 0.1).sin().abs(), 0.5, (i % 7) as f32 * 0.1]).collect();
         let scene = Scene::from_color("clock", width, height, color);
         let expr = crate::lang::parse_expr("exp(-distance2(color) / (1 + sqrt(distance2(pixel))))").unwrap();
-        let kernel = crate::jit::compile(&expr).unwrap();
+        let kernel = crate::jit::compile(&expr, crate::jit::KernelSpec::default()).unwrap();
         let mut buffers = SceneBuffers::new(&gpu, &scene);
         let within = |span: Span| {
             assert_eq!(span.device.is_some(), gpu.has_device_clock());

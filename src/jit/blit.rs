@@ -17,11 +17,17 @@ pub struct BlitParams {
 
 /// The blit's WGSL for images of `element`s: `Vec4F32` into `rgba32float`, `F32` into `r32float`.
 pub fn blit_wgsl(element: Element) -> String {
-    let mut context = BindingInterface::blit(element).template_context();
     let scalar = element == Element::F32;
-    context.insert("scalar", &scalar);
-    context.insert("format", if scalar { "r32float" } else { "rgba32float" });
-    render_builtin("blit", include_str!("../../templates/blit.wgsl.tera"), &context)
+    let values = BlitTemplate { scalar, format: if scalar { "r32float" } else { "rgba32float" } };
+    render_builtin("blit", include_str!("../../templates/blit.wgsl.tera"), &BindingInterface::blit(element), &values)
+}
+
+/// What `templates/blit.wgsl.tera` reads beside the interface.
+#[derive(serde::Serialize)]
+struct BlitTemplate {
+    scalar: bool,
+    /// The texture's format.
+    format: &'static str,
 }
 
 /// The blit, validated by naga; its bindings are checked against its interface.

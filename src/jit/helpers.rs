@@ -61,14 +61,51 @@ fn library() -> &'static Library {
                 functions.push(Function { name, text: std::mem::take(&mut pending) + &body, calls: Vec::new() });
             }
         }
-        let names: Vec<String> = functions.iter().map(|f| format!("{}(", f.name)).collect();
-        for f in &mut functions {
-            let body = f.text.split_once('{').map_or("", |(_, body)| body);
-            f.calls =
-                names.iter().enumerate().filter(|(_, call)| body.contains(call.as_str())).map(|(k, _)| k).collect();
+        // Who calls whom, read from the parsed module, not from the text.
+        let module = naga::front::wgsl::parse_str(OPS_WGSL)
+            .unwrap_or_else(|e| panic!("templates/ops.wgsl parses: {}", e.emit_to_string(OPS_WGSL)));
+        let index = |name: &str| functions.iter().position(|f| f.name == name);
+        let calls: Vec<Vec<usize>> = functions
+            .iter()
+            .map(|f| {
+                let (_, function) = module
+                    .functions
+                    .iter()
+                    .find(|(_, g)| g.name.as_deref() == Some(f.name.as_str()))
+                    .unwrap_or_else(|| panic!("naga reads `{}` in templates/ops.wgsl", f.name));
+                let mut callees = BTreeSet::new();
+                called(&function.body, &mut callees);
+                callees.iter().filter_map(|&h| index(module.functions[h].name.as_deref()?)).collect()
+            })
+            .collect();
+        for (f, calls) in functions.iter_mut().zip(calls) {
+            f.calls = calls;
         }
         Library { prelude, functions }
     })
+}
+
+/// The functions a block calls, in its nested blocks too.
+fn called(block: &naga::Block, out: &mut BTreeSet<naga::Handle<naga::Function>>) {
+    use naga::Statement;
+    for statement in block.iter() {
+        match statement {
+            Statement::Call { function, .. } => {
+                out.insert(*function);
+            }
+            Statement::Block(inner) => called(inner, out),
+            Statement::If { accept, reject, .. } => {
+                called(accept, out);
+                called(reject, out);
+            }
+            Statement::Switch { cases, .. } => cases.iter().for_each(|c| called(&c.body, out)),
+            Statement::Loop { body, continuing, .. } => {
+                called(body, out);
+                called(continuing, out);
+            }
+            _ => {}
+        }
+    }
 }
 
 /// The prelude and exactly the helpers `needs` names and the ones they call,

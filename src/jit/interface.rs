@@ -431,15 +431,15 @@ impl BindingInterface {
     /// What every built-in kernel's template (pre-pass, spread, reduction)
     /// is rendered with: the versions, the workgroup, and this interface's
     /// `struct Params` and declarations. Each kernel adds its own constants.
-    pub fn template_context(&self) -> tera::Context {
-        let mut context = tera::Context::new();
-        context.insert("crate_version", env!("CARGO_PKG_VERSION"));
-        context.insert("template_version", &TEMPLATE_VERSION);
-        context.insert("workgroup_x", &WORKGROUP[0]);
-        context.insert("workgroup_y", &WORKGROUP[1]);
-        context.insert("params_struct", &self.params_struct());
-        context.insert("declarations", &self.declarations());
-        context
+    pub fn template_context(&self) -> InterfaceContext {
+        InterfaceContext {
+            crate_version: env!("CARGO_PKG_VERSION"),
+            template_version: TEMPLATE_VERSION,
+            workgroup_x: WORKGROUP[0],
+            workgroup_y: WORKGROUP[1],
+            params_struct: self.params_struct(),
+            declarations: self.declarations(),
+        }
     }
 
     /// The WGSL declarations of every binding, one line each.
@@ -509,13 +509,47 @@ pub(super) fn field(name: &str, ty: &'static str, offset: u32, meaning: &str) ->
     UniformField { name: name.into(), ty, offset, meaning: meaning.into() }
 }
 
-/// A built-in kernel's template rendered: it ships in the binary, so a
-/// template that does not parse or render is filterjit's bug.
-pub fn render_builtin(name: &str, template: &str, context: &tera::Context) -> String {
+/// What every kernel's template reads from its interface: the versions that
+/// head the WGSL, the workgroup, the uniform's struct and the bindings.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct InterfaceContext {
+    pub crate_version: &'static str,
+    pub template_version: u32,
+    pub workgroup_x: u32,
+    pub workgroup_y: u32,
+    pub params_struct: String,
+    pub declarations: String,
+}
+
+/// A built-in kernel's template context: its interface's values and its own
+/// (`values`, a struct of the kernel's: the names its template reads).
+#[derive(serde::Serialize)]
+struct BuiltinContext<'a, T: serde::Serialize> {
+    #[serde(flatten)]
+    interface: InterfaceContext,
+    #[serde(flatten)]
+    values: &'a T,
+}
+
+/// A built-in kernel's template rendered with its interface's values and its
+/// own: it ships in the binary, so a template that does not parse or render
+/// is filterjit's bug.
+pub fn render_builtin<T: serde::Serialize>(
+    name: &str,
+    template: &str,
+    interface: &BindingInterface,
+    values: &T,
+) -> String {
+    let context = BuiltinContext { interface: interface.template_context(), values };
+    let context = tera::Context::from_serialize(&context).unwrap_or_else(|e| panic!("built-in {name} context: {e}"));
     let mut tera = tera::Tera::default();
     tera.add_raw_template(name, template).unwrap_or_else(|e| panic!("built-in {name} template parses: {e}"));
-    tera.render(name, context).unwrap_or_else(|e| panic!("built-in {name} template renders: {e}"))
+    tera.render(name, &context).unwrap_or_else(|e| panic!("built-in {name} template renders: {e}"))
 }
+
+/// The values of a built-in kernel that reads nothing but its interface.
+#[derive(serde::Serialize)]
+pub struct NoValues {}
 
 #[cfg(test)]
 mod tests {

@@ -137,6 +137,29 @@ impl KernelLayout {
     }
 }
 
+/// Everything that decides which kernel an expression compiles to: the one
+/// description [`crate::jit::compile`] and [`crate::jit::lower`] take. The
+/// default is today's `filter` kernel: a window pass, every optimisation on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct KernelSpec {
+    pub kind: KernelKind,
+    pub options: LowerOptions,
+    pub shape: Shape,
+}
+
+impl Default for KernelSpec {
+    fn default() -> Self {
+        KernelSpec { kind: KernelKind::Filter, options: LowerOptions::ALL, shape: Shape::WINDOW }
+    }
+}
+
+impl KernelSpec {
+    /// The default kernel of another kind.
+    pub fn of(kind: KernelKind) -> Self {
+        KernelSpec { kind, ..KernelSpec::default() }
+    }
+}
+
 /// What a kernel computes. Both kinds share the binding interface.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Default)]
 pub enum KernelKind {

@@ -12,8 +12,8 @@ use super::helpers;
 use super::interface::{BindingInterface, Element, Role};
 use super::ir::{self, feature_ident, var_ident};
 use super::kernel::{
-    wgsl_f32, Input, KernelKind, KernelLayout, LowerOptions, Shape, FIRST_PASS, TEMPLATE_VERSION, WORKGROUP,
-    WORKGROUP_STORAGE_BUDGET,
+    wgsl_f32, Input, KernelKind, KernelLayout, KernelSpec, LowerOptions, Shape, FIRST_PASS, TEMPLATE_VERSION,
+    WORKGROUP, WORKGROUP_STORAGE_BUDGET,
 };
 use crate::lang::{Expr, Feature, ScalarVar};
 use crate::semantics;
@@ -53,47 +53,24 @@ pub enum LowerError {
     Fused,
 }
 
-/// Lower an expression to the WGSL source of its filter kernel.
-pub fn lower(expr: &Expr) -> Result<KernelSource, LowerError> {
-    lower_kind(expr, KernelKind::Filter)
+/// Lower an expression to the WGSL source of the kernel `spec` describes.
+pub fn lower(expr: &Expr, spec: KernelSpec) -> Result<KernelSource, LowerError> {
+    lower_members(std::slice::from_ref(expr), spec)
 }
 
-/// Lower an expression into a kernel of the given kind.
-pub fn lower_kind(expr: &Expr, kind: KernelKind) -> Result<KernelSource, LowerError> {
-    lower_with(expr, kind, LowerOptions::default())
+/// Lower several expressions into one window-form fitness kernel (`spec`'s
+/// kind must be [`KernelKind::Fitness`]): every neighbour's features are
+/// loaded once and each member's weight, sums, terms and domain flags are
+/// its own, computed by exactly the code its own kernel would run (member
+/// m's terms at `m * width * height + pixel`). Fewer, larger modules are what
+/// software drivers compile fastest (docs/JOURNAL.md); the fitness is the
+/// same as the members' own kernels'.
+pub fn lower_fused(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, LowerError> {
+    lower_members(exprs, spec)
 }
 
-/// Lower with explicit optimisation switches.
-pub fn lower_with(expr: &Expr, kind: KernelKind, options: LowerOptions) -> Result<KernelSource, LowerError> {
-    lower_shaped(expr, kind, options, Shape::WINDOW)
-}
-
-/// Lower a kernel of the given kind and shape.
-pub fn lower_shaped(
-    expr: &Expr,
-    kind: KernelKind,
-    options: LowerOptions,
-    shape: Shape,
-) -> Result<KernelSource, LowerError> {
-    lower_members(std::slice::from_ref(expr), kind, options, shape)
-}
-
-/// Lower several expressions into one window-form fitness kernel: every
-/// neighbour's features are loaded once and each member's weight, sums,
-/// terms and domain flags are its own, computed by exactly the code its own
-/// kernel would run (member m's terms at `m * width * height + pixel`). Fewer,
-/// larger modules are what software drivers compile fastest
-/// (docs/JOURNAL.md); the fitness is the same as the members' own kernels'.
-pub fn lower_fused(exprs: &[Expr], options: LowerOptions, shape: Shape) -> Result<KernelSource, LowerError> {
-    lower_members(exprs, KernelKind::Fitness, options, shape)
-}
-
-fn lower_members(
-    exprs: &[Expr],
-    kind: KernelKind,
-    options: LowerOptions,
-    shape: Shape,
-) -> Result<KernelSource, LowerError> {
+fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, LowerError> {
+    let KernelSpec { kind, options, shape } = spec;
     for expr in exprs {
         expr.validate().map_err(LowerError::Literal)?;
     }

@@ -22,10 +22,10 @@ pub use builtin::BuiltIn;
 pub use helpers::Helper;
 pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot};
 pub use kernel::{
-    wgsl_f32, Input, KernelKind, KernelLayout, LowerOptions, OutputFormat, PassRole, Shape, FIRST_PASS,
+    wgsl_f32, Input, KernelKind, KernelLayout, KernelSpec, LowerOptions, OutputFormat, PassRole, Shape, FIRST_PASS,
     TEMPLATE_VERSION, WORKGROUP, WORKGROUP_STORAGE_BUDGET,
 };
-pub use lower::{lower, lower_fused, lower_kind, lower_shaped, lower_with, KernelSource, LowerError};
+pub use lower::{lower, lower_fused, KernelSource, LowerError};
 pub use planefit::{
     planefit_module, planefit_terms_module, planefit_terms_wgsl, planefit_wgsl, PlaneFitParams, PLANEFIT_REMODULATED,
 };
@@ -38,52 +38,24 @@ pub use spread::{
 pub use temporal::{temporal_module, temporal_variance_module, temporal_variance_wgsl, temporal_wgsl, TemporalParams};
 pub use validate::{validate, validate_module, KernelKey, ValidateError, ValidatedKernel, ValidatedModule};
 
-/// Lower and validate in one step.
-pub fn compile(expr: &crate::lang::Expr) -> Result<ValidatedKernel, CompileError> {
-    Ok(validate(lower(expr)?)?)
+/// Lower and validate: the kernel `spec` describes for `expr`.
+pub fn compile(expr: &crate::lang::Expr, spec: KernelSpec) -> Result<ValidatedKernel, CompileError> {
+    Ok(validate(lower(expr, spec)?)?)
 }
 
-/// Lower and validate a kernel of the given kind.
-pub fn compile_kind(expr: &crate::lang::Expr, kind: KernelKind) -> Result<ValidatedKernel, CompileError> {
-    Ok(validate(lower_kind(expr, kind)?)?)
-}
-
-/// Lower with explicit options and validate.
-pub fn compile_with(
-    expr: &crate::lang::Expr,
-    kind: KernelKind,
-    options: LowerOptions,
-) -> Result<ValidatedKernel, CompileError> {
-    Ok(validate(lower_with(expr, kind, options)?)?)
-}
-
-/// Lower and validate many expressions on up to `threads` threads; results in order.
-pub fn compile_all(
+/// [`compile`] for many expressions on up to `threads` threads, each on its
+/// own: one that fails does not stop the others. Results in order.
+pub fn compile_each(
     exprs: &[crate::lang::Expr],
-    kind: KernelKind,
+    spec: KernelSpec,
     threads: usize,
-) -> Result<Vec<ValidatedKernel>, CompileError> {
-    compile_all_with(exprs, kind, LowerOptions::default(), threads)
+) -> Vec<Result<ValidatedKernel, CompileError>> {
+    crate::parallel::map(exprs, threads, |e| compile(e, spec))
 }
 
-/// [`compile_all`] with explicit lowering options.
-pub fn compile_all_with(
-    exprs: &[crate::lang::Expr],
-    kind: KernelKind,
-    options: LowerOptions,
-    threads: usize,
-) -> Result<Vec<ValidatedKernel>, CompileError> {
-    compile_each_with(exprs, kind, options, threads).into_iter().collect()
-}
-
-/// Lower and validate a kernel of the given kind and shape.
-pub fn compile_shaped(
-    expr: &crate::lang::Expr,
-    kind: KernelKind,
-    options: LowerOptions,
-    shape: Shape,
-) -> Result<ValidatedKernel, CompileError> {
-    Ok(validate(lower_shaped(expr, kind, options, shape)?)?)
+/// One fitness kernel scoring every expression of `exprs` ([`lower_fused`]).
+pub fn compile_fused(exprs: &[crate::lang::Expr], spec: KernelSpec) -> Result<ValidatedKernel, CompileError> {
+    Ok(validate(lower_fused(exprs, spec)?)?)
 }
 
 /// The kernel that makes the first pass's `guide` (docs/SEMANTICS.md, "The
@@ -92,39 +64,7 @@ pub fn compile_shaped(
 /// nothing multiplied back.
 pub fn compile_guide(kind: KernelKind) -> Result<ValidatedKernel, CompileError> {
     let shape = Shape { atrous: true, remodulate: false, stencil: crate::pipeline::GUIDE_STENCIL };
-    compile_shaped(&crate::lang::Expr::Const(1.0), kind, LowerOptions::default(), shape)
-}
-
-/// Lower and validate one fitness kernel scoring every expression of `exprs`
-/// ([`lower_fused`]).
-pub fn compile_fused(
-    exprs: &[crate::lang::Expr],
-    options: LowerOptions,
-    shape: Shape,
-) -> Result<ValidatedKernel, CompileError> {
-    Ok(validate(lower_fused(exprs, options, shape)?)?)
-}
-
-/// Lower and validate many expressions on up to `threads` threads, each on
-/// its own: one that fails does not stop the others. Results in order.
-pub fn compile_each_with(
-    exprs: &[crate::lang::Expr],
-    kind: KernelKind,
-    options: LowerOptions,
-    threads: usize,
-) -> Vec<Result<ValidatedKernel, CompileError>> {
-    compile_each_shaped(exprs, kind, options, Shape::WINDOW, threads)
-}
-
-/// [`compile_each_with`] for kernels of a given shape.
-pub fn compile_each_shaped(
-    exprs: &[crate::lang::Expr],
-    kind: KernelKind,
-    options: LowerOptions,
-    shape: Shape,
-    threads: usize,
-) -> Vec<Result<ValidatedKernel, CompileError>> {
-    crate::parallel::map(exprs, threads, |e| compile_shaped(e, kind, options, shape))
+    compile(&crate::lang::Expr::Const(1.0), KernelSpec { kind, shape, ..KernelSpec::default() })
 }
 
 #[derive(Debug, thiserror::Error)]

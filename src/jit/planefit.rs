@@ -57,19 +57,40 @@ pub fn planefit_terms_module() -> Result<ValidatedModule, ValidateError> {
 }
 
 fn render(interface: &BindingInterface, textures: Option<OutputFormat>, fitness: bool) -> String {
-    let mut context = interface.template_context();
-    context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
-    context.insert("normal_sigma", &wgsl_f32(pipeline::SURFACE_KEEP_NORMAL_SIGMA));
-    context.insert("luminance_sigma", &wgsl_f32(pipeline::PLANEFIT_LUMINANCE_SIGMA));
-    context.insert("luminance_floor", &wgsl_f32(pipeline::PLANEFIT_LUMINANCE_FLOOR));
-    context.insert("ridge", &wgsl_f32(pipeline::PLANEFIT_RIDGE));
-    context.insert("slope_tau", &wgsl_f32(pipeline::PLANEFIT_SLOPE_TAU));
-    context.insert("slope_cap", &wgsl_f32(pipeline::PLANEFIT_SLOPE_CAP));
-    context.insert("tiny", &wgsl_f32(pipeline::PLANEFIT_TINY));
-    context.insert("relmse_epsilon", &wgsl_f32(crate::metrics::RELMSE_EPSILON));
-    context.insert("textures", &textures.is_some());
-    context.insert("fitness", &fitness);
-    context.insert("sampled", &interface.samples_color());
-    context.insert("remodulated", PLANEFIT_REMODULATED);
-    render_builtin("planefit", include_str!("../../templates/planefit.wgsl.tera"), &context)
+    let values = PlaneFitTemplate {
+        luminance: pipeline::LUMINANCE.map(wgsl_f32),
+        normal_sigma: wgsl_f32(pipeline::SURFACE_KEEP_NORMAL_SIGMA),
+        luminance_sigma: wgsl_f32(pipeline::PLANEFIT_LUMINANCE_SIGMA),
+        luminance_floor: wgsl_f32(pipeline::PLANEFIT_LUMINANCE_FLOOR),
+        ridge: wgsl_f32(pipeline::PLANEFIT_RIDGE),
+        slope_tau: wgsl_f32(pipeline::PLANEFIT_SLOPE_TAU),
+        slope_cap: wgsl_f32(pipeline::PLANEFIT_SLOPE_CAP),
+        tiny: wgsl_f32(pipeline::PLANEFIT_TINY),
+        relmse_epsilon: wgsl_f32(crate::metrics::RELMSE_EPSILON),
+        textures: textures.is_some(),
+        fitness,
+        sampled: interface.samples_color(),
+        remodulated: PLANEFIT_REMODULATED,
+    };
+    render_builtin("planefit", include_str!("../../templates/planefit.wgsl.tera"), interface, &values)
+}
+
+/// What `templates/planefit.wgsl.tera` reads beside the interface: the
+/// constants `crate::pipeline` owns, as WGSL literals, and which variant.
+#[derive(serde::Serialize)]
+struct PlaneFitTemplate {
+    luminance: [String; 3],
+    normal_sigma: String,
+    luminance_sigma: String,
+    luminance_floor: String,
+    ridge: String,
+    slope_tau: String,
+    slope_cap: String,
+    tiny: String,
+    relmse_epsilon: String,
+    textures: bool,
+    /// The fitness variant: terms against the reference instead of an image.
+    fitness: bool,
+    sampled: bool,
+    remodulated: &'static str,
 }

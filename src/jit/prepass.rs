@@ -36,14 +36,28 @@ impl PrepassParams {
 /// The pre-pass's WGSL: on storage buffers (filterjit's, `None`), or
 /// exported, on textures with outputs in `format`.
 pub fn prepass_wgsl(textures: Option<OutputFormat>) -> String {
-    let mut context = BindingInterface::prepass(textures).template_context();
-    context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
-    context.insert("outlier_radius", &pipeline::OUTLIER_RADIUS);
-    // The template unrolls the neighbourhood, in its order.
-    context.insert("neighbours", &pipeline::outlier_neighbours().collect::<Vec<_>>());
-    context.insert("albedo_floor", &wgsl_f32(pipeline::ALBEDO_FLOOR));
-    context.insert("textures", &textures.is_some());
-    render_builtin("pre-pass", include_str!("../../templates/prepass.wgsl.tera"), &context)
+    let values = PrepassTemplate {
+        luminance: pipeline::LUMINANCE.map(wgsl_f32),
+        outlier_radius: pipeline::OUTLIER_RADIUS,
+        neighbours: pipeline::outlier_neighbours().collect(),
+        albedo_floor: wgsl_f32(pipeline::ALBEDO_FLOOR),
+        textures: textures.is_some(),
+    };
+    let template = include_str!("../../templates/prepass.wgsl.tera");
+    render_builtin("pre-pass", template, &BindingInterface::prepass(textures), &values)
+}
+
+/// What `templates/prepass.wgsl.tera` reads beside the interface: the
+/// constants `crate::pipeline` owns, as WGSL literals.
+#[derive(serde::Serialize)]
+struct PrepassTemplate {
+    luminance: [String; 3],
+    outlier_radius: u32,
+    /// The outlier rule's neighbourhood, in its order: the template unrolls it.
+    neighbours: Vec<[i32; 2]>,
+    albedo_floor: String,
+    /// Exported, on textures (else on filterjit's storage buffers).
+    textures: bool,
 }
 
 /// The pre-pass, validated by naga; its bindings are checked against its interface.

@@ -4,7 +4,7 @@
 //! out of the generated kernels is what makes them cheap to compile on
 //! software drivers, and the tree is the same for every member, fused or not.
 
-use super::interface::{render_builtin, BindingInterface};
+use super::interface::{render_builtin, BindingInterface, NoValues};
 use super::validate::{validate_with_interface, ValidateError, ValidatedModule};
 
 /// The reduction's uniform (`struct Params` of its module; fields in [`BindingInterface::reduce`]).
@@ -20,11 +20,8 @@ pub struct ReduceParams {
 
 /// The reduction's WGSL.
 pub fn reduce_wgsl() -> String {
-    render_builtin(
-        "reduction",
-        include_str!("../../templates/reduce.wgsl.tera"),
-        &BindingInterface::reduce().template_context(),
-    )
+    let template = include_str!("../../templates/reduce.wgsl.tera");
+    render_builtin("reduction", template, &BindingInterface::reduce(), &NoValues {})
 }
 
 /// The reduction, validated by naga; its bindings are checked against its interface.

@@ -154,17 +154,30 @@ impl SpreadParams {
 /// The spread kernel's WGSL: its images sampled, its output a storage buffer (filterjit's, `None`), or
 /// exported, on textures (its output `rgba32float` whatever `format` is).
 pub fn spread_wgsl(textures: Option<OutputFormat>) -> String {
-    let mut context = BindingInterface::spread(textures).template_context();
     let half = pipeline::KEEP_STENCIL.half_width();
-    context.insert("passes", &pipeline::KEEP_PASSES);
-    context.insert("textures", &textures.is_some());
-    context.insert("stage", stage_name(textures));
-    // Each tap's offset and weight h(offset), across the stencil in order.
-    let taps: Vec<(i32, String)> = (-half..=half).map(|d| (d, wgsl_f32(pipeline::KEEP_STENCIL.weight(d)))).collect();
-    context.insert("taps", &taps);
-    context.insert("first", &SpreadStage::FIRST);
-    context.insert("finish", &SpreadStage::FINISH);
-    render_builtin("spread", include_str!("../../templates/spread.wgsl.tera"), &context)
+    let values = SpreadTemplate {
+        passes: pipeline::KEEP_PASSES,
+        textures: textures.is_some(),
+        stage: stage_name(textures),
+        taps: (-half..=half).map(|d| (d, wgsl_f32(pipeline::KEEP_STENCIL.weight(d)))).collect(),
+        first: SpreadStage::FIRST,
+        finish: SpreadStage::FINISH,
+    };
+    let template = include_str!("../../templates/spread.wgsl.tera");
+    render_builtin("spread", template, &BindingInterface::spread(textures), &values)
+}
+
+/// What `templates/spread.wgsl.tera` reads beside the interface.
+#[derive(serde::Serialize)]
+struct SpreadTemplate {
+    passes: u32,
+    textures: bool,
+    /// How the template names the uniform's stage field.
+    stage: &'static str,
+    /// Each tap's offset and weight h(offset), across the stencil in order.
+    taps: Vec<(i32, String)>,
+    first: u32,
+    finish: u32,
 }
 
 /// The spread kernel, validated by naga; its bindings are checked against its interface.
@@ -180,27 +193,47 @@ const _: () = assert!(TOTAL_LANES.is_power_of_two());
 /// The surface spread kernel's WGSL (`keep=surface`), on storage buffers or
 /// exported on textures, as [`spread_wgsl`].
 pub fn spread_surface_wgsl(textures: Option<OutputFormat>) -> String {
-    let mut context = BindingInterface::spread_surface(textures).template_context();
     let half = pipeline::KEEP_STENCIL.half_width();
-    context.insert("dispatches", &SpreadParams::sequence(Keep::Surface, 0, 0).len());
-    context.insert("textures", &textures.is_some());
-    context.insert("stage", stage_name(textures));
-    // Each tap's offsets (dx, dy) and weight h(dx)·h(dy), row by row.
-    let taps: Vec<(i32, i32, String)> = (-half..=half)
-        .flat_map(|dy| (-half..=half).map(move |dx| (dx, dy)))
-        .map(|(dx, dy)| (dx, dy, wgsl_f32(pipeline::KEEP_STENCIL.weight(dx) * pipeline::KEEP_STENCIL.weight(dy))))
-        .collect();
-    context.insert("taps", &taps);
-    context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
-    context.insert("sigma", &wgsl_f32(pipeline::SURFACE_KEEP_NORMAL_SIGMA));
-    context.insert("floor_factor", &wgsl_f32(pipeline::SURFACE_KEEP_LIGHT_FLOOR));
-    context.insert("lanes", &TOTAL_LANES);
-    context.insert("surface", &SurfaceStage::SURFACE);
-    context.insert("total", &SurfaceStage::TOTAL);
-    context.insert("first", &SurfaceStage::FIRST);
-    context.insert("gather", &SurfaceStage::GATHER);
-    context.insert("finish", &SurfaceStage::FINISH);
-    render_builtin("spread_surface", include_str!("../../templates/spread_surface.wgsl.tera"), &context)
+    let values = SurfaceSpreadTemplate {
+        dispatches: SpreadParams::sequence(Keep::Surface, 0, 0).len(),
+        textures: textures.is_some(),
+        stage: stage_name(textures),
+        taps: (-half..=half)
+            .flat_map(|dy| (-half..=half).map(move |dx| (dx, dy)))
+            .map(|(dx, dy)| (dx, dy, wgsl_f32(pipeline::KEEP_STENCIL.weight(dx) * pipeline::KEEP_STENCIL.weight(dy))))
+            .collect(),
+        luminance: pipeline::LUMINANCE.map(wgsl_f32),
+        sigma: wgsl_f32(pipeline::SURFACE_KEEP_NORMAL_SIGMA),
+        floor_factor: wgsl_f32(pipeline::SURFACE_KEEP_LIGHT_FLOOR),
+        lanes: TOTAL_LANES,
+        surface: SurfaceStage::SURFACE,
+        total: SurfaceStage::TOTAL,
+        first: SurfaceStage::FIRST,
+        gather: SurfaceStage::GATHER,
+        finish: SurfaceStage::FINISH,
+    };
+    let template = include_str!("../../templates/spread_surface.wgsl.tera");
+    render_builtin("spread_surface", template, &BindingInterface::spread_surface(textures), &values)
+}
+
+/// What `templates/spread_surface.wgsl.tera` reads beside the interface:
+/// the stages' bits ([`SurfaceStage`]) and the constants `crate::pipeline` owns.
+#[derive(serde::Serialize)]
+struct SurfaceSpreadTemplate {
+    dispatches: usize,
+    textures: bool,
+    stage: &'static str,
+    /// Each tap's offsets (dx, dy) and weight h(dx)·h(dy), row by row.
+    taps: Vec<(i32, i32, String)>,
+    luminance: [String; 3],
+    sigma: String,
+    floor_factor: String,
+    lanes: u32,
+    surface: u32,
+    total: u32,
+    first: u32,
+    gather: u32,
+    finish: u32,
 }
 
 /// The surface spread kernel, validated by naga; its bindings are checked against its interface.

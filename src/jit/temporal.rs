@@ -43,19 +43,44 @@ impl TemporalParams {
 /// The kernel's WGSL: its outputs storage buffers (filterjit's, `None`), or
 /// exported, storage textures.
 pub fn temporal_wgsl(textures: Option<OutputFormat>) -> String {
-    let mut context = BindingInterface::temporal(textures).template_context();
-    context.insert("luminance", &pipeline::LUMINANCE.map(wgsl_f32));
-    context.insert("depth_tolerance", &wgsl_f32(pipeline::TEMPORAL_DEPTH_TOLERANCE));
-    context.insert("normal_cosine", &wgsl_f32(pipeline::TEMPORAL_NORMAL_COSINE));
-    context.insert("black_albedo", &wgsl_f32(pipeline::TEMPORAL_BLACK_ALBEDO));
-    context.insert("albedo_floor", &wgsl_f32(pipeline::ALBEDO_FLOOR));
-    context.insert("antilag_slack", &wgsl_f32(pipeline::TEMPORAL_ANTILAG_SLACK));
-    context.insert("min_footprint", &wgsl_f32(pipeline::TEMPORAL_MIN_FOOTPRINT));
-    context.insert("max_history", &wgsl_f32(pipeline::TEMPORAL_MAX_HISTORY));
-    context.insert("short_history", &wgsl_f32(pipeline::TEMPORAL_SHORT_HISTORY));
-    context.insert("variance_radius", &pipeline::TEMPORAL_VARIANCE_RADIUS);
-    context.insert("textures", &textures.is_some());
-    render_builtin("temporal", include_str!("../../templates/temporal.wgsl.tera"), &context)
+    let values = TemporalTemplate {
+        luminance: pipeline::LUMINANCE.map(wgsl_f32),
+        depth_tolerance: wgsl_f32(pipeline::TEMPORAL_DEPTH_TOLERANCE),
+        normal_cosine: wgsl_f32(pipeline::TEMPORAL_NORMAL_COSINE),
+        black_albedo: wgsl_f32(pipeline::TEMPORAL_BLACK_ALBEDO),
+        albedo_floor: wgsl_f32(pipeline::ALBEDO_FLOOR),
+        antilag_slack: wgsl_f32(pipeline::TEMPORAL_ANTILAG_SLACK),
+        min_footprint: wgsl_f32(pipeline::TEMPORAL_MIN_FOOTPRINT),
+        max_history: wgsl_f32(pipeline::TEMPORAL_MAX_HISTORY),
+        short_history: wgsl_f32(pipeline::TEMPORAL_SHORT_HISTORY),
+        variance_radius: pipeline::TEMPORAL_VARIANCE_RADIUS,
+        textures: textures.is_some(),
+    };
+    let template = include_str!("../../templates/temporal.wgsl.tera");
+    render_builtin("temporal", template, &BindingInterface::temporal(textures), &values)
+}
+
+/// What `templates/temporal.wgsl.tera` reads beside the interface: the
+/// constants `crate::pipeline` owns, as WGSL literals.
+#[derive(serde::Serialize)]
+struct TemporalTemplate {
+    luminance: [String; 3],
+    depth_tolerance: String,
+    normal_cosine: String,
+    black_albedo: String,
+    albedo_floor: String,
+    antilag_slack: String,
+    min_footprint: String,
+    max_history: String,
+    short_history: String,
+    variance_radius: i32,
+    textures: bool,
+}
+
+/// What a built-in template reads that only says whether it runs on textures.
+#[derive(serde::Serialize)]
+struct OnTextures {
+    textures: bool,
 }
 
 /// The kernel, validated by naga; its bindings are checked against its interface.
@@ -67,9 +92,9 @@ pub fn temporal_module(textures: Option<OutputFormat>) -> Result<ValidatedModule
 /// Gaussian and multiplied by r, `temporalVariance`
 /// (`templates/temporal_variance.wgsl.tera`).
 pub fn temporal_variance_wgsl(textures: Option<OutputFormat>) -> String {
-    let mut context = BindingInterface::temporal_variance(textures).template_context();
-    context.insert("textures", &textures.is_some());
-    render_builtin("temporal variance", include_str!("../../templates/temporal_variance.wgsl.tera"), &context)
+    let template = include_str!("../../templates/temporal_variance.wgsl.tera");
+    let interface = BindingInterface::temporal_variance(textures);
+    render_builtin("temporal variance", template, &interface, &OnTextures { textures: textures.is_some() })
 }
 
 /// The variance kernel, validated by naga and checked against its interface.

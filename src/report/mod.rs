@@ -177,7 +177,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         .iter()
         .map(|m| {
             let shape = jit::Shape::of(&m.pipeline);
-            jit::compile_shaped(&m.expr, jit::KernelKind::Filter, jit::LowerOptions::ALL, shape)
+            jit::compile(&m.expr, jit::KernelSpec { shape, ..jit::KernelSpec::default() })
                 .with_context(|| m.name.clone())
         })
         .collect::<Result<_>>()?;
