@@ -510,7 +510,9 @@ fn bench_frames_times_whole_frames_at_each_size() {
     assert!(run.status.success(), "{stdout}\n{}", text(&run.stderr));
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let frames = report["frames"].as_array().unwrap();
-    assert_eq!(frames.len(), 6, "three methods at two sizes: {report}");
+    assert_eq!(frames.len(), 8, "four methods at two sizes: {report}");
+    let realtime = format!("@{}", filterjit::denoise::SHIPPED_REALTIME);
+    assert!(frames.iter().any(|f| f["method"] == realtime.as_str()), "{report}");
     let temporal = filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0];
     for frame in frames {
         let (w, h) = (frame["width"].as_u64().unwrap(), frame["height"].as_u64().unwrap());
@@ -523,6 +525,34 @@ fn bench_frames_times_whole_frames_at_each_size() {
         }
     }
     assert!(stdout.contains("96x64") && stdout.contains(&format!("@{temporal}")), "{stdout}");
+}
+
+/// `--filter` times the filters a user names instead of the default three,
+/// each in its stored pipeline; without `--frames` it is refused, not ignored.
+#[test]
+fn bench_frames_times_the_filters_it_is_given() {
+    let dir = crate::common::temp_dir("cli", "bench-frames-given");
+    let json = dir.join("bench.json");
+    let bench = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_filterjit"))
+            .args(["bench", "--repeats", "1", "--no-oidn", "-o", json.to_str().unwrap()])
+            .args(extra)
+            .env("FILTERJIT_CACHE", dir.join("cache"))
+            .output()
+            .unwrap()
+    };
+    let run = bench(&["--frames", "48x48", "--filter", "@evolvedAtrous3x3", "--filter", "exp(-distance2(color))"]);
+    assert!(run.status.success(), "{}\n{}", text(&run.stdout), text(&run.stderr));
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let frames = report["frames"].as_array().unwrap();
+    let methods: Vec<(&str, &str)> =
+        frames.iter().map(|f| (f["method"].as_str().unwrap(), f["pipeline"].as_str().unwrap())).collect();
+    let stored = filterjit::corpus::resolve_with_pipeline("@evolvedAtrous3x3").unwrap().pipeline.unwrap();
+    let default = filterjit::pipeline::FilterPipeline::default().to_string();
+    assert_eq!(methods, [("@evolvedAtrous3x3", stored.to_string().as_str()), ("filter2", default.as_str())]);
+    let refused = bench(&["--filter", "@evolvedAtrous3x3"]);
+    assert!(!refused.status.success());
+    assert!(text(&refused.stderr).contains("--frames"), "{}", text(&refused.stderr));
 }
 
 /// A flag the pipeline cannot honour is refused with why, not ignored:

@@ -87,12 +87,12 @@ pub struct FramesReport {
     pub frames: Vec<FrameResult>,
 }
 
-/// The methods `bench --frames` times: `filter`'s default, the 3x3
-/// cascade, and the best shipped temporal filter (a still sequence's frames,
-/// its history settled); OIDN beside them where found.
+/// The methods `bench --frames` times: `filter`'s default, the real-time
+/// filter, the 3x3 cascade, and the best shipped temporal filter (a still
+/// sequence's frames, its history settled); OIDN beside them where found.
 pub fn frame_methods() -> anyhow::Result<Vec<FrameMethod>> {
-    let names =
-        [crate::denoise::SHIPPED_BY_QUALITY[0], "evolvedAtrous3x3", crate::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0]];
+    use crate::denoise::{SHIPPED_BY_QUALITY, SHIPPED_REALTIME, SHIPPED_TEMPORAL_BY_QUALITY};
+    let names = [SHIPPED_BY_QUALITY[0], SHIPPED_REALTIME, "evolvedAtrous3x3", SHIPPED_TEMPORAL_BY_QUALITY[0]];
     names.iter().map(|name| FrameMethod::shipped(name)).collect()
 }
 

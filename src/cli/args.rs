@@ -326,6 +326,11 @@ pub(crate) struct BenchArgs {
     /// a 256² render of glossy-floor tiled to each size; `bench.json` gets their `frames`.
     #[arg(long, value_delimiter = ',', value_parser = parse_size)]
     pub(crate) frames: Vec<(u32, u32)>,
+    /// With --frames: time this filter instead of the default three (repeat
+    /// the flag for more): @name, @FILE[:NAME] or an expression, each in the
+    /// pipeline stored with it (else `filter`'s default pipeline).
+    #[arg(long = "filter")]
+    pub(crate) filters: Vec<String>,
 }
 
 #[derive(clap::Args)]

@@ -42,16 +42,31 @@ pub(crate) fn bench_frames(
     env: &Environment,
     sizes: &[(u32, u32)],
     repeats: usize,
+    filters: &[String],
     no_oidn: bool,
     output: &Path,
 ) -> Result<()> {
+    let methods = match filters {
+        [] => filterjit::bench::frame_methods()?,
+        given => given
+            .iter()
+            .enumerate()
+            .map(|(k, arg)| {
+                let resolved = corpus::resolve_with_pipeline(arg)?;
+                Ok(filterjit::bench::FrameMethod {
+                    name: resolved.name.map_or_else(|| format!("filter{}", k + 1), |n| format!("@{n}")),
+                    expr: resolved.expr,
+                    pipeline: resolved.pipeline.unwrap_or_default(),
+                })
+            })
+            .collect::<Result<_>>()?,
+    };
     let gpu = gpu::Gpu::open(&env.adapter)?;
     let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
     eprintln!("bench     whole frames on {}", gpu.describe());
     let d = render::builtin("glossy-floor").expect("built in")?;
     let rs = render::RenderSettings { width: 256, height: 256, spp: 4, reference_spp: 64, seed: 0 };
     let dir = render::cached(&gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
-    let methods = filterjit::bench::frame_methods()?;
     let mut features: std::collections::BTreeSet<lang::Feature> =
         methods.iter().flat_map(|m| m.expr.features()).collect();
     features.extend(methods.iter().flat_map(|m| m.pipeline.features()));
@@ -82,9 +97,13 @@ pub(crate) fn bench_command(env: &Environment, args: BenchArgs) -> Result<()> {
         output,
         no_oidn,
         frames,
+        filters,
     } = args;
     if !frames.is_empty() {
-        return bench_frames(env, &frames, repeats.max(1), no_oidn, &output);
+        return bench_frames(env, &frames, repeats.max(1), &filters, no_oidn, &output);
+    }
+    if !filters.is_empty() {
+        bail!("--filter names a filter whose whole frames are timed: give the sizes with --frames (e.g. --frames 1920x1080)");
     }
     let settings = filterjit::bench::BenchSettings {
         radius,
