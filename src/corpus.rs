@@ -1,6 +1,8 @@
 //! Named expressions shipped with filterjit (`data/expressions.txt`), and
 //! expression arguments resolved: a shipped name, a file's entry or a text.
 
+use anyhow::{bail, Context};
+
 use crate::named::{NamedFile, NamedFileError};
 
 /// The shipped file's text.
@@ -42,7 +44,6 @@ pub fn resolve(arg: &str) -> anyhow::Result<(Option<String>, crate::lang::Expr)>
 
 /// [`resolve`], with the pipeline the file states for the expression.
 pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
-    use anyhow::{bail, Context};
     let (name, text, pipeline) = match arg.strip_prefix('@') {
         Some(reference) if lookup(reference).is_none() && file_reference(reference).is_some() => {
             let (path, name) = file_reference(reference).expect("checked");
@@ -96,7 +97,7 @@ pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
 }
 
 fn parse_checked(text: &str) -> anyhow::Result<crate::lang::Expr> {
-    crate::lang::parse_expr(text).map_err(|e| anyhow::anyhow!("invalid expression:\n{e}"))
+    crate::lang::parse_expr(text).context("invalid expression")
 }
 
 /// `PATH` or `PATH:NAME` of an existing file of named expressions.

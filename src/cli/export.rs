@@ -49,7 +49,7 @@ pub(super) fn export(
             );
             corpus::Resolved {
                 name: Some(member.name.clone()),
-                expr: filterjit::parse_expr(&member.expr).map_err(|e| anyhow::anyhow!("{e}"))?,
+                expr: filterjit::parse_expr(&member.expr)?,
                 pipeline: Some(front.pipeline),
                 radius: Some(member.radius),
             }

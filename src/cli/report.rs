@@ -134,7 +134,7 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
         }
         None => {
             let tuned = tune_baseline(&gpu, env, &args.scene, &context)?;
-            let expr = lang::parse_expr(&tuned.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let expr = lang::parse_expr(&tuned.expr)?;
             ("crossBilateral (tuned)".to_string(), expr, context.pipeline, Some(tuned))
         }
     };
@@ -187,8 +187,7 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
         for entry in &file.entries {
             let name = &entry.name;
             let text = file.expression(name).expect("its own entry");
-            let expr =
-                lang::parse_expr(text).map_err(|e| anyhow::anyhow!("{}: entry `{name}`:\n{e}", path.display()))?;
+            let expr = lang::parse_expr(text).with_context(|| format!("{}: entry `{name}`", path.display()))?;
             // Reported as people read them: simplified (the same weights).
             let expr = filterjit::simplify::simplify(&expr);
             let pipeline = entry.pipeline.unwrap_or(context.pipeline);

@@ -121,7 +121,7 @@ pub(super) fn measure_front(
     let exprs: Vec<(Expr, u32)> = front
         .iter()
         .map(|m| {
-            let e = crate::lang::parse_expr(&m.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let e = crate::lang::parse_expr(&m.expr)?;
             Ok((e, m.radius.unwrap_or(config.radius)))
         })
         .collect::<Result<_>>()?;

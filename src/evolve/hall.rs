@@ -2,7 +2,7 @@
 //! @FILE` reads), and, after a run on tiles, its members scored again on
 //! whole training images.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use serde::Serialize;
 
 use crate::fitness::{FitnessRule, Scorer};
@@ -31,7 +31,7 @@ pub(super) fn rescore(whole: &mut Scorer<'_>, hall: &[(usize, gp::StoredMember)]
     }
     let mut at = Vec::new();
     for m in &unique {
-        let expr = crate::lang::parse_expr(&m.expr).map_err(|e| anyhow::anyhow!("hall of fame: {e}"))?;
+        let expr = crate::lang::parse_expr(&m.expr).context("hall of fame")?;
         at.push((expr, m.radius.unwrap_or(whole.radius())));
     }
     let errors = whole.errors_each(&at)?;

@@ -15,7 +15,7 @@ use std::collections::BTreeSet;
 use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 pub use config::RunConfig;
 pub use front::{time_filters, Front, FrontMember, FRONT_FILE, FRONT_TIMING_SIDE};
@@ -147,7 +147,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         features.retain(|f| allowed.contains(f));
         variances.retain(|v| allowed_variances.contains(v));
     }
-    let seed_expr = crate::lang::parse_expr(&config.seed_expr).map_err(|e| anyhow::anyhow!("seed expression:\n{e}"))?;
+    let seed_expr = crate::lang::parse_expr(&config.seed_expr).context("seed expression")?;
     let holds = Holds {
         features: &features,
         variances: &variances,
@@ -271,7 +271,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let names = test_scenes.iter().map(|s| s.name.clone()).collect();
     let scoring = fitness::Settings::for_pipeline(config.radius, config.pipeline.spatial(), threads);
     let mut tester = Scorer::new(gpu, test_scenes, &scoring)?;
-    let best_expr = crate::lang::parse_expr(&best.expr).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let best_expr = crate::lang::parse_expr(&best.expr)?;
     let compared = vec![best_expr, seed_expr];
     let mut results = test(&mut tester, &compared)?.into_iter();
     let test_best = results.next().expect("best");

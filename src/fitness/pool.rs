@@ -1,7 +1,7 @@
 //! Errors of tiles pooled into errors of scenes, and the noisy input's error
 //! over exactly the pixels that count: pure functions of numbers and images.
 
-use crate::gpu::{FitnessError, Region};
+use crate::gpu::{Region, SceneScore};
 use crate::metrics;
 use crate::scene::Scene;
 
@@ -15,7 +15,7 @@ pub(super) type Counted = Option<Vec<Region>>;
 /// One error per scene from one per tile: a scene's relMSE and luminance
 /// are the pixel-weighted means over its tiles' counted pixels, its flags
 /// any tile's.
-pub(super) fn pool_errors(row: &[FitnessError], pooling: &Pooling, scenes: usize) -> Vec<FitnessError> {
+pub(super) fn pool_errors(row: &[SceneScore], pooling: &Pooling, scenes: usize) -> Vec<SceneScore> {
     let mut out = vec![(0.0, 0.0, 0.0, 0u32, true); scenes];
     for (e, (scene, pixels)) in row.iter().zip(pooling) {
         let pooled = &mut out[*scene];
@@ -26,7 +26,7 @@ pub(super) fn pool_errors(row: &[FitnessError], pooling: &Pooling, scenes: usize
         pooled.4 &= e.finite;
     }
     out.into_iter()
-        .map(|(sum, luminance, n, flags, finite)| FitnessError {
+        .map(|(sum, luminance, n, flags, finite)| SceneScore {
             relmse: sum / n,
             luminance: luminance / n,
             flags,
@@ -37,9 +37,9 @@ pub(super) fn pool_errors(row: &[FitnessError], pooling: &Pooling, scenes: usize
 
 /// The noisy input's error against its reference, and its mean luminance,
 /// over `regions` (all of it when `None`): what a candidate's are measured against.
-pub(super) fn noisy_error(scene: &Scene, regions: Option<&[Region]>) -> FitnessError {
+pub(super) fn noisy_error(scene: &Scene, regions: Option<&[Region]>) -> SceneScore {
     let reference = scene.reference.as_ref().expect("fitness scenes have references");
-    let measure = |color: &[[f32; 3]], reference: &[[f32; 3]]| FitnessError {
+    let measure = |color: &[[f32; 3]], reference: &[[f32; 3]]| SceneScore {
         relmse: metrics::errors(color, reference, scene.spp).relmse,
         luminance: metrics::mean_luminance(color),
         flags: 0,
@@ -63,8 +63,8 @@ pub(super) fn noisy_per_scene(
     counted: &[Counted],
     pooling: Option<&Pooling>,
     scenes: usize,
-) -> Vec<FitnessError> {
-    let row: Vec<FitnessError> = scored.iter().zip(counted).map(|(s, r)| noisy_error(s, r.as_deref())).collect();
+) -> Vec<SceneScore> {
+    let row: Vec<SceneScore> = scored.iter().zip(counted).map(|(s, r)| noisy_error(s, r.as_deref())).collect();
     match pooling {
         None => row,
         Some(pooling) => pool_errors(&row, pooling, scenes),
@@ -77,7 +77,7 @@ mod tests {
 
     #[test]
     fn a_scenes_error_is_its_tiles_pixel_weighted_mean_and_any_flag() {
-        let e = |relmse, flags, finite| FitnessError { relmse, luminance: relmse * 2.0, flags, finite };
+        let e = |relmse, flags, finite| SceneScore { relmse, luminance: relmse * 2.0, flags, finite };
         let row = [e(1.0, 0, true), e(4.0, 2, true), e(10.0, 0, false)];
         // Tiles 0 and 1 are scene 0's (100 and 300 pixels), tile 2 scene 1's.
         let pooled = pool_errors(&row, &vec![(0, 100.0), (0, 300.0), (1, 50.0)], 2);

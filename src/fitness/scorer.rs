@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 
 use crate::gp::{self, EvalTime, Evaluator, Fitness};
-use crate::gpu::{FitnessError, FitnessScene, Gpu, GpuError};
+use crate::gpu::{FitnessScene, Gpu, GpuError, SceneScore};
 use crate::jit;
 use crate::lang::Expr;
 use crate::scene::Scene;
@@ -20,7 +20,7 @@ use super::settings::Settings;
 use super::tiles;
 
 /// One expression's relMSE per scene with its domain flags, or why it could not be scored.
-pub type ScoredErrors = std::result::Result<Vec<FitnessError>, Invalid>;
+pub type ScoredErrors = std::result::Result<Vec<SceneScore>, Invalid>;
 
 /// Fitness of expressions on a set of scenes, on the GPU.
 pub struct Scorer<'g> {
@@ -137,7 +137,7 @@ impl<'g> Scorer<'g> {
 
     /// Each scene's error as the rule counts it: relMSE, charged for the
     /// light moved where the rule says so.
-    fn charged(&self, per_scene: &[FitnessError]) -> Vec<f64> {
+    fn charged(&self, per_scene: &[SceneScore]) -> Vec<f64> {
         let tolerance = self.settings.rule.light_tolerance;
         per_scene
             .iter()
@@ -148,7 +148,7 @@ impl<'g> Scorer<'g> {
 
     /// Each scene's light moved by a candidate: its mean luminance over the
     /// noisy input's on the scored pixels (`None` where the input is black).
-    pub fn light_moved(&self, per_scene: &[FitnessError]) -> Vec<Option<f64>> {
+    pub fn light_moved(&self, per_scene: &[SceneScore]) -> Vec<Option<f64>> {
         per_scene.iter().zip(&self.noisy_luminance).map(|(e, n)| super::rule::light_moved(e.luminance, *n)).collect()
     }
 
@@ -207,7 +207,7 @@ impl<'g> Scorer<'g> {
         let compiled = start.elapsed();
         let start = Instant::now();
         let data: Vec<&Scene> = self.tiles.as_deref().unwrap_or(&self.scenes).iter().collect();
-        type DeviceResult = Result<(Duration, Vec<Vec<FitnessError>>), GpuError>;
+        type DeviceResult = Result<(Duration, Vec<Vec<SceneScore>>), GpuError>;
         let results: Vec<DeviceResult> = std::thread::scope(|s| {
             let handles: Vec<_> = devices
                 .iter()
@@ -312,12 +312,12 @@ impl<'g> Scorer<'g> {
 
 /// The thesis's fitness (section 3.2.3): the mean over scenes of relMSE /
 /// the noisy input's relMSE. Training fitness and test results both use it.
-pub fn normalised_error(per_scene: &[FitnessError], noisy: &[f64]) -> f64 {
+pub fn normalised_error(per_scene: &[SceneScore], noisy: &[f64]) -> f64 {
     Pool::Mean.combine(per_scene.iter().map(|e| e.relmse), noisy)
 }
 
 /// Every domain-error bit raised on any scene.
-pub fn domain_flags(per_scene: &[FitnessError]) -> u32 {
+pub fn domain_flags(per_scene: &[SceneScore]) -> u32 {
     per_scene.iter().fold(0, |a, e| a | e.flags)
 }
 

@@ -23,6 +23,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::ops::Range;
 use std::time::{Duration, Instant};
 
+use anyhow::Context;
 use serde::{Deserialize, Serialize};
 
 use crate::lang::{parse_expr, Expr, Feature, ScalarVar};
@@ -485,7 +486,7 @@ impl<'e> Engine<'e> {
         let outgoing = arriving.pop().expect("a process holds at least one island");
         let sent = outgoing.stored();
         let received: StoredMember = serde_json::from_slice(&self.transport.pass_on(serde_json::to_vec(&sent)?)?)?;
-        let expr = parse_expr(&received.expr).map_err(|e| anyhow::anyhow!("migrant `{}`:\n{e}", received.expr))?;
+        let expr = parse_expr(&received.expr).with_context(|| format!("migrant `{}`", received.expr))?;
         arriving.insert(0, Member { expr, text: received.expr, radius: received.radius, fitness: received.fitness });
         for ((i, target), migrant) in self.held().zip(islands.iter_mut()).zip(arriving) {
             let standing = self.standing(i, target);
@@ -562,8 +563,7 @@ impl<'e> Engine<'e> {
                 island
                     .iter()
                     .map(|s| {
-                        let expr =
-                            parse_expr(&s.expr).map_err(|e| anyhow::anyhow!("stored expression `{}`:\n{e}", s.expr))?;
+                        let expr = parse_expr(&s.expr).with_context(|| format!("stored expression `{}`", s.expr))?;
                         self.memo.entry(s.key()).or_insert_with(|| s.fitness.clone());
                         Ok(Member { expr, text: s.expr.clone(), radius: s.radius, fitness: s.fitness.clone() })
                     })

@@ -65,9 +65,10 @@ impl Region {
     }
 }
 
-/// The error of one kernel on one scene.
+/// What one kernel scored on one scene: its error, light and domain flags
+/// (a measurement; a scene that cannot be read is a `scene::SceneError`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SceneError {
+pub struct SceneScore {
     /// relMSE (equation 3.5 without the m/2 factor) of the filtered image.
     pub relmse: f64,
     /// The filtered image's mean luminance (`pipeline::luminance`) over the
@@ -177,7 +178,7 @@ impl Gpu {
         scenes: &mut [FitnessScene],
         data: &[&Scene],
         radius: u32,
-    ) -> Result<Vec<Vec<SceneError>>, GpuError> {
+    ) -> Result<Vec<Vec<SceneScore>>, GpuError> {
         self.run_fitness(kernels, scenes, data, radius, Pass::Full)
     }
 
@@ -204,7 +205,7 @@ impl Gpu {
         data: &[&Scene],
         radius: u32,
         run: Pass,
-    ) -> Result<Vec<Vec<SceneError>>, GpuError> {
+    ) -> Result<Vec<Vec<SceneScore>>, GpuError> {
         assert_eq!(scenes.len(), data.len(), "one FitnessScene per Scene");
         for k in kernels {
             assert_eq!(k.source().kind, KernelKind::Fitness, "evaluate_fitness runs fitness kernels");
@@ -427,7 +428,7 @@ impl Gpu {
                 };
                 let pixels =
                     fs.counted.as_ref().map_or(fs.width * fs.height, |r| r.iter().map(Region::pixels).sum()) as f64;
-                row.push(SceneError {
+                row.push(SceneScore {
                     relmse: sum / pixels,
                     luminance: luminance / pixels,
                     flags: bits,

@@ -22,7 +22,7 @@ pub use crate::jit::builtin::PATHTRACE_WGSL;
 pub use buffers::SceneBuffers;
 pub use clock::Span;
 pub use filter::{Filtered, MAX_WEIGHTS_PER_DISPATCH};
-pub use fitness::{FitnessScene, Region, SceneError as FitnessError};
+pub use fitness::{FitnessScene, Region, SceneScore};
 pub use raw::{RawBuffer, RawKernel};
 pub use temporal::TemporalState;
 pub use trace::{TraceBand, TraceInputs, TraceScene};
