@@ -93,7 +93,7 @@ const MAX_NESTING: usize = MAX_DEPTH;
 /// Parse an expression's text into a syntax tree.
 pub fn parse(source: &str) -> Result<Syntax, ExprError> {
     check_nesting(source)?;
-    let mut pairs = ExprParser::parse(Rule::weight, source).map_err(syntax_error)?;
+    let mut pairs = ExprParser::parse(Rule::weight, source).map_err(|e| syntax_error(e, source))?;
     let weight = pairs.next().expect("weight rule matched");
     let expr = weight.into_inner().next().expect("weight holds an expr");
     lower_expr(expr, source, 0)
@@ -183,18 +183,68 @@ fn lower_primary(pair: Pair<'_, Rule>, source: &str, depth: usize) -> Result<Syn
     }
 }
 
-/// pest's error as filterjit's, the grammar's rules named in words.
-fn syntax_error(e: pest::error::Error<Rule>) -> ExprError {
-    use pest::error::{InputLocation, LineColLocation};
+/// pest's error as filterjit's: what was expected named in words, each
+/// once, and a `)` where a bracket before the position is still open (the
+/// grammar's literals are not rules, so pest cannot name it).
+fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> ExprError {
+    use pest::error::{Error, ErrorVariant, InputLocation, LineColLocation};
     let (line, column) = match e.line_col {
         LineColLocation::Pos(p) | LineColLocation::Span(p, _) => p,
     };
     let offset = match e.location {
         InputLocation::Pos(p) | InputLocation::Span((p, _)) => p,
     };
-    let e = e.renamed_rules(describe_rule);
+    let e = match &e.variant {
+        ErrorVariant::ParsingError { positives, .. } if !positives.is_empty() => {
+            let mut expected: Vec<String> = Vec::new();
+            for name in positives.iter().map(describe_rule) {
+                if !expected.contains(&name) {
+                    expected.push(name);
+                }
+            }
+            if positives.contains(&Rule::number) {
+                // Where an operand may start, so may a bracketed one.
+                expected.push("`(`".into());
+            }
+            // After a whole operand (an operator would do), the innermost
+            // open bracket may close there; a call's may take another argument.
+            let operand_done = positives.iter().any(|r| matches!(r, Rule::add | Rule::sub | Rule::mul | Rule::div));
+            if let Some(open) = innermost_open_bracket(&source[..offset.min(source.len())]).filter(|_| operand_done) {
+                let in_call = source[..open].chars().next_back().is_some_and(|c| c.is_alphanumeric() || c == '_');
+                if in_call {
+                    expected.push("`,`".into());
+                }
+                expected.push("`)`".into());
+            }
+            let message = match expected.split_last() {
+                Some((last, [])) => format!("expected {last}"),
+                Some((last, rest)) => format!("expected {}, or {last}", rest.join(", ")),
+                None => unreachable!("positives is not empty"),
+            };
+            match pest::Position::new(source, offset) {
+                Some(at) => Error::new_from_pos(ErrorVariant::CustomError { message }, at),
+                None => e.renamed_rules(describe_rule),
+            }
+        }
+        _ => e.renamed_rules(describe_rule),
+    };
     let message = e.variant.message().into_owned();
     ExprError::syntax(line, column, offset, message, e.to_string())
+}
+
+/// The byte offset of the last `(` of `text` still open at its end.
+fn innermost_open_bracket(text: &str) -> Option<usize> {
+    let mut open = Vec::new();
+    for (k, c) in text.char_indices() {
+        match c {
+            '(' => open.push(k),
+            ')' => {
+                open.pop();
+            }
+            _ => {}
+        }
+    }
+    open.pop()
 }
 
 fn describe_rule(rule: &Rule) -> String {
