@@ -309,13 +309,16 @@ fn glsl_hlsl_and_spirv_exports_pass_reference_compilers() {
     let keep: filterjit::pipeline::FilterPipeline = "outliers=2,keep,demodulate,atrous3x3=4".parse().unwrap();
     let surface: filterjit::pipeline::FilterPipeline =
         "outliers=2,keep=surface,demodulate,atrous=4,planefit=3".parse().unwrap();
+    // The temporal stage's two kernels, in the shipped sequence filter's pipeline.
+    let temporal = corpus::resolve_with_pipeline("@temporal").unwrap();
     let named = corpus::named().len();
     let cases = exprs
         .iter()
         .map(|e| (e, filterjit::pipeline::FilterPipeline::WINDOW))
         .chain(exprs[..named].iter().map(|e| (e, atrous)))
         .chain(exprs[..1].iter().map(|e| (e, keep)))
-        .chain(exprs[..1].iter().map(|e| (e, surface)));
+        .chain(exprs[..1].iter().map(|e| (e, surface)))
+        .chain(std::iter::once((&temporal.expr, temporal.pipeline.unwrap())));
     for (k, (expr, pipeline)) in cases.enumerate() {
         for target in [Target::Glsl, Target::Hlsl, Target::Spirv, Target::Msl] {
             let exported =

@@ -54,6 +54,7 @@ pub fn temporal_wgsl(textures: Option<OutputFormat>) -> String {
         max_history: wgsl_f32(pipeline::TEMPORAL_MAX_HISTORY),
         short_history: wgsl_f32(pipeline::TEMPORAL_SHORT_HISTORY),
         variance_radius: pipeline::TEMPORAL_VARIANCE_RADIUS,
+        window_taps: (2 * pipeline::TEMPORAL_VARIANCE_RADIUS + 1).pow(2),
         textures: textures.is_some(),
     };
     let template = include_str!("../../templates/temporal.wgsl.tera");
@@ -74,6 +75,8 @@ struct TemporalTemplate {
     max_history: String,
     short_history: String,
     variance_radius: i32,
+    /// The spatial variance's window, (2 radius + 1)² taps (the template initialises its array).
+    window_taps: i32,
     textures: bool,
 }
 
