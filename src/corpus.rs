@@ -3,7 +3,7 @@
 
 use anyhow::{bail, Context};
 
-use crate::named::{NamedFile, NamedFileError};
+use crate::named::{Entry, NamedFile, NamedFileError};
 
 /// The shipped file's text.
 pub const EXPRESSIONS: &str = include_str!("../data/expressions.txt");
@@ -44,56 +44,36 @@ pub fn resolve(arg: &str) -> anyhow::Result<(Option<String>, crate::lang::Expr)>
 
 /// [`resolve`], with the pipeline the file states for the expression.
 pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
-    let (name, text, pipeline) = match arg.strip_prefix('@') {
-        Some(reference) if lookup(reference).is_none() && file_reference(reference).is_some() => {
-            let (path, name) = file_reference(reference).expect("checked");
-            let content = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-            let file =
-                NamedFile::parse(&content).map_err(|e: NamedFileError| anyhow::anyhow!("{}: {e}", path.display()))?;
-            let found = match &name {
-                Some(n) => file.get(n),
-                None => file.entries.first(),
-            };
-            match found {
-                Some(entry) => {
-                    let text = file.expression(&entry.name).expect("its own entry");
-                    if text.starts_with('@') {
-                        bail!(
-                            "{}: `{} = {}` names an entry the file does not hold (or one that names it back)",
-                            path.display(),
-                            entry.name,
-                            entry.text
-                        );
-                    }
-                    let expr = parse_checked(text).with_context(|| format!("{}: `{}`", path.display(), entry.name))?;
-                    return Ok(Resolved {
-                        name: Some(entry.name.clone()),
-                        expr,
-                        pipeline: entry.pipeline,
-                        radius: entry.radius,
-                    });
-                }
-                None => bail!(
-                    "{} has no expression{}",
-                    path.display(),
-                    name.map(|n| format!(" named `{n}`")).unwrap_or_default()
-                ),
-            }
-        }
-        Some(name) => match lookup(name) {
-            Some(text) => {
-                let pipeline = shipped().get(name).and_then(|e| e.pipeline);
-                (name.to_string(), text.to_string(), pipeline)
-            }
-            None => {
-                let names: Vec<String> = named().iter().map(|(n, _)| format!("@{n}")).collect();
-                bail!("no shipped expression `@{name}`; there are: {}", names.join(", "))
-            }
-        },
-        None => return Ok(Resolved { name: None, expr: parse_checked(arg)?, pipeline: None, radius: None }),
+    let Some(reference) = arg.strip_prefix('@') else {
+        return Ok(Resolved { name: None, expr: parse_checked(arg)?, pipeline: None, radius: None });
     };
-    let radius = shipped().get(&name).and_then(|e| e.radius);
-    Ok(Resolved { name: Some(name), expr: parse_checked(&text)?, pipeline, radius })
+    if let Some(entry) = shipped().get(reference) {
+        return resolve_entry(shipped(), entry);
+    }
+    let Some((path, name)) = file_reference(reference) else {
+        let names: Vec<String> = named().iter().map(|(n, _)| format!("@{n}")).collect();
+        bail!("no shipped expression `@{reference}`; there are: {}", names.join(", "))
+    };
+    let content = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let file = NamedFile::parse(&content).map_err(|e: NamedFileError| anyhow::anyhow!("{}: {e}", path.display()))?;
+    let found = match &name {
+        Some(n) => file.get(n),
+        None => file.entries.first(),
+    };
+    let Some(entry) = found else {
+        bail!("{} has no expression{}", path.display(), name.map(|n| format!(" named `{n}`")).unwrap_or_default())
+    };
+    resolve_entry(&file, entry).with_context(|| path.display().to_string())
+}
+
+/// Entry `entry` of `file`, its alias followed, parsed, with what the file states for it.
+fn resolve_entry(file: &NamedFile, entry: &Entry) -> anyhow::Result<Resolved> {
+    let text = file.expression(&entry.name).expect("its own entry");
+    if text.starts_with('@') {
+        bail!("`{} = {}` names an entry the file does not hold (or one that names it back)", entry.name, entry.text);
+    }
+    let expr = parse_checked(text).with_context(|| format!("`{}`", entry.name))?;
+    Ok(Resolved { name: Some(entry.name.clone()), expr, pipeline: entry.pipeline, radius: entry.radius })
 }
 
 fn parse_checked(text: &str) -> anyhow::Result<crate::lang::Expr> {

@@ -80,9 +80,16 @@ pub struct FrameMethod {
 impl FrameMethod {
     /// A shipped filter, `@name`, in the pipeline it is stored with.
     pub fn shipped(name: &str) -> anyhow::Result<FrameMethod> {
-        let resolved = crate::corpus::resolve_with_pipeline(&format!("@{name}"))?;
-        let pipeline = resolved.pipeline.unwrap_or_default();
-        Ok(FrameMethod { name: format!("@{name}"), expr: resolved.expr, pipeline })
+        FrameMethod::resolve(&format!("@{name}"), name)
+    }
+
+    /// An expression argument (`@name`, `@FILE[:NAME]` or text) in the
+    /// pipeline stored with it, else `filter`'s default one; called `@NAME`,
+    /// or `unnamed` where the argument has no name.
+    pub fn resolve(arg: &str, unnamed: &str) -> anyhow::Result<FrameMethod> {
+        let resolved = crate::corpus::resolve_with_pipeline(arg)?;
+        let name = resolved.name.map_or_else(|| unnamed.to_string(), |n| format!("@{n}"));
+        Ok(FrameMethod { name, expr: resolved.expr, pipeline: resolved.pipeline.unwrap_or_default() })
     }
 }
 

@@ -51,14 +51,7 @@ pub(crate) fn bench_frames(
         given => given
             .iter()
             .enumerate()
-            .map(|(k, arg)| {
-                let resolved = corpus::resolve_with_pipeline(arg)?;
-                Ok(filterjit::bench::FrameMethod {
-                    name: resolved.name.map_or_else(|| format!("filter{}", k + 1), |n| format!("@{n}")),
-                    expr: resolved.expr,
-                    pipeline: resolved.pipeline.unwrap_or_default(),
-                })
-            })
+            .map(|(k, arg)| filterjit::bench::FrameMethod::resolve(arg, &format!("filter{}", k + 1)))
             .collect::<Result<_>>()?,
     };
     let gpu = gpu::Gpu::open(&env.adapter)?;

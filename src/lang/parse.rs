@@ -216,10 +216,10 @@ fn syntax_error(e: pest::error::Error<Rule>, source: &str) -> ExprError {
                 }
                 expected.push("`)`".into());
             }
-            let message = match expected.split_last() {
-                Some((last, [])) => format!("expected {last}"),
-                Some((last, rest)) => format!("expected {}, or {last}", rest.join(", ")),
-                None => unreachable!("positives is not empty"),
+            let last = expected.pop().expect("positives is not empty");
+            let message = match expected.is_empty() {
+                true => format!("expected {last}"),
+                false => format!("expected {}, or {last}", expected.join(", ")),
             };
             match pest::Position::new(source, offset) {
                 Some(at) => Error::new_from_pos(ErrorVariant::CustomError { message }, at),
