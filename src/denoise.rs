@@ -44,7 +44,7 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
 
 /// The shipped filter meant for real time: chosen on the built-in scenes
 /// from a front of error against whole-frame time at 1920x1080
-/// (docs/BENCHMARKS.md, "The real-time filter").
+/// (docs/JOURNAL.md, "Choosing the real-time filter").
 pub const SHIPPED_REALTIME: &str = "realtime";
 
 /// The shipped temporal filters a sequence gets when none is asked for,
