@@ -534,7 +534,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
             acc[VALUES + c] += values[c] * values[c];
         }
     }
+    // The sums hold the band's rows only: a whole large image's would pass
+    // the device's largest storage binding (128 MiB on Mesa).
+    let in_band = gid.y * params.width + x;
     for (var k = 0u; k < STRIDE; k++) {
-        sums[pixel * STRIDE + k] = acc[k];
+        sums[in_band * STRIDE + k] = acc[k];
     }
 }

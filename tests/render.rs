@@ -87,6 +87,26 @@ fn renders_are_deterministic_for_a_seed() {
     assert_ne!(a.noisy(), c.noisy());
 }
 
+/// At 1280x720 the whole image's sums (38 floats a pixel) would be 140 MB,
+/// over the 128 MiB a storage binding may hold on Mesa: the tracer binds one
+/// band of rows at a time, and every band lands in its own rows.
+#[test]
+fn a_720p_render_is_traced_in_bands_that_each_land_in_their_rows() {
+    let gpu = gpu();
+    let d = render::builtin("cornell").unwrap().unwrap();
+    let settings = RenderSettings { width: 1280, height: 720, spp: 1, reference_spp: 2, seed: 1 };
+    let rendered = render::render(&gpu, &d, &settings, &mut |_, _| {}).unwrap();
+    let reference = rendered.reference();
+    let rows_per_band = (render::MAX_PATHS_PER_DISPATCH / 1280) as usize / 8 * 8;
+    assert!(rows_per_band < 720, "the test must span several bands");
+    assert!(reference.iter().flatten().all(|v| v.is_finite()), "a pixel not finite");
+    for (band, pixels) in reference.chunks(1280 * rows_per_band).enumerate() {
+        let light = pixels.iter().map(|p| p[0] + p[1] + p[2]).sum::<f32>() / pixels.len() as f32;
+        // Every band crosses the box's lit walls; one written elsewhere would be black.
+        assert!(light > 0.05, "band {band} (from row {}) is dark: {light}", band * rows_per_band);
+    }
+}
+
 #[test]
 fn the_cache_renders_once_per_scene_text_and_settings() {
     let gpu = gpu();

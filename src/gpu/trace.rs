@@ -68,16 +68,16 @@ impl Gpu {
         let _turn = self.gl_turn();
         let device = self.device();
         let TraceBand { width, height, row_offset, rows, sums_per_pixel } = band;
+        debug_assert!(row_offset + rows <= height, "a band inside the image");
         let row_bytes = width as u64 * sums_per_pixel as u64 * 4;
-        let size = height as u64 * row_bytes;
+        // The tracer writes the band's rows from the buffer's start.
+        let band = rows as u64 * row_bytes;
         let sums = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sums"),
-            size,
+            size: band,
             usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
             mapped_at_creation: false,
         });
-        let first = row_offset as u64 * row_bytes;
-        let band = rows as u64 * row_bytes;
         let staging = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("sums readback"),
             size: band,
@@ -97,7 +97,7 @@ impl Gpu {
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(8), rows.div_ceil(8), 1);
         }
-        encoder.copy_buffer_to_buffer(&sums, first, &staging, 0, band);
+        encoder.copy_buffer_to_buffer(&sums, 0, &staging, 0, band);
         let bytes = self.finish_and_read(encoder, scope, "path tracing", &staging)?;
         Ok(bytemuck::pod_collect_to_vec(&bytes))
     }
