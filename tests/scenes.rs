@@ -216,3 +216,30 @@ fn non_finite_inputs_are_sanitised_and_reported() {
     assert!(scene.features[&Feature::Normal].iter().flatten().all(|v| v.is_finite()));
     assert!(scene.notes.iter().any(|n| n.contains("noisy colour: 2 non-finite")), "{:?}", scene.notes);
 }
+
+/// The same image written twice gives the same bytes: exr compresses blocks
+/// in parallel, and filterjit writes them in order, not as they finish.
+#[test]
+fn an_exr_written_twice_has_the_same_bytes() {
+    let dir = temp_dir("same-bytes");
+    let (width, height) = (1024, 512);
+    // Noise, so every block's compression takes its own time.
+    let mut state = 12345u32;
+    let rgb: Vec<[f32; 3]> = (0..width * height)
+        .map(|_| {
+            let mut next = || {
+                state = state.wrapping_mul(1664525).wrapping_add(1013904223);
+                (state >> 8) as f32 / (1 << 24) as f32
+            };
+            [next(), next(), next()]
+        })
+        .collect();
+    let first = dir.join("first.exr");
+    scene::exr_io::write_rgb(&first, width, height, &rgb).unwrap();
+    let bytes = std::fs::read(&first).unwrap();
+    for k in 0..6 {
+        let again = dir.join(format!("again{k}.exr"));
+        scene::exr_io::write_rgb(&again, width, height, &rgb).unwrap();
+        assert!(std::fs::read(&again).unwrap() == bytes, "write {k} differs from the first");
+    }
+}

@@ -278,7 +278,7 @@ impl Gpu {
                     Some(scratch) if level + 1 < passes => &scratch.images[level as usize % 2],
                     _ => &out,
                 };
-                self.record_feedback(&mut encoder, recorded, image, pixels);
+                self.record_feedback(&mut encoder, recorded, image, (buffers.width, buffers.height))?;
             }
         }
         // `planefit` after the form: one dispatch over the last pass's whole image.

@@ -28,6 +28,12 @@ impl Sampled {
     pub(super) fn forget(&mut self, role: Role) {
         self.scene.remove(&role);
     }
+
+    /// Take `texture`, which holds the values of the scene's image bound to
+    /// `role`, as that image's texture (a stage that made one already).
+    pub(super) fn provide(&mut self, role: Role, texture: wgpu::Texture) {
+        self.scene.insert(role, texture);
+    }
 }
 
 impl Gpu {

@@ -22,19 +22,22 @@ pub struct TemporalState {
     frames: u32,
 }
 
-/// One frame's history on the device.
+/// One frame's history on the device, kept as the sampled textures the
+/// next frame's stage reads: the frame made each of them for a kernel of
+/// its own, so the next frame copies none (docs/JOURNAL.md, "The temporal
+/// stage keeps textures").
 struct Kept {
     width: u32,
     height: u32,
     /// The image the pipeline feeds back (rgba, demodulated where it demodulates).
-    color: wgpu::Buffer,
+    color: wgpu::Texture,
     /// m1, m2, r, n per pixel.
-    moments: wgpu::Buffer,
+    moments: wgpu::Texture,
     /// The frame's surface: the normal's direction and the depth; and its albedo.
-    surface: wgpu::Buffer,
-    albedo: wgpu::Buffer,
+    surface: wgpu::Texture,
+    albedo: wgpu::Texture,
     /// The modulation blended over frames.
-    modulation: wgpu::Buffer,
+    modulation: wgpu::Texture,
 }
 
 impl TemporalState {
@@ -62,14 +65,14 @@ impl TemporalState {
 
 /// What the stage recorded into a frame, kept once the frame's submission is done.
 pub(super) struct Recorded {
-    moments: wgpu::Buffer,
-    surface: wgpu::Buffer,
-    albedo: wgpu::Buffer,
-    modulation: wgpu::Buffer,
+    moments: wgpu::Texture,
+    surface: wgpu::Texture,
+    albedo: wgpu::Texture,
+    modulation: wgpu::Texture,
     /// The passes of the form after which the image is the next history.
     pub(super) feedback: u32,
     /// The image fed back, once recorded.
-    pub(super) color: Option<wgpu::Buffer>,
+    pub(super) color: Option<wgpu::Texture>,
 }
 
 impl Gpu {
@@ -107,21 +110,24 @@ impl Gpu {
         let modulation = make("temporal modulation", 16);
         let (length, samples) = (make("history length", 4), make("sample variance", 4));
         let size = (width, height);
-        let view = |encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer| {
-            Ok::<_, GpuError>(self.blitted(encoder, buffer, Element::Vec4F32, size)?.create_view(&Default::default()))
+        let texture = |encoder: &mut wgpu::CommandEncoder, buffer: &wgpu::Buffer| {
+            self.blitted(encoder, buffer, Element::Vec4F32, size)
         };
-        let color = view(encoder, &buffers.color)?;
-        let geometry = view(encoder, &surface)?;
-        let material = view(encoder, &albedo)?;
-        let motion = view(encoder, &vectors)?;
+        let view = |texture: &wgpu::Texture| texture.create_view(&Default::default());
+        let color = view(&texture(encoder, &buffers.color)?);
+        // The frame's surface and albedo: this frame's test reads them, and the next frame's as its past.
+        let surface = texture(encoder, &surface)?;
+        let albedo = texture(encoder, &albedo)?;
+        let (geometry, material) = (view(&surface), view(&albedo));
+        let motion = view(&texture(encoder, &vectors)?);
         // A first frame reads no history: the frame's own images stand in for it.
         let (past, past_moments, past_surface, past_albedo, past_modulation) = match history {
             Some(kept) => (
-                view(encoder, &kept.color)?,
-                view(encoder, &kept.moments)?,
-                view(encoder, &kept.surface)?,
-                view(encoder, &kept.albedo)?,
-                view(encoder, &kept.modulation)?,
+                view(&kept.color),
+                view(&kept.moments),
+                view(&kept.surface),
+                view(&kept.albedo),
+                view(&kept.modulation),
             ),
             None => (color.clone(), color.clone(), geometry.clone(), material.clone(), material.clone()),
         };
@@ -163,7 +169,9 @@ impl Gpu {
         let sizes = crate::jit::BlitParams { width, height, _pad: [0; 2] };
         let uniform = self.params_buffer(interface.params(), "temporal variance params", bytemuck::bytes_of(&sizes));
         let sample_view = self.blitted(encoder, &samples, Element::F32, size)?.create_view(&Default::default());
-        let moments_view = view(encoder, &moments)?;
+        // The moments' texture: this kernel's, then the next frame's history.
+        let moments = texture(encoder, &moments)?;
+        let moments_view = view(&moments);
         let variance = make("temporal variance", 4);
         let bind_group = self.bind_group(&prefilter, &interface, |role| match role {
             Role::Params => uniform.as_entire_binding(),
@@ -180,32 +188,32 @@ impl Gpu {
         }
         buffers.inputs.insert(Input::Variance(ScalarVar::HistoryLength), length);
         buffers.inputs.insert(Input::Variance(ScalarVar::TemporalVariance), variance);
+        // The blend and the blended modulation as textures: the form samples
+        // them, and the next frame reads them as its history.
+        let modulation_texture = texture(encoder, &modulation)?;
+        let blend_texture = texture(encoder, &blend)?;
         // The form's result is multiplied back by the albedo blended over frames.
         if buffers.modulation.is_some() {
-            buffers.replace_modulation(modulation.clone());
+            buffers.replace_modulation(modulation);
+            buffers.sampled.provide(Role::Modulation, modulation_texture.clone());
         }
         buffers.replace_color(blend);
+        buffers.sampled.provide(Role::Color, blend_texture.clone());
         let feedback = stage.feedback;
-        let color = (feedback == 0).then(|| buffers.color.clone());
-        Ok(Recorded { moments, surface, albedo, modulation, feedback, color })
+        let color = (feedback == 0).then_some(blend_texture);
+        Ok(Recorded { moments, surface, albedo, modulation: modulation_texture, feedback, color })
     }
 
-    /// Record a copy of `image` (a pass's output) as the history's colour.
+    /// Record a copy of `image` (a pass's output, a frame of `size`) as the history's colour.
     pub(super) fn record_feedback(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         recorded: &mut Recorded,
         image: &wgpu::Buffer,
-        pixels: u64,
-    ) {
-        let copy = self.device().create_buffer(&wgpu::BufferDescriptor {
-            label: Some("temporal history"),
-            size: pixels * 16,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        encoder.copy_buffer_to_buffer(image, 0, &copy, 0, pixels * 16);
-        recorded.color = Some(copy);
+        size: (u32, u32),
+    ) -> Result<(), GpuError> {
+        recorded.color = Some(self.blitted(encoder, image, Element::Vec4F32, size)?);
+        Ok(())
     }
 }
 

@@ -96,6 +96,14 @@ pub struct ImageChannels {
     pub data: Vec<Vec<f32>>,
 }
 
+/// How filterjit writes EXRs: exr's fast lossless encoding, its blocks in
+/// increasing order. Its default order is the order parallel compression
+/// finishes them in, so the same image gave files of different bytes.
+const ORDERED: exr::image::Encoding = exr::image::Encoding {
+    line_order: exr::meta::attribute::LineOrder::Increasing,
+    ..exr::image::Encoding::FAST_LOSSLESS
+};
+
 /// Write an RGB float EXR atomically (temporary file, then rename).
 pub fn write_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> Result<(), SceneError> {
     use exr::prelude::*;
@@ -103,7 +111,7 @@ pub fn write_rgb(path: &Path, width: usize, height: usize, rgb: &[[f32; 3]]) -> 
         let [r, g, b] = rgb[pos.y() * width + pos.x()];
         (r, g, b)
     });
-    let image = Image::from_channels((width, height), channels);
+    let image = Image::from_encoded_channels((width, height), ORDERED, channels);
     crate::io::write_atomically(path, |tmp| image.write().to_file(tmp).map_err(|e| e.to_string()))
         .map_err(SceneError::from)
 }
@@ -118,8 +126,7 @@ pub fn write_channels(
     use exr::prelude::*;
     let list: SmallVec<[AnyChannel<FlatSamples>; 4]> =
         channels.iter().map(|(name, data)| AnyChannel::new(*name, FlatSamples::F32(data.clone()))).collect();
-    let layer =
-        Layer::new((width, height), LayerAttributes::default(), Encoding::FAST_LOSSLESS, AnyChannels::sort(list));
+    let layer = Layer::new((width, height), LayerAttributes::default(), ORDERED, AnyChannels::sort(list));
     let image = Image::from_layer(layer);
     crate::io::write_atomically(path, |tmp| image.write().to_file(tmp).map_err(|e| e.to_string()))
         .map_err(SceneError::from)
