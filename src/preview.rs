@@ -2,6 +2,11 @@
 
 use std::path::Path;
 
+/// An animated preview's longest side and its most frames: a sequence's
+/// preview stays a few megabytes whatever the frames' size and number.
+pub const ANIMATION_SIDE: usize = 512;
+pub const ANIMATION_FRAMES: usize = 240;
+
 /// Linear → sRGB transfer, after clamping to [0, 1]. Every preview uses this
 /// one mapping, so previews of different methods compare directly.
 pub fn tone_map(linear: f32) -> u8 {
@@ -53,4 +58,30 @@ pub fn write_animated_png(
         writer.finish().map_err(encode)?;
     }
     crate::io::write_bytes_atomically(path, &bytes)
+}
+
+/// Images of one size side by side, left to right.
+pub fn side_by_side(images: &[&[[f32; 3]]], width: usize, height: usize) -> Vec<[f32; 3]> {
+    (0..height)
+        .flat_map(|y| images.iter().flat_map(move |image| image[y * width..(y + 1) * width].iter().copied()))
+        .collect()
+}
+
+/// A preview's size: the frame's, or smaller so that its longest side is `longest_side`.
+pub fn preview_size(width: usize, height: usize, longest_side: usize) -> (usize, usize) {
+    let longest = width.max(height);
+    if longest <= longest_side {
+        return (width, height);
+    }
+    ((width * longest_side / longest).max(1), (height * longest_side / longest).max(1))
+}
+
+/// `image` (`width`×`height`) at `to_width`×`to_height`, nearest pixel.
+pub fn shrunk(image: &[[f32; 3]], width: usize, height: usize, to_width: usize, to_height: usize) -> Vec<[f32; 3]> {
+    if (width, height) == (to_width, to_height) {
+        return image.to_vec();
+    }
+    (0..to_height)
+        .flat_map(|y| (0..to_width).map(move |x| image[(y * height / to_height) * width + x * width / to_width]))
+        .collect()
 }

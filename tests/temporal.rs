@@ -345,3 +345,47 @@ fn a_channel_both_a_feature_and_the_temporal_stage_read_is_loaded_for_both() {
     // Blender's y up, read as image rows down.
     assert!(motion.vectors.iter().all(|v| *v == [0.5, -0.25]));
 }
+
+/// `report --sequence`: the shipped temporal filters beside the noisy input
+/// over every frame, their figures per frame and for the sequence, the plots
+/// and the animated comparison; flags about scenes to render are refused.
+#[test]
+fn a_sequence_report_compares_the_temporal_filters_frame_by_frame() {
+    let out = temp_dir("temporal", "report").join("out");
+    let dir = committed();
+    let o = filterjit(&["report", "--sequence", dir.to_str().unwrap(), "--no-oidn", "-o", out.to_str().unwrap()]);
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stderr}");
+    for file in ["index.html", "sequence.json", "relmse.svg", "flicker.svg", "comparison.png"] {
+        assert!(out.join(file).is_file(), "{file} written");
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("sequence.json")).unwrap()).unwrap();
+    let entrants = report["entrants"].as_array().unwrap();
+    let names: Vec<&str> = entrants.iter().map(|e| e["name"].as_str().unwrap()).collect();
+    assert_eq!(names, ["noisy", "@temporal", "@realtimeTemporal", "@svgf"], "{stdout}");
+    let noisy = &entrants[0];
+    for entrant in entrants {
+        let frames = entrant["frames"].as_array().unwrap();
+        assert_eq!(frames.len(), 3, "{entrant}");
+        assert!(frames[0]["flicker"].is_null() && frames[2]["flicker"].as_f64().unwrap() > 0.0, "{entrant}");
+        assert!(frames.iter().all(|f| f["hdr_flip"].as_f64().unwrap() > 0.0), "{entrant}");
+    }
+    for filter in &entrants[1..] {
+        assert!(filter["pipeline"].as_str().unwrap().contains("temporal="), "{filter}");
+        assert!(filter["relmse"].as_f64().unwrap() < 0.2 * noisy["relmse"].as_f64().unwrap(), "{filter}");
+        assert!(filter["flicker"].as_f64().unwrap() < 0.5 * noisy["flicker"].as_f64().unwrap(), "{filter}");
+        assert!(filter["frame_ms"].as_f64().unwrap() > 0.0, "{filter}");
+    }
+    // Each method's line in each plot, and the page names them all.
+    let html = std::fs::read_to_string(out.join("index.html")).unwrap();
+    for file in ["relmse.svg", "flicker.svg"] {
+        let svg = std::fs::read_to_string(out.join(file)).unwrap();
+        assert_eq!(svg.matches("<path").count(), 4, "{file}");
+    }
+    assert!(names.iter().all(|n| html.contains(n)), "the page names every method");
+
+    let o = filterjit(&["report", "--sequence", dir.to_str().unwrap(), "--scenes", "cornell"]);
+    assert!(!o.status.success(), "--scenes with --sequence is refused");
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--scenes"), "{}", String::from_utf8_lossy(&o.stderr));
+}

@@ -289,6 +289,13 @@ pub(crate) struct ReportArgs {
     /// (FILTERJIT_OIDN, PATH, or the pyoidn Python package).
     #[arg(long)]
     pub(crate) no_oidn: bool,
+    /// Report on a sequence's folder of frames instead of scenes: the filters
+    /// (default: the shipped temporal ones) over every frame in order, beside
+    /// the noisy input and OIDN on each frame; per frame and for the
+    /// sequence relMSE, light, HDR-FLIP and flicker, plots over the frames,
+    /// an animated comparison.
+    #[arg(long, value_name = "SEQ_DIR")]
+    pub(crate) sequence: Option<PathBuf>,
 }
 
 #[derive(clap::Args)]

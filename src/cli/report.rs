@@ -122,6 +122,9 @@ pub(crate) fn tune_on_training(
 
 pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
     use filterjit::report::{self, Method, Origin};
+    if let Some(dir) = &args.sequence {
+        return report_sequence(env, &args, dir);
+    }
     let context = scene_context(&args.scene)?;
     let gpu = gpu::Gpu::open(&env.adapter)?;
     let mut methods = Vec::new();
@@ -255,6 +258,89 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
             f(m.mean_normalised, 4),
             f(m.mean_relmse, 4),
             f(m.mean_ms_per_mpx, 1)
+        );
+    }
+    println!("wrote     {}", args.output.join("index.html").display());
+    Ok(())
+}
+
+/// The shipped filters a sequence report runs when it is given none: the
+/// temporal default, the real-time one and SVGF in its paper's pipeline.
+const SEQUENCE_FILTERS: [&str; 3] = ["@temporal", "@realtimeTemporal", "@svgf"];
+
+/// `report --sequence SEQ_DIR`: `report::sequence` on one folder of frames.
+fn report_sequence(env: &Environment, args: &ReportArgs, dir: &std::path::Path) -> Result<()> {
+    // What describes scenes to render, a run or a baseline has no meaning for a sequence's frames.
+    let refused = [
+        ("--scenes", !args.scenes.is_empty()),
+        ("--run", args.scene.run.is_some()),
+        ("--hall-of-fame", args.hall_of_fame.is_some()),
+        ("--baseline", args.baseline.is_some()),
+        ("--training-scenes", !args.scene.training_scenes.is_empty()),
+        ("--size", args.scene.render.size.is_some()),
+        ("--reference-spp", args.scene.render.reference_spp.is_some()),
+    ];
+    if let Some((flag, _)) = refused.iter().find(|(_, given)| *given) {
+        bail!("{flag} describes scenes to render; with --sequence the frames are the sequence's own");
+    }
+    let sequence =
+        filterjit::scene::Sequence::find(dir).with_context(|| format!("reading sequence {}", dir.display()))?;
+    let asked: Vec<&str> = match args.exprs.is_empty() {
+        true => SEQUENCE_FILTERS.to_vec(),
+        false => args.exprs.iter().map(String::as_str).collect(),
+    };
+    let render = &args.scene.render;
+    let mut filters = Vec::new();
+    for (k, arg) in asked.iter().enumerate() {
+        let choice = filterjit::denoise::Choice::asked(arg, render.pipeline, render.radius)
+            .with_context(|| format!("filter {arg}"))?;
+        let name = if arg.starts_with('@') { arg.to_string() } else { format!("expr{}", k + 1) };
+        filters.push((name, choice));
+    }
+    let oidn = match (args.no_oidn, filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref())) {
+        (true, _) => None,
+        (false, Ok(oidn)) => Some(oidn),
+        (false, Err(why)) => {
+            eprintln!("note: the report goes on without Intel Open Image Denoise: {why}");
+            None
+        }
+    };
+    let gpu = gpu::Gpu::open(&env.adapter)?;
+    let read = filterjit::scene::Request { spp: render.spp, ..Default::default() };
+    let inputs =
+        filterjit::report::sequence::SequenceInputs { sequence: &sequence, filters, oidn: oidn.as_ref(), read };
+    let report =
+        filterjit::report::sequence::run(&gpu, inputs, &args.output, &mut |what| eprintln!("measure   {what}"))?;
+    let f = |v: Option<f64>, d: usize| v.map(|v| format!("{v:.d$}")).unwrap_or_else(|| "-".into());
+    let settled = match report.frames.len() >= report.settled_from {
+        true => format!("settled: frames {}–{}", report.settled_from, report.frames.len()),
+        false => format!("too short to settle (from frame {})", report.settled_from),
+    };
+    println!(
+        "sequence  {} ({} frames, {}x{}); {settled}",
+        report.sequence,
+        report.frames.len(),
+        report.width,
+        report.height
+    );
+    println!(
+        "{:<30} {:>10} {:>10} {:>10} {:>10} {:>9} {:>13} {:>9}",
+        "method", "relMSE", "settled", "flicker", "settled", "HDR-FLIP", "light", "ms"
+    );
+    for e in &report.entrants {
+        println!(
+            "{:<30} {:>10.5} {:>10} {:>10} {:>10} {:>9.4} {:>13} {:>9}",
+            e.name,
+            e.relmse,
+            f(e.relmse_settled, 5),
+            f(e.flicker, 5),
+            f(e.flicker_settled, 5),
+            e.hdr_flip,
+            match (e.light_min, e.light_max) {
+                (Some(lo), Some(hi)) => format!("{lo:.3}–{hi:.3}"),
+                _ => "-".into(),
+            },
+            f(e.frame_ms, 1)
         );
     }
     println!("wrote     {}", args.output.join("index.html").display());

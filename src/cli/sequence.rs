@@ -11,6 +11,7 @@ use anyhow::{bail, Context, Result};
 use filterjit::denoise::{Choice, Provided, SequenceFilter};
 use filterjit::environment::Environment;
 use filterjit::pipeline::FilterPipeline;
+use filterjit::report::sequence::{FrameScore, SETTLED_FROM};
 use filterjit::scene::{self, Request, Sequence};
 use filterjit::{gpu, metrics, preview};
 use serde::Serialize;
@@ -20,14 +21,6 @@ use super::ms;
 
 /// A frame's linear RGB pixels.
 type Image = Vec<[f32; 3]>;
-
-/// Frames before this one still build their history: the sequence's
-/// "settled" figures start here (the frames 5–12 of twelve).
-pub(crate) const SETTLED_FROM: usize = 4;
-
-/// The longest side of the animated previews, and their most frames.
-const PREVIEW_SIDE: usize = 512;
-const PREVIEW_FRAMES: usize = 240;
 
 /// One frame's figures, as `metrics.json` holds them.
 #[derive(Serialize)]
@@ -147,25 +140,19 @@ pub(crate) fn filter_sequence(
             .with_context(|| format!("writing {}", png.display()))?;
 
         let reference = scene.reference.as_deref();
-        let errors = reference.map(|r| metrics::errors(&rgb, r, scene.spp));
+        let before = previous.as_ref().and_then(|(output, reference)| Some((output.as_slice(), reference.as_deref()?)));
+        let score = reference.map(|r| FrameScore::of(&rgb, r, before, scene.spp, (width, height)));
         let noisy = reference.map(|r| metrics::errors(&scene.color, r, scene.spp));
-        let hdr_flip = reference.map(|r| filterjit::flip::hdr_flip(r, &rgb, width, height).mean());
-        let change = match (&previous, reference) {
-            (Some((before, Some(before_reference))), Some(reference)) => {
-                Some(metrics::temporal((before, &rgb), (before_reference, reference)))
-            }
-            _ => None,
-        };
         let temporal_ms = done.temporal.map(|span| ms(span.device.unwrap_or(span.wall)));
         let figure = FrameFigures {
             name: frame.name.clone(),
-            relmse: errors.map(|e| e.relmse),
+            relmse: score.map(|s| s.relmse),
             noisy_relmse: noisy.map(|e| e.relmse),
-            light: errors.and_then(|e| e.light),
+            light: score.and_then(|s| s.light),
             noisy_light: noisy.and_then(|e| e.light),
-            hdr_flip,
-            flicker: change.map(|c| c.flicker),
-            temporal_relmse: change.map(|c| c.relmse),
+            hdr_flip: score.map(|s| s.hdr_flip),
+            flicker: score.and_then(|s| s.flicker),
+            temporal_relmse: score.and_then(|s| s.temporal_relmse),
             wall_ms: ms(wall),
             device_ms: filtered.time.device.map(ms),
             temporal_ms,
@@ -202,10 +189,10 @@ pub(crate) fn filter_sequence(
                 filterjit::semantics::flag::describe(filtered.all_flags()).join("; ")
             );
         }
-        if k < PREVIEW_FRAMES {
+        if k < preview::ANIMATION_FRAMES {
             let strip: Vec<&[[f32; 3]]> =
                 [Some(scene.color.as_slice()), Some(rgb.as_slice()), reference].into_iter().flatten().collect();
-            comparison.push(side_by_side(&strip, width, height));
+            comparison.push(preview::side_by_side(&strip, width, height));
             animation.push(rgb.clone());
         }
         figures.push(figure);
@@ -214,9 +201,9 @@ pub(crate) fn filter_sequence(
 
     let summary = summarise(&sequence, &described, pipeline, gpu.describe(), (width, height), figures);
     print_summary(&summary);
-    let (side, preview_height) = preview_size(width, height);
+    let (side, preview_height) = preview::preview_size(width, height, preview::ANIMATION_SIDE);
     let shrink = |frames: &[Vec<[f32; 3]>], w: usize| -> Vec<Vec<[f32; 3]>> {
-        frames.iter().map(|f| shrunk(f, w, height, side * w / width.max(1), preview_height)).collect()
+        frames.iter().map(|f| preview::shrunk(f, w, height, side * w / width.max(1), preview_height)).collect()
     };
     let animated = output.join("animation.png");
     preview::write_animated_png(&animated, side, preview_height, &shrink(&animation, width), 8)?;
@@ -292,30 +279,4 @@ fn print_summary(s: &SequenceFigures) {
         s.frame_ms
     );
     println!("          (relMSE: Σ_rgb (o − r)² / (r² + 0.01); flicker F: mean |(o_t − o_t−1) − (r_t − r_t−1)| over pixels and channels)");
-}
-
-/// Images of one size side by side, left to right.
-fn side_by_side(images: &[&[[f32; 3]]], width: usize, height: usize) -> Vec<[f32; 3]> {
-    (0..height)
-        .flat_map(|y| images.iter().flat_map(move |image| image[y * width..(y + 1) * width].iter().copied()))
-        .collect()
-}
-
-/// The previews' size: the frame's, or smaller so that its longest side is `PREVIEW_SIDE`.
-fn preview_size(width: usize, height: usize) -> (usize, usize) {
-    let longest = width.max(height);
-    if longest <= PREVIEW_SIDE {
-        return (width, height);
-    }
-    ((width * PREVIEW_SIDE / longest).max(1), (height * PREVIEW_SIDE / longest).max(1))
-}
-
-/// `image` (`width`×`height`) at `to_width`×`to_height`, nearest pixel.
-fn shrunk(image: &[[f32; 3]], width: usize, height: usize, to_width: usize, to_height: usize) -> Vec<[f32; 3]> {
-    if (width, height) == (to_width, to_height) {
-        return image.to_vec();
-    }
-    (0..to_height)
-        .flat_map(|y| (0..to_width).map(move |x| image[(y * height / to_height) * width + x * width / to_width]))
-        .collect()
 }

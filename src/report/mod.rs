@@ -11,6 +11,7 @@
 
 mod pages;
 pub mod plot;
+pub mod sequence;
 
 use pages::file_name;
 

@@ -35,6 +35,53 @@ fn escape(text: &str) -> String {
     text.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }
 
+/// An empty plot of the common size: white, its title at the top left.
+fn canvas(title: &str) -> String {
+    let mut svg = String::new();
+    let _ = writeln!(
+        svg,
+        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{HEIGHT}" viewBox="0 0 {WIDTH} {HEIGHT}" font-family="sans-serif" font-size="12">"#
+    );
+    let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
+    let _ = writeln!(svg, r#"<text x="{}" y="20" font-size="14" font-weight="bold">{}</text>"#, LEFT, escape(title));
+    svg
+}
+
+/// The y axis's decades (`range`, log10) as grid lines with labels; `y` maps a value to its row.
+fn log_y_ticks(svg: &mut String, range: (f64, f64), y: &dyn Fn(f64) -> f64) {
+    for v in ticks(range) {
+        let py = y(v);
+        let _ = writeln!(
+            svg,
+            r##"<line x1="{LEFT}" y1="{py:.1}" x2="{:.1}" y2="{py:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
+            WIDTH - RIGHT,
+            LEFT - 6.0,
+            py + 4.0,
+            tick_label(v)
+        );
+    }
+}
+
+/// The plot area's frame and the two axes' names (the y axis logarithmic).
+fn axes(svg: &mut String, x_label: &str, y_label: &str) {
+    let (plot_w, plot_h) = (WIDTH - LEFT - RIGHT, HEIGHT - TOP - BOTTOM);
+    let _ =
+        writeln!(svg, r##"<rect x="{LEFT}" y="{TOP}" width="{plot_w}" height="{plot_h}" fill="none" stroke="#444"/>"##);
+    let _ = writeln!(
+        svg,
+        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
+        LEFT + plot_w / 2.0,
+        HEIGHT - 10.0,
+        escape(x_label)
+    );
+    let _ = writeln!(
+        svg,
+        r#"<text transform="translate(16 {:.1}) rotate(-90)" text-anchor="middle">{} (log)</text>"#,
+        TOP + plot_h / 2.0,
+        escape(y_label)
+    );
+}
+
 /// A log axis covering `values` (log10 of its ends), padded by a tenth of
 /// the span on each side, at least a factor of 2 wide.
 fn log_range(values: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -84,13 +131,7 @@ pub fn scatter(title: &str, y_label: &str, points: &[Point], baseline: Option<(&
     let plot_h = HEIGHT - TOP - BOTTOM;
     let x = |v: f64| LEFT + (v.max(1e-300).log10() - x0) / (x1 - x0) * plot_w;
     let y = |v: f64| TOP + (1.0 - (v.max(1e-300).log10() - y0) / (y1 - y0)) * plot_h;
-    let mut svg = String::new();
-    let _ = writeln!(
-        svg,
-        r#"<svg xmlns="http://www.w3.org/2000/svg" width="{WIDTH}" height="{HEIGHT}" viewBox="0 0 {WIDTH} {HEIGHT}" font-family="sans-serif" font-size="12">"#
-    );
-    let _ = writeln!(svg, r#"<rect width="100%" height="100%" fill="white"/>"#);
-    let _ = writeln!(svg, r#"<text x="{}" y="20" font-size="14" font-weight="bold">{}</text>"#, LEFT, escape(title));
+    let mut svg = canvas(title);
     for v in ticks((x0, x1)) {
         let px = x(v);
         let _ = writeln!(
@@ -101,31 +142,8 @@ pub fn scatter(title: &str, y_label: &str, points: &[Point], baseline: Option<(&
             tick_label(v)
         );
     }
-    for v in ticks((y0, y1)) {
-        let py = y(v);
-        let _ = writeln!(
-            svg,
-            r##"<line x1="{LEFT}" y1="{py:.1}" x2="{:.1}" y2="{py:.1}" stroke="#ddd"/><text x="{:.1}" y="{:.1}" text-anchor="end">{}</text>"##,
-            LEFT + plot_w,
-            LEFT - 6.0,
-            py + 4.0,
-            tick_label(v)
-        );
-    }
-    let _ =
-        writeln!(svg, r##"<rect x="{LEFT}" y="{TOP}" width="{plot_w}" height="{plot_h}" fill="none" stroke="#444"/>"##);
-    let _ = writeln!(
-        svg,
-        r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">filter time, ms per megapixel (log)</text>"#,
-        LEFT + plot_w / 2.0,
-        HEIGHT - 10.0
-    );
-    let _ = writeln!(
-        svg,
-        r#"<text transform="translate(16 {:.1}) rotate(-90)" text-anchor="middle">{} (log)</text>"#,
-        TOP + plot_h / 2.0,
-        escape(y_label)
-    );
+    log_y_ticks(&mut svg, (y0, y1), &y);
+    axes(&mut svg, "filter time, ms per megapixel (log)", y_label);
     if let Some((label, value)) = baseline {
         let py = y(value);
         let _ = writeln!(
@@ -192,6 +210,67 @@ pub fn scatter(title: &str, y_label: &str, points: &[Point], baseline: Option<(&
     svg
 }
 
+/// The colours of `lines`' series, in order (then again).
+const SERIES_COLOURS: [&str; 6] = ["#7f8c8d", "#c0392b", "#2980b9", "#27ae60", "#8e44ad", "#d35400"];
+
+/// A line per series over the same x labels (a sequence's frames), the y
+/// axis logarithmic; a series' missing values break its line.
+pub fn lines(title: &str, y_label: &str, x_labels: &[String], series: &[(String, Vec<Option<f64>>)]) -> String {
+    let (y0, y1) = log_range(series.iter().flat_map(|(_, values)| values.iter().flatten().copied()));
+    let plot_w = WIDTH - LEFT - RIGHT;
+    let plot_h = HEIGHT - TOP - BOTTOM;
+    let steps = x_labels.len().saturating_sub(1).max(1) as f64;
+    let x = |k: usize| LEFT + k as f64 / steps * plot_w;
+    let y = |v: f64| TOP + (1.0 - (v.max(1e-300).log10() - y0) / (y1 - y0)) * plot_h;
+    let mut svg = canvas(title);
+    log_y_ticks(&mut svg, (y0, y1), &y);
+    for (k, label) in x_labels.iter().enumerate() {
+        let _ = writeln!(
+            svg,
+            r#"<text x="{:.1}" y="{:.1}" text-anchor="middle">{}</text>"#,
+            x(k),
+            TOP + plot_h + 16.0,
+            escape(label)
+        );
+    }
+    axes(&mut svg, "frame", y_label);
+    for (n, (name, values)) in series.iter().enumerate() {
+        let colour = SERIES_COLOURS[n % SERIES_COLOURS.len()];
+        let mut path = String::new();
+        let mut pen_down = false;
+        for (k, value) in values.iter().enumerate() {
+            match value.filter(|v| v.is_finite() && *v > 0.0) {
+                Some(v) => {
+                    let _ = write!(path, "{} {:.1} {:.1} ", if pen_down { "L" } else { "M" }, x(k), y(v));
+                    pen_down = true;
+                }
+                None => pen_down = false,
+            }
+        }
+        if !path.is_empty() {
+            let _ = writeln!(
+                svg,
+                r#"<path d="{}" fill="none" stroke="{colour}" stroke-width="1.8"><title>{}</title></path>"#,
+                path.trim_end(),
+                escape(name)
+            );
+        }
+        let ly = TOP + 14.0 + 16.0 * n as f64;
+        let lx = LEFT + plot_w + 10.0;
+        let _ = writeln!(
+            svg,
+            r#"<line x1="{lx:.1}" y1="{:.1}" x2="{:.1}" y2="{:.1}" stroke="{colour}" stroke-width="2.5"/><text x="{:.1}" y="{ly:.1}" fill="{colour}">{}</text>"#,
+            ly - 4.0,
+            lx + 16.0,
+            ly - 4.0,
+            lx + 20.0,
+            escape(name)
+        );
+    }
+    svg.push_str("</svg>\n");
+    svg
+}
+
 /// A horizontal bar chart of counts, largest first.
 pub fn bars(title: &str, items: &[(String, usize)]) -> String {
     let mut items = items.to_vec();
@@ -239,6 +318,21 @@ mod tests {
     fn the_front_keeps_only_undominated_points() {
         let points = [p("fast", 1.0, 0.5), p("slow-good", 10.0, 0.1), p("dominated", 5.0, 0.6), p("tie", 1.0, 0.5)];
         assert_eq!(pareto_front(&points), [true, true, false, true]);
+    }
+
+    #[test]
+    fn lines_draw_a_path_per_series_and_break_at_missing_values() {
+        let labels: Vec<String> = (1..=4).map(|k| k.to_string()).collect();
+        let series = [
+            ("a<b".to_string(), vec![Some(0.5), Some(0.2), None, Some(0.1)]),
+            ("c".to_string(), vec![None, Some(0.05), Some(0.04), Some(0.03)]),
+        ];
+        let svg = lines("t", "relMSE", &labels, &series);
+        assert_eq!(svg.matches("<path").count(), 2);
+        // The first series breaks at its missing third frame: two moves.
+        let first = svg.lines().find(|l| l.contains("<path") && l.contains("a&lt;b")).unwrap();
+        assert_eq!(first.matches('M').count(), 2, "{first}");
+        assert!(!svg.contains("a<b"));
     }
 
     #[test]
