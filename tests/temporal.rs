@@ -384,6 +384,13 @@ fn a_sequence_report_compares_the_temporal_filters_frame_by_frame() {
         assert_eq!(svg.matches("<path").count(), 4, "{file}");
     }
     assert!(names.iter().all(|n| html.contains(n)), "the page names every method");
+    // The viewer's pictures: every method's and the reference's, every frame.
+    for view in 0..=names.len() {
+        for k in 1..=3 {
+            let png = out.join(format!("frames/{view}/{k:04}.png"));
+            assert!(png.is_file(), "{} written", png.display());
+        }
+    }
 
     let o = filterjit(&["report", "--sequence", dir.to_str().unwrap(), "--scenes", "cornell"]);
     assert!(!o.status.success(), "--scenes with --sequence is refused");

@@ -232,6 +232,17 @@ pub fn run(
         }
         if k < preview::ANIMATION_FRAMES {
             let strip: Vec<&[[f32; 3]]> = outputs.iter().map(Vec::as_slice).chain([reference.as_slice()]).collect();
+            // The viewer's pictures: each method's frame (and the reference's) on its own.
+            for (view, image) in strip.iter().enumerate() {
+                let png = output.join(view_file(view, k));
+                std::fs::create_dir_all(png.parent().expect("in a folder"))?;
+                preview::write_png(
+                    &png,
+                    side,
+                    preview_height,
+                    &preview::shrunk(image, width, height, side, preview_height),
+                )?;
+            }
             let strips = strip.len();
             let wide = preview::side_by_side(&strip, width, height);
             animation.push(preview::shrunk(&wide, width * strips, height, side * strips, preview_height));
@@ -263,6 +274,23 @@ pub fn run(
     Ok(report)
 }
 
+/// The viewer's picture of view `view` (a method, in the report's order, or
+/// the reference after them) at frame `k` (from 0).
+fn view_file(view: usize, k: usize) -> String {
+    format!("frames/{view}/{:04}.png", k + 1)
+}
+
+/// What the page's viewer shows: a picture of each view at each frame.
+#[derive(Serialize)]
+struct Viewer<'a> {
+    /// The methods' names, then "reference"; their pictures are `frames/INDEX/NNNN.png`.
+    views: Vec<&'a str>,
+    /// Frames with pictures.
+    frames: usize,
+    width: usize,
+    height: usize,
+}
+
 /// `sequence.json`, the two plots and `index.html`.
 fn write_pages(report: &SequenceReport, output: &Path) -> Result<()> {
     let labels: Vec<String> = (1..=report.frames.len()).map(|k| k.to_string()).collect();
@@ -277,7 +305,11 @@ fn write_pages(report: &SequenceReport, output: &Path) -> Result<()> {
         io::write_bytes_atomically(&output.join(file), svg.as_bytes())?;
     }
     io::write_bytes_atomically(&output.join("sequence.json"), serde_json::to_string_pretty(report)?.as_bytes())?;
-    let context = tera::Context::from_serialize(report)?;
+    let mut context = tera::Context::from_serialize(report)?;
+    let (width, height) = preview::preview_size(report.width, report.height, preview::ANIMATION_SIDE);
+    let views = report.entrants.iter().map(|e| e.name.as_str()).chain(["reference"]).collect();
+    let frames = report.frames.len().min(preview::ANIMATION_FRAMES);
+    context.insert("viewer", &Viewer { views, frames, width, height });
     let html = tera::Tera::one_off(include_str!("../../templates/report_sequence.html.tera"), &context, true)
         .context("rendering report_sequence.html")?;
     io::write_bytes_atomically(&output.join("index.html"), html.as_bytes())?;
