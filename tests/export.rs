@@ -418,6 +418,7 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
                         panic!("the exported `{text}` pipeline fails in plain wgpu, frame {}: {e}", k + 1)
                     });
             assert_eq!(sequence.frames as usize, k + 1, "{text}: the host counts its frames");
+            assert!(sequence.gpu_time.is_some_and(|t| !t.is_zero()), "{text}: the host times the frame's GPU work");
             let mut buffers = SceneBuffers::for_frame(&gpu, scene, &pipeline).unwrap();
             let filtered = gpu.filter_frame(&kernel, &mut buffers, scene, radius, &mut state).unwrap().rgb();
             let error = relative_difference(&ours, &filtered);

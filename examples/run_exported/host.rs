@@ -53,6 +53,9 @@ pub struct Sequence {
     size: (u32, u32),
     /// Frames filtered since the sequence started.
     pub frames: u32,
+    /// The last frame's GPU work: from its submission to its end, the
+    /// uploads done before and the readback's mapping after left out.
+    pub gpu_time: Option<std::time::Duration>,
 }
 
 impl Sequence {
@@ -535,12 +538,22 @@ pub fn filter_frame(
         },
         extent,
     );
+    // The uploads first, so that the frame's time is its GPU work alone (an
+    // engine's inputs are on the GPU already; it would not wait here).
+    queue.submit([]);
+    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| e.to_string())?;
+    let submitted = std::time::Instant::now();
     queue.submit([encoder.finish()]);
     if let Some(error) = pollster::block_on(scope.pop()) {
         return Err(error.to_string());
     }
+    device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| e.to_string())?;
+    let gpu_time = Some(submitted.elapsed());
     if !history.is_empty() {
-        *sequence = Sequence { kept, size: (width, height), frames: if first { 1 } else { sequence.frames + 1 } };
+        let frames = if first { 1 } else { sequence.frames + 1 };
+        *sequence = Sequence { kept, size: (width, height), frames, gpu_time };
+    } else {
+        sequence.gpu_time = gpu_time;
     }
     let slice = staging.slice(..);
     slice.map_async(wgpu::MapMode::Read, |_| {});

@@ -6,6 +6,10 @@
 //!     cargo run --release --example run_exported -- SHADER.wgsl SCENE [RADIUS] OUT.png
 //!     cargo run --release --example run_exported -- SHADER.wgsl SEQ_DIR [RADIUS] OUT_DIR
 //!
+//! `--repeat N` first filters a single image N more times and prints the
+//! median GPU work of a frame (from its submission to its end; the uploads
+//! before it and the readback after it left out), what an engine pays.
+//!
 //! `host.rs` is the integration: plain wgpu and the manifest, nothing from
 //! filterjit. This file only stands in for the engine's G-buffer: it loads a
 //! filterjit scene (an EXR dataset), or a sequence's frames in order, to have
@@ -25,7 +29,15 @@ fn main() -> Result<(), String> {
     if std::env::var_os("NODEVICE_SELECT").is_none() {
         std::env::set_var("NODEVICE_SELECT", "1");
     }
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let repeats = match args.iter().position(|a| a == "--repeat") {
+        Some(at) => {
+            let n = args.get(at + 1).and_then(|n| n.parse::<usize>().ok()).ok_or("--repeat takes a count")?;
+            args.drain(at..at + 2);
+            n
+        }
+        None => 0,
+    };
     let (shader, input, radius, out) = match args.as_slice() {
         [shader, input, out] => (shader, input, 5, out),
         [shader, input, radius, out] => (shader, input, radius.parse().map_err(|_| "RADIUS is a number")?, out),
@@ -79,7 +91,23 @@ fn main() -> Result<(), String> {
             return Err(format!("{shader} is a temporal filter: give it a sequence's folder of frames"));
         }
         let scene = filterjit::scene::load(&input, &request).map_err(|e| e.to_string())?;
-        let filtered = host::filter(&device, &queue, &shaders, &manifest, &frame(&scene, &roles)?, radius)?;
+        let frame = frame(&scene, &roles)?;
+        let mut times = Vec::new();
+        for _ in 0..repeats {
+            let mut alone = host::Sequence::new();
+            host::filter_frame(&device, &queue, &shaders, &manifest, &frame, radius, &mut alone)?;
+            times.extend(alone.gpu_time);
+        }
+        if !times.is_empty() {
+            times.sort();
+            let median = times[times.len() / 2];
+            println!(
+                "GPU work a frame: {:.1} ms (median of {}; the first compiles; uploads and readback left out)",
+                median.as_secs_f64() * 1e3,
+                times.len()
+            );
+        }
+        let filtered = host::filter(&device, &queue, &shaders, &manifest, &frame, radius)?;
         write_png(&scene, &filtered, Path::new(out))?;
         println!("filtered {}x{} with radius {radius}: wrote {out}", scene.width, scene.height);
         return Ok(());
