@@ -95,7 +95,10 @@ pub fn accumulate(
             let mut before = taken.as_ref().map_or(0.0, |t| t.moments[3]);
             // The history's test: where its light is off the frame's, it is cut to one frame.
             if let (Some(kappa), Some(t)) = (temporal.antilag, &taken) {
-                let (mean, error) = mean_and_error(&luminance, x, y, w, h);
+                // The history's own spread of a sample's luminance: the frame's
+                // 3×3 alone is narrowest where its few samples happen to be dark.
+                let own = (t.moments[1] - t.moments[0] * t.moments[0]).max(0.0).sqrt();
+                let (mean, error) = mean_and_error(&luminance, x, y, w, h, own);
                 let past = pipeline::luminance(t.color);
                 let allowed = kappa as f64 * error + pipeline::TEMPORAL_ANTILAG_SLACK * mean.max(past);
                 if (past - mean).abs() > allowed {
@@ -263,9 +266,10 @@ fn reproject(
 }
 
 /// The mean of the luminance over the 3×3 pixels around (`x`, `y`) inside
-/// the image, and its standard error (the population standard deviation
-/// over √N): what the history's test (`antilag=K`) holds the history to.
-fn mean_and_error(luminance: &[f64], x: i64, y: i64, w: i64, h: i64) -> (f64, f64) {
+/// the image, and its standard error: the larger of the taps' population
+/// standard deviation and `least_deviation`, over √N. What the history's
+/// test (`antilag=K`) holds the history to.
+fn mean_and_error(luminance: &[f64], x: i64, y: i64, w: i64, h: i64, least_deviation: f64) -> (f64, f64) {
     let taps: Vec<f64> = (-1..=1)
         .flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy)))
         .filter(|&(xj, yj)| inside(xj, yj, w, h))
@@ -274,7 +278,7 @@ fn mean_and_error(luminance: &[f64], x: i64, y: i64, w: i64, h: i64) -> (f64, f6
     let n = taps.len() as f64;
     let mean = taps.iter().sum::<f64>() / n;
     let deviation = (taps.iter().map(|l| (l - mean).powi(2)).sum::<f64>() / n).sqrt();
-    (mean, deviation / n.sqrt())
+    (mean, deviation.max(least_deviation) / n.sqrt())
 }
 
 /// Each channel's mean and standard deviation over the 3×3 pixels around
@@ -444,6 +448,36 @@ mod tests {
         // Without the test it lags: a seventh of the new light.
         let lagging = accumulate(stage(0.1), &dark, &motion, w, h, history.as_ref());
         assert!((lagging.color[12][0] - (4.0 - 3.0 / 7.0)).abs() < 1e-5, "{}", lagging.color[12][0]);
+    }
+
+    /// One sample a pixel of a still surface whose light is rare and bright
+    /// (10 with probability 0.1, else 0: mean 1): the history's test must not
+    /// cut where the frame's few samples happen to be dark, which would keep
+    /// the dark ones and darken the image.
+    #[test]
+    fn the_history_test_keeps_the_light_of_skewed_samples() {
+        let (w, h) = (24, 24);
+        let (_, motion) = still(w, h, 0.0);
+        let testing = Temporal { antilag: Some(3.0), ..stage(0.2) };
+        let mut state = 12345u32;
+        let mut history: Option<History> = None;
+        let (mut sum, mut count) = (0.0f64, 0usize);
+        for frame in 0..60 {
+            let color: Vec<[f32; 3]> = (0..w * h)
+                .map(|_| {
+                    state = state.wrapping_mul(1664525).wrapping_add(1013904223);
+                    [if (state >> 8).is_multiple_of(10) { 10.0 } else { 0.0 }; 3]
+                })
+                .collect();
+            let out = accumulate(testing, &color, &motion, w, h, history.as_ref());
+            if frame >= 20 {
+                sum += out.color.iter().map(|c| c[0] as f64).sum::<f64>();
+                count += out.color.len();
+            }
+            history = Some(keep(&out, out.color.clone(), &motion, w, h));
+        }
+        let light = sum / count as f64;
+        assert!((light - 1.0).abs() < 0.03, "the blend's mean {light} against the samples' 1");
     }
 
     #[test]
