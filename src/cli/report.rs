@@ -229,17 +229,7 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
         crop: args.crop,
         timing_size: args.timing_size,
     };
-    let oidn = match (args.no_oidn, filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref())) {
-        (true, _) => None,
-        (false, Ok(oidn)) => {
-            eprintln!("peer      Intel Open Image Denoise: {}", oidn.program.display());
-            Some(oidn)
-        }
-        (false, Err(why)) => {
-            eprintln!("note: the report goes on without Intel Open Image Denoise: {why}");
-            None
-        }
-    };
+    let oidn = report_peer(env, args.no_oidn);
     let inputs = report::Inputs {
         scenes: &datasets,
         methods: &methods,
@@ -297,14 +287,7 @@ fn report_sequence(env: &Environment, args: &ReportArgs, dir: &std::path::Path) 
         let name = if arg.starts_with('@') { arg.to_string() } else { format!("expr{}", k + 1) };
         filters.push((name, choice));
     }
-    let oidn = match (args.no_oidn, filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref())) {
-        (true, _) => None,
-        (false, Ok(oidn)) => Some(oidn),
-        (false, Err(why)) => {
-            eprintln!("note: the report goes on without Intel Open Image Denoise: {why}");
-            None
-        }
-    };
+    let oidn = report_peer(env, args.no_oidn);
     let gpu = gpu::Gpu::open(&env.adapter)?;
     let read = filterjit::scene::Request { spp: render.spp, ..Default::default() };
     let inputs =
@@ -328,21 +311,40 @@ fn report_sequence(env: &Environment, args: &ReportArgs, dir: &std::path::Path) 
         "method", "relMSE", "settled", "flicker", "settled", "HDR-FLIP", "light", "ms"
     );
     for e in &report.entrants {
+        let s = &e.summary;
         println!(
-            "{:<30} {:>10.5} {:>10} {:>10} {:>10} {:>9.4} {:>13} {:>9}",
+            "{:<30} {:>10} {:>10} {:>10} {:>10} {:>9} {:>13} {:>9}",
             e.name,
-            e.relmse,
-            f(e.relmse_settled, 5),
-            f(e.flicker, 5),
-            f(e.flicker_settled, 5),
-            e.hdr_flip,
-            match (e.light_min, e.light_max) {
+            f(s.relmse, 5),
+            f(s.relmse_settled, 5),
+            f(s.flicker, 5),
+            f(s.flicker_settled, 5),
+            f(s.hdr_flip, 4),
+            match (s.light_min, s.light_max) {
                 (Some(lo), Some(hi)) => format!("{lo:.3}–{hi:.3}"),
                 _ => "-".into(),
             },
-            f(e.frame_ms, 1)
+            f(s.frame_ms, 1)
         );
     }
     println!("wrote     {}", args.output.join("index.html").display());
     Ok(())
+}
+
+/// The peer a report compares with: OIDN where its `oidnDenoise` is found and
+/// not left out; where it is not found, the report goes on and says so.
+fn report_peer(env: &Environment, left_out: bool) -> Option<filterjit::oidn::Oidn> {
+    if left_out {
+        return None;
+    }
+    match filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()) {
+        Ok(oidn) => {
+            eprintln!("peer      Intel Open Image Denoise: {}", oidn.program.display());
+            Some(oidn)
+        }
+        Err(why) => {
+            eprintln!("note: the report goes on without Intel Open Image Denoise: {why}");
+            None
+        }
+    }
 }

@@ -11,7 +11,7 @@ use anyhow::{bail, Context, Result};
 use filterjit::denoise::{Choice, Provided, SequenceFilter};
 use filterjit::environment::Environment;
 use filterjit::pipeline::FilterPipeline;
-use filterjit::report::sequence::{FrameScore, SETTLED_FROM};
+use filterjit::report::sequence::{FrameScore, Summary, SETTLED_FROM};
 use filterjit::scene::{self, Request, Sequence};
 use filterjit::{gpu, metrics, preview};
 use serde::Serialize;
@@ -50,16 +50,9 @@ struct SequenceFigures {
     width: usize,
     height: usize,
     frames: Vec<FrameFigures>,
-    relmse: Option<f64>,
-    relmse_settled: Option<f64>,
-    flicker: Option<f64>,
-    flicker_settled: Option<f64>,
-    temporal_relmse: Option<f64>,
-    hdr_flip: Option<f64>,
-    light_min: Option<f64>,
-    light_max: Option<f64>,
-    /// The median of the frames' wall times after the first (which compiles).
-    frame_ms: f64,
+    /// Its times are the frames' wall times.
+    #[serde(flatten)]
+    summary: Summary,
 }
 
 pub(crate) fn filter_sequence(
@@ -117,8 +110,11 @@ pub(crate) fn filter_sequence(
         "", "relMSE", "noisy", "light", "HDR-FLIP", "flicker", "temporal", "ms", "on device"
     );
     let mut figures = Vec::new();
+    let mut scores = Vec::new();
     // The frame before's output and reference, for the change between frames.
     let mut previous: Option<(Image, Option<Image>)> = None;
+    // The previews' frames, made small as they come.
+    let (side, preview_height) = preview::preview_size(width, height, preview::ANIMATION_SIDE);
     let mut animation: Vec<Vec<[f32; 3]>> = Vec::new();
     let mut comparison: Vec<Vec<[f32; 3]>> = Vec::new();
     for k in 0..sequence.frames.len() {
@@ -190,26 +186,38 @@ pub(crate) fn filter_sequence(
             );
         }
         if k < preview::ANIMATION_FRAMES {
-            let strip: Vec<&[[f32; 3]]> =
-                [Some(scene.color.as_slice()), Some(rgb.as_slice()), reference].into_iter().flatten().collect();
-            comparison.push(preview::side_by_side(&strip, width, height));
-            animation.push(rgb.clone());
+            let small = |image: &[[f32; 3]]| preview::shrunk(image, width, height, side, preview_height);
+            let strip: Vec<Image> = [Some(scene.color.as_slice()), Some(rgb.as_slice()), reference]
+                .into_iter()
+                .flatten()
+                .map(small)
+                .collect();
+            let strip: Vec<&[[f32; 3]]> = strip.iter().map(Vec::as_slice).collect();
+            comparison.push(preview::side_by_side(&strip, side, preview_height));
+            animation.push(small(&rgb));
         }
         figures.push(figure);
+        scores.push(score);
         previous = Some((rgb, scene.reference));
     }
 
-    let summary = summarise(&sequence, &described, pipeline, gpu.describe(), (width, height), figures);
-    print_summary(&summary);
-    let (side, preview_height) = preview::preview_size(width, height, preview::ANIMATION_SIDE);
-    let shrink = |frames: &[Vec<[f32; 3]>], w: usize| -> Vec<Vec<[f32; 3]>> {
-        frames.iter().map(|f| preview::shrunk(f, w, height, side * w / width.max(1), preview_height)).collect()
+    let walls: Vec<f64> = figures.iter().map(|f| f.wall_ms).collect();
+    let summary = SequenceFigures {
+        sequence: sequence.name.clone(),
+        filter: described,
+        pipeline,
+        device: gpu.describe(),
+        width,
+        height,
+        summary: Summary::of(&scores, &walls),
+        frames: figures,
     };
+    print_summary(&summary);
     let animated = output.join("animation.png");
-    preview::write_animated_png(&animated, side, preview_height, &shrink(&animation, width), 8)?;
-    let strips = comparison.first().map_or(1, |f| f.len() / (width * height));
+    preview::write_animated_png(&animated, side, preview_height, &animation, 8)?;
+    let strips = comparison.first().map_or(1, |f| f.len() / (side * preview_height));
     let compared = output.join("comparison.png");
-    preview::write_animated_png(&compared, side * strips, preview_height, &shrink(&comparison, width * strips), 8)?;
+    preview::write_animated_png(&compared, side * strips, preview_height, &comparison, 8)?;
     let json = output.join("metrics.json");
     filterjit::io::write_bytes_atomically(&json, serde_json::to_string_pretty(&summary)?.as_bytes())?;
     println!(
@@ -224,51 +232,14 @@ pub(crate) fn filter_sequence(
     Ok(())
 }
 
-fn summarise(
-    sequence: &Sequence,
-    filter: &str,
-    pipeline: FilterPipeline,
-    device: String,
-    (width, height): (usize, usize),
-    frames: Vec<FrameFigures>,
-) -> SequenceFigures {
-    let mean = |values: Vec<f64>| (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64);
-    let of = |from: usize, pick: &dyn Fn(&FrameFigures) -> Option<f64>| {
-        mean(frames.iter().skip(from).filter_map(pick).collect())
-    };
-    let lights: Vec<f64> = frames.iter().filter_map(|f| f.light).collect();
-    let mut walls: Vec<f64> = frames.iter().skip(1).map(|f| f.wall_ms).collect();
-    if walls.is_empty() {
-        walls = frames.iter().map(|f| f.wall_ms).collect();
-    }
-    walls.sort_by(f64::total_cmp);
-    SequenceFigures {
-        sequence: sequence.name.clone(),
-        filter: filter.to_string(),
-        pipeline,
-        device,
-        width,
-        height,
-        relmse: of(0, &|f| f.relmse),
-        relmse_settled: of(SETTLED_FROM, &|f| f.relmse),
-        flicker: of(0, &|f| f.flicker),
-        flicker_settled: of(SETTLED_FROM, &|f| f.flicker),
-        temporal_relmse: of(0, &|f| f.temporal_relmse),
-        hdr_flip: of(0, &|f| f.hdr_flip),
-        light_min: lights.iter().copied().reduce(f64::min),
-        light_max: lights.iter().copied().reduce(f64::max),
-        frame_ms: walls.get(walls.len() / 2).copied().unwrap_or(0.0),
-        frames,
-    }
-}
-
-fn print_summary(s: &SequenceFigures) {
+fn print_summary(figures: &SequenceFigures) {
+    let s = &figures.summary;
     let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.5}"));
     println!(
         "sequence  relMSE {} (frames {}–{}: {}) | flicker {} ({}) | temporal relMSE {} | HDR-FLIP {} | light {}–{} | {:.1} ms a frame",
         f(s.relmse),
         SETTLED_FROM + 1,
-        s.frames.len(),
+        figures.frames.len(),
         f(s.relmse_settled),
         f(s.flicker),
         f(s.flicker_settled),
@@ -276,7 +247,7 @@ fn print_summary(s: &SequenceFigures) {
         f(s.hdr_flip),
         s.light_min.map_or("-".into(), |l| format!("{l:.3}")),
         s.light_max.map_or("-".into(), |l| format!("{l:.3}")),
-        s.frame_ms
+        s.frame_ms.unwrap_or(0.0)
     );
     println!("          (relMSE: Σ_rgb (o − r)² / (r² + 0.01); flicker F: mean |(o_t − o_t−1) − (r_t − r_t−1)| over pixels and channels)");
 }

@@ -75,6 +75,50 @@ pub enum Kind {
     Peer,
 }
 
+/// A sequence's figures: means over every frame, and over the settled ones
+/// (from [`SETTLED_FROM`]); `filter SEQ_DIR`'s `metrics.json` and each
+/// method of a sequence report hold them.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Summary {
+    pub relmse: Option<f64>,
+    pub relmse_settled: Option<f64>,
+    pub flicker: Option<f64>,
+    pub flicker_settled: Option<f64>,
+    pub temporal_relmse: Option<f64>,
+    pub hdr_flip: Option<f64>,
+    pub light_min: Option<f64>,
+    pub light_max: Option<f64>,
+    /// The median time a frame after the first (which compiles).
+    pub frame_ms: Option<f64>,
+}
+
+impl Summary {
+    /// Of `frames` in order (none where a frame has no reference), each taking `ms[k]`.
+    pub fn of(frames: &[Option<FrameScore>], ms: &[f64]) -> Summary {
+        let mean = |values: Vec<f64>| (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64);
+        let of = |from: usize, pick: &dyn Fn(&FrameScore) -> Option<f64>| {
+            mean(frames.iter().skip(from).flatten().filter_map(pick).collect())
+        };
+        let lights: Vec<f64> = frames.iter().flatten().filter_map(|f| f.light).collect();
+        let mut later: Vec<f64> = ms.iter().skip(1).copied().collect();
+        if later.is_empty() {
+            later = ms.to_vec();
+        }
+        later.sort_by(f64::total_cmp);
+        Summary {
+            relmse: of(0, &|f| Some(f.relmse)),
+            relmse_settled: of(SETTLED_FROM, &|f| Some(f.relmse)),
+            flicker: of(0, &|f| f.flicker),
+            flicker_settled: of(SETTLED_FROM, &|f| f.flicker),
+            temporal_relmse: of(0, &|f| f.temporal_relmse),
+            hdr_flip: of(0, &|f| Some(f.hdr_flip)),
+            light_min: lights.iter().copied().reduce(f64::min),
+            light_max: lights.iter().copied().reduce(f64::max),
+            frame_ms: later.get(later.len() / 2).copied(),
+        }
+    }
+}
+
 /// One method over the sequence.
 #[derive(Clone, Debug, Serialize)]
 pub struct Entrant {
@@ -83,46 +127,9 @@ pub struct Entrant {
     /// A filter's pipeline as it reads.
     pub pipeline: Option<String>,
     pub frames: Vec<FrameScore>,
-    /// Means over every frame, and over the settled ones (from [`SETTLED_FROM`]).
-    pub relmse: f64,
-    pub relmse_settled: Option<f64>,
-    pub flicker: Option<f64>,
-    pub flicker_settled: Option<f64>,
-    pub hdr_flip: f64,
-    pub light_min: Option<f64>,
-    pub light_max: Option<f64>,
-    /// The median time a frame, after the first (which compiles): a filter's
-    /// on the device's clock where it has one, OIDN's its program's own.
-    pub frame_ms: Option<f64>,
-}
-
-impl Entrant {
-    fn new(name: String, kind: Kind, pipeline: Option<String>, frames: Vec<FrameScore>, ms: &[f64]) -> Entrant {
-        let mean = |values: Vec<f64>| (!values.is_empty()).then(|| values.iter().sum::<f64>() / values.len() as f64);
-        let of = |from: usize, pick: &dyn Fn(&FrameScore) -> Option<f64>| {
-            mean(frames.iter().skip(from).filter_map(pick).collect())
-        };
-        let lights: Vec<f64> = frames.iter().filter_map(|f| f.light).collect();
-        let mut later: Vec<f64> = ms.iter().skip(1).copied().collect();
-        if later.is_empty() {
-            later = ms.to_vec();
-        }
-        later.sort_by(f64::total_cmp);
-        Entrant {
-            name,
-            kind,
-            pipeline,
-            relmse: of(0, &|f| Some(f.relmse)).unwrap_or(0.0),
-            relmse_settled: of(SETTLED_FROM, &|f| Some(f.relmse)),
-            flicker: of(0, &|f| f.flicker),
-            flicker_settled: of(SETTLED_FROM, &|f| f.flicker),
-            hdr_flip: of(0, &|f| Some(f.hdr_flip)).unwrap_or(0.0),
-            light_min: lights.iter().copied().reduce(f64::min),
-            light_max: lights.iter().copied().reduce(f64::max),
-            frame_ms: later.get(later.len() / 2).copied(),
-            frames,
-        }
-    }
+    /// Its times: a filter's on the device's clock where it has one, OIDN's its program's own.
+    #[serde(flatten)]
+    pub summary: Summary,
 }
 
 /// The report on one sequence, as `sequence.json` holds it.
@@ -208,8 +215,9 @@ pub fn run(
     for k in 0..sequence.frames.len() {
         let frame = &sequence.frames[k];
         progress(&format!("frame {} of {}: {}", k + 1, sequence.frames.len(), frame.name));
-        let scene = sequence.load(k, &request).with_context(|| format!("loading frame {}", frame.path.display()))?;
-        let Some(reference) = scene.reference.clone() else {
+        let mut scene =
+            sequence.load(k, &request).with_context(|| format!("loading frame {}", frame.path.display()))?;
+        let Some(reference) = scene.reference.take() else {
             bail!("{}: no reference; a sequence report scores every frame against its own", frame.path.display());
         };
         let mut outputs: Vec<Image> = vec![scene.color.clone()];
@@ -231,21 +239,19 @@ pub fn run(
             method.frames.push(FrameScore::of(image, &reference, before, scene.spp, (width, height)));
         }
         if k < preview::ANIMATION_FRAMES {
-            let strip: Vec<&[[f32; 3]]> = outputs.iter().map(Vec::as_slice).chain([reference.as_slice()]).collect();
+            let small: Vec<Image> = outputs
+                .iter()
+                .chain([&reference])
+                .map(|image| preview::shrunk(image, width, height, side, preview_height))
+                .collect();
             // The viewer's pictures: each method's frame (and the reference's) on its own.
-            for (view, image) in strip.iter().enumerate() {
+            for (view, image) in small.iter().enumerate() {
                 let png = output.join(view_file(view, k));
                 std::fs::create_dir_all(png.parent().expect("in a folder"))?;
-                preview::write_png(
-                    &png,
-                    side,
-                    preview_height,
-                    &preview::shrunk(image, width, height, side, preview_height),
-                )?;
+                preview::write_png(&png, side, preview_height, image)?;
             }
-            let strips = strip.len();
-            let wide = preview::side_by_side(&strip, width, height);
-            animation.push(preview::shrunk(&wide, width * strips, height, side * strips, preview_height));
+            let strip: Vec<&[[f32; 3]]> = small.iter().map(Vec::as_slice).collect();
+            animation.push(preview::side_by_side(&strip, side, preview_height));
         }
         for (method, image) in running.iter_mut().zip(outputs) {
             method.previous = Some(image);
@@ -257,7 +263,10 @@ pub fn run(
     let entrants: Vec<Entrant> = names
         .into_iter()
         .zip(running)
-        .map(|((name, kind, pipeline), run)| Entrant::new(name, kind, pipeline, run.frames, &run.ms))
+        .map(|((name, kind, pipeline), run)| {
+            let scored: Vec<Option<FrameScore>> = run.frames.iter().copied().map(Some).collect();
+            Entrant { name, kind, pipeline, summary: Summary::of(&scored, &run.ms), frames: run.frames }
+        })
         .collect();
     let report = SequenceReport {
         sequence: sequence.name.clone(),
