@@ -86,7 +86,12 @@ impl CostModel {
             // A plain subtraction or absolute value, without saturation.
             Op::NegInRange(_) | Op::AbsInRange(_) => self.binary(BinaryOp::Sub),
             // A product: `x * x`, `x * (1/c)`.
-            Op::Square(_) | Op::Scale(..) => self.binary(BinaryOp::Mul),
+            Op::Square(..) | Op::Scale(..) => self.binary(BinaryOp::Mul),
+            // The operator, less the parts of its guard its range proves idle
+            // (priced as the operator: the model has no finer weight).
+            Op::Arith(op, ..) => self.binary(op),
+            Op::ExpNonPositive(_) => self.unary(UnaryOp::Exp),
+            Op::SqrtNonNegative(..) => self.unary(UnaryOp::Sqrt),
             // The squared distance: `distance2` without its square root (never cheaper than a dot product).
             Op::Distance2Squared(..) => {
                 (self.pair(PairOp::Distance2) - self.unary(UnaryOp::Sqrt)).max(self.pair(PairOp::Dot))

@@ -26,6 +26,18 @@ fn fj_fin(x: f32) -> f32 {
     return select(clamp(x, -FJ_BIG, FJ_BIG), 0.0, abs(x) < FJ_TINY);
 }
 
+// The parts of fj_fin, for values whose range proves the other part idle
+// (src/jit/range.rs): the same f32 wherever the lowering uses them.
+fn fj_flush(x: f32) -> f32 {
+    return select(x, 0.0, abs(x) < FJ_TINY);
+}
+fn fj_flush_pos(x: f32) -> f32 {
+    return select(x, 0.0, x < FJ_TINY);
+}
+fn fj_fin_pos(x: f32) -> f32 {
+    return select(min(x, FJ_BIG), 0.0, x < FJ_TINY);
+}
+
 fn fj_protect(d: f32) -> f32 {
     return select(d, select(FJ_DIV_EPS, -FJ_DIV_EPS, d < 0.0), abs(d) < FJ_DIV_EPS);
 }
@@ -64,6 +76,12 @@ fn fj_tan(a: f32) -> f32 {
 fn fj_exp(a: f32) -> f32 {
     let e = fj_fin(exp(clamp(a, FJ_EXP_MIN, FJ_EXP_MAX)));
     return select(select(e, FJ_BIG, a >= FJ_EXP_MAX), 0.0, a < FJ_EXP_MIN);
+}
+// fj_exp of a non-positive argument (src/jit/range.rs): exp(EXP_MIN) is
+// below TINY, so the lower cut-off is the flush's.
+fn fj_exp_nonpos(a: f32) -> f32 {
+    let e = exp(max(a, FJ_EXP_MIN));
+    return select(e, 0.0, e < FJ_TINY);
 }
 fn fj_asin(a: f32) -> f32 {
     if (abs(a) > 1.0) {

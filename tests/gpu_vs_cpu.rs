@@ -355,6 +355,51 @@ fn each_optimisation_gives_the_plain_kernels_results() {
     }
 }
 
+/// Leaving out the parts of `fin` a value's range proves idle
+/// (`src/jit/range.rs`) computes the same f32s: the same bits as the kernel
+/// with every guard, on the shipped filters, the corpus and random
+/// expressions over the whole operator table, with and without the other
+/// rewrites.
+#[test]
+fn guards_a_range_proves_idle_change_no_bit() {
+    let gpu = gpu();
+    use filterjit::jit::LowerOptions;
+    let scene = synthetic_scene(16, 12, 9);
+    let mut buffers = SceneBuffers::new(&gpu, &scene);
+    let mut exprs: Vec<Expr> = corpus::named().iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
+    exprs.extend(
+        crate::common::named_entries(include_str!("data/corpus.txt")).iter().map(|(_, t)| parse_expr(t).unwrap()),
+    );
+    let alphabet = Alphabet::full();
+    let mut rng = Rng::seeded(405);
+    for _ in 0..env_usize("FILTERJIT_RANDOM_EXPRS", 40) {
+        let depth = 3 + rng.below(5);
+        exprs.push(alphabet.grow(&mut rng, depth));
+    }
+    let run = |e: &Expr, options: LowerOptions, buffers: &mut SceneBuffers| {
+        let kernel =
+            jit::validate(jit::lower(e, jit::KernelSpec { options, ..jit::KernelSpec::default() }).unwrap()).unwrap();
+        let guarded =
+            ["fj_fin_pos(", "fj_flush", "fj_exp_nonpos(", "FJ_BIG)"].iter().any(|h| kernel.wgsl().contains(h));
+        (gpu.filter(&kernel, buffers, &scene, 2).unwrap(), guarded)
+    };
+    let mut elided = 0;
+    for e in &exprs {
+        for base in [LowerOptions::NONE, LowerOptions::ALL] {
+            let (full, _) = run(e, LowerOptions { skip_redundant_checks: false, ..base }, &mut buffers);
+            let (ranged, guarded) = run(e, LowerOptions { skip_redundant_checks: true, ..base }, &mut buffers);
+            elided += guarded as usize;
+            assert_eq!(ranged.color, full.color, "the ranges change `{e}`");
+            assert_eq!(ranged.flags, full.flags, "the ranges change the domain flags of `{e}`");
+        }
+    }
+    assert!(elided > exprs.len() / 4, "guards were left out in only {elided} kernels");
+    // The real-time weight's sums are all of non-negative terms: none keeps `fj_add`.
+    let realtime = parse_expr(corpus::lookup("realtime").unwrap()).unwrap();
+    let kernel = jit::lower(&realtime, jit::KernelSpec::default()).unwrap();
+    assert!(!kernel.wgsl.contains("fj_add("), "{}", kernel.wgsl);
+}
+
 #[test]
 fn tiled_kernels_agree_across_bands_and_edges() {
     let gpu = gpu();

@@ -16,12 +16,15 @@
 //!   centre side;
 //! * strength reduction: `pow(x, 2)` is a product (`distance2` squared
 //!   without its square root), `pow(x, 1)` is x, `x / c` a multiplication by 1/c;
-//! * skipping checks: `-x` and `abs(x)` of an in-range value need no saturation.
+//! * skipping checks: `-x` and `abs(x)` of an in-range value need no saturation,
+//!   and where a value's range proves a part of `fin` idle (src/jit/range.rs)
+//!   sums, products, quotients, `exp` and `sqrt` leave that part out.
 
 use std::collections::{BTreeSet, HashMap};
 
 use super::helpers::Helper;
 use super::kernel::LowerOptions;
+use super::range::{Guard, Range};
 use crate::lang::{BinaryOp, Expr, Feature, PairOp, ScalarVar, UnaryOp};
 use crate::semantics;
 
@@ -63,21 +66,34 @@ pub enum Op {
     NegInRange(Operand),
     /// `abs(x)` of an in-range x.
     AbsInRange(Operand),
-    /// `pow(x, 2)`: `x * x`, saturated.
-    Square(Operand),
+    /// `pow(x, 2)`: `x * x`, with the part of `fin` its range needs.
+    Square(Operand, Guard),
     /// `pow(distance2(f_i, f_j), 2)`: the squared distance, no square root.
     Distance2Squared(Feature, Feature),
-    /// `x / c` for a literal c: `x * (1/c)` (bits of the f32 1/c), saturated.
-    Scale(Operand, u32),
+    /// `x / c` for a literal c: `x * (1/c)` (bits of the f32 1/c), with the
+    /// part of `fin` its range needs.
+    Scale(Operand, u32, Guard),
+    /// `a + b`, `a - b`, `a * b` where the range proves a part of `fin` idle,
+    /// or `a / b` where it proves the zero guard idle: the bare operation
+    /// with the part of `fin` it needs.
+    Arith(BinaryOp, Operand, Operand, Guard),
+    /// `exp(x)` of a non-positive x (`fj_exp_nonpos`).
+    ExpNonPositive(Operand),
+    /// `sqrt(x)` of a non-negative x: no domain flag, no flush.
+    SqrtNonNegative(Operand, Guard),
 }
 
 impl Op {
     fn operands(&self) -> impl Iterator<Item = Operand> {
         let (a, b) = match *self {
-            Op::Unary(_, a) | Op::NegInRange(a) | Op::AbsInRange(a) | Op::Square(a) | Op::Scale(a, _) => {
-                (Some(a), None)
-            }
-            Op::Binary(_, a, b) => (Some(a), Some(b)),
+            Op::Unary(_, a)
+            | Op::NegInRange(a)
+            | Op::AbsInRange(a)
+            | Op::Square(a, _)
+            | Op::Scale(a, ..)
+            | Op::ExpNonPositive(a)
+            | Op::SqrtNonNegative(a, _) => (Some(a), None),
+            Op::Binary(_, a, b) | Op::Arith(_, a, b, _) => (Some(a), Some(b)),
             Op::Pair(..) | Op::Distance2Squared(..) => (None, None),
         };
         a.into_iter().chain(b)
@@ -90,9 +106,12 @@ impl Op {
             Op::Binary(op, ..) => Some(op.helper()),
             Op::Pair(op, ..) => Some(op.helper()),
             Op::NegInRange(_) | Op::AbsInRange(_) => None,
-            Op::Square(_) => Some(BinaryOp::Mul.helper()),
+            Op::Square(_, Guard::Fin) => Some(BinaryOp::Mul.helper()),
             Op::Distance2Squared(..) => Some("fj_distance2sq".into()),
-            Op::Scale(..) => Some("fj_fin".into()),
+            Op::Square(_, guard) | Op::Scale(_, _, guard) | Op::Arith(.., guard) | Op::SqrtNonNegative(_, guard) => {
+                guard.helper().map(String::from)
+            }
+            Op::ExpNonPositive(_) => Some("fj_exp_nonpos".into()),
         }
     }
 }
@@ -122,7 +141,7 @@ pub struct Body {
 impl Body {
     /// Lower `expr` with `options`.
     pub fn of(expr: &Expr, options: LowerOptions) -> Body {
-        let mut builder = Builder { options, insts: Vec::new(), known: HashMap::new() };
+        let mut builder = Builder { options, insts: Vec::new(), ranges: Vec::new(), known: HashMap::new() };
         let result = builder.build(expr);
         Body { insts: builder.insts, result }
     }
@@ -165,11 +184,24 @@ impl Body {
                 Op::Pair(op, i, j) => format!("{}({}, {})", op.helper(), feature_ident('i', i), feature_ident('j', j)),
                 Op::NegInRange(a) => format!("(0.0 - {})", operand(a)),
                 Op::AbsInRange(a) => format!("abs({})", operand(a)),
-                Op::Square(a) => format!("fj_mul({0}, {0})", operand(a)),
+                Op::Square(a, Guard::Fin) => format!("fj_mul({0}, {0})", operand(a)),
+                Op::Square(a, guard) => guard.apply(&format!("{0} * {0}", operand(a))),
                 Op::Distance2Squared(i, j) => {
                     format!("fj_distance2sq({}, {})", feature_ident('i', i), feature_ident('j', j))
                 }
-                Op::Scale(a, r) => format!("fj_fin({} * {:?})", operand(a), f32::from_bits(r)),
+                Op::Scale(a, r, guard) => guard.apply(&format!("{} * {:?}", operand(a), f32::from_bits(r))),
+                Op::Arith(op, a, b, guard) => {
+                    let symbol = match op {
+                        BinaryOp::Add => "+",
+                        BinaryOp::Sub => "-",
+                        BinaryOp::Mul => "*",
+                        BinaryOp::Div => "/",
+                        BinaryOp::Pow => unreachable!("a power is never bare"),
+                    };
+                    guard.apply(&format!("{} {symbol} {}", operand(a), operand(b)))
+                }
+                Op::ExpNonPositive(a) => format!("fj_exp_nonpos({})", operand(a)),
+                Op::SqrtNonNegative(a, guard) => guard.apply(&format!("sqrt({})", operand(a))),
             };
             let line = format!("let {prefix}{k} = {value};");
             match inst.side {
@@ -207,6 +239,8 @@ fn literal_syntax(e: &Expr) -> Option<f64> {
 struct Builder {
     options: LowerOptions,
     insts: Vec<Inst>,
+    /// What each instruction's value can be.
+    ranges: Vec<Range>,
     /// Each instruction's index, for hash-consing.
     known: HashMap<Op, usize>,
 }
@@ -222,10 +256,16 @@ impl Builder {
                 if let Some(value) = self.fold(|flags| Some(op.eval(a.literal_value()?, flags))) {
                     return value;
                 }
-                let skip = self.options.skip_redundant_checks && a.in_range();
+                let ranged = self.options.skip_redundant_checks;
+                let skip = ranged && a.in_range();
+                let range = self.range(a);
                 self.add(match op {
                     UnaryOp::Neg if skip => Op::NegInRange(a),
                     UnaryOp::Abs if skip => Op::AbsInRange(a),
+                    UnaryOp::Exp if ranged && range.non_positive() => Op::ExpNonPositive(a),
+                    UnaryOp::Sqrt if ranged && range.non_negative() && a.literal_value().is_none() => {
+                        Op::SqrtNonNegative(a, range.sqrt_non_negative().0)
+                    }
                     _ => Op::Unary(*op, a),
                 })
             }
@@ -249,7 +289,9 @@ impl Builder {
                         return value;
                     }
                     // The zero guard only changes divisors below FJ_DIV_EPS.
-                    return self.add(Op::Scale(a, ((1.0 / d) as f32).to_bits()));
+                    let reciprocal = (1.0 / d) as f32;
+                    let guard = self.guard(a, Range::product(self.range(a), Range::literal(reciprocal as f64)));
+                    return self.add(Op::Scale(a, reciprocal.to_bits(), guard));
                 }
                 let b = match b {
                     Some(b) => b,
@@ -259,7 +301,8 @@ impl Builder {
                     return value;
                 }
                 if strength && *op == BinaryOp::Pow && b.literal_value() == Some(2.0) {
-                    return self.add(Op::Square(a));
+                    let magnitude = self.range(a).magnitude();
+                    return self.add(Op::Square(a, self.guard(a, Range::product(magnitude, magnitude))));
                 }
                 // Every operand is already saturated (0 or at least FJ_TINY in
                 // size, at most FJ_BIG), and there `pow(x, 1)` is x up to the
@@ -267,8 +310,83 @@ impl Builder {
                 if strength && *op == BinaryOp::Pow && b.literal_value() == Some(1.0) {
                     return a;
                 }
+                if self.options.skip_redundant_checks {
+                    if let Some(op) = self.bare(*op, a, b) {
+                        return self.add(op);
+                    }
+                }
                 self.add(Op::Binary(*op, a, b))
             }
+        }
+    }
+
+    /// What `operand` can be.
+    fn range(&self, operand: Operand) -> Range {
+        match operand {
+            Operand::Literal(bits) => Range::literal(f32::from_bits(bits) as f64),
+            Operand::Var(_) => Range::ANY,
+            Operand::Value(k) => self.ranges[k],
+        }
+    }
+
+    /// The part of `fin` a value in `range` computed from `operand` needs
+    /// (all of it with checks not skipped, or for a literal operand, which
+    /// WGSL would multiply as an abstract float: `bare`).
+    fn guard(&self, operand: Operand, range: Range) -> Guard {
+        if self.options.skip_redundant_checks && operand.literal_value().is_none() {
+            range.guard().0
+        } else {
+            Guard::Fin
+        }
+    }
+
+    /// `a op b` as a bare operation where the operands' ranges prove part of
+    /// its guards idle: a part of `fin`, or (for a quotient) the zero guard.
+    fn bare(&self, op: BinaryOp, a: Operand, b: Operand) -> Option<Op> {
+        // WGSL evaluates an operation on two literals as abstract floats, not
+        // in f32: such an operation (unfolded) keeps its helper, whose
+        // arguments are f32.
+        if a.literal_value().is_some() && b.literal_value().is_some() {
+            return None;
+        }
+        let (ra, rb) = (self.range(a), self.range(b));
+        let range = match op {
+            BinaryOp::Add => Range::sum(ra, rb),
+            BinaryOp::Sub => Range::sum(ra, rb.negated()),
+            BinaryOp::Mul => Range::product(ra, rb),
+            BinaryOp::Div => return Range::quotient(ra, rb).map(|r| Op::Arith(op, a, b, r.guard().0)),
+            BinaryOp::Pow => return None,
+        };
+        let guard = range.guard().0;
+        (guard != Guard::Fin).then_some(Op::Arith(op, a, b, guard))
+    }
+
+    /// What the value of `op` (with its operands' ranges known) can be.
+    fn range_of(&self, op: &Op) -> Range {
+        let after = |range: Range| range.guard().1;
+        match *op {
+            Op::Unary(op, a) => Range::unary(op, self.range(a)),
+            Op::Binary(op, a, b) => Range::binary(op, self.range(a), self.range(b)),
+            Op::Pair(op, ..) => Range::pair(op),
+            Op::NegInRange(a) => self.range(a).negated(),
+            Op::AbsInRange(a) => self.range(a).magnitude(),
+            Op::Square(a, _) => {
+                let magnitude = self.range(a).magnitude();
+                after(Range::product(magnitude, magnitude))
+            }
+            Op::Distance2Squared(..) => Range::pair(PairOp::Distance2),
+            Op::Scale(a, r, _) => after(Range::product(self.range(a), Range::literal(f32::from_bits(r) as f64))),
+            Op::Arith(op, a, b, _) => {
+                let (ra, rb) = (self.range(a), self.range(b));
+                after(match op {
+                    BinaryOp::Add => Range::sum(ra, rb),
+                    BinaryOp::Sub => Range::sum(ra, rb.negated()),
+                    BinaryOp::Mul => Range::product(ra, rb),
+                    _ => Range::quotient(ra, rb).expect("a bare quotient's divisor is away from zero"),
+                })
+            }
+            Op::ExpNonPositive(a) => Range::unary(UnaryOp::Exp, self.range(a)),
+            Op::SqrtNonNegative(a, _) => self.range(a).sqrt_non_negative().1,
         }
     }
 
@@ -293,7 +411,7 @@ impl Builder {
         if !self.options.fold_constants {
             return None;
         }
-        let mut probe = Builder { options: self.options, insts: Vec::new(), known: HashMap::new() };
+        let mut probe = Builder { options: self.options, insts: Vec::new(), ranges: Vec::new(), known: HashMap::new() };
         match probe.build(e) {
             Operand::Literal(bits) if probe.insts.is_empty() => Some(f32::from_bits(bits) as f64),
             _ => None,
@@ -311,6 +429,7 @@ impl Builder {
         let reads_neighbour = matches!(op, Op::Pair(..) | Op::Distance2Squared(..))
             || op.operands().any(|o| matches!(o, Operand::Value(k) if self.insts[k].side == Side::Neighbour));
         let side = if self.options.hoist_centre_terms && !reads_neighbour { Side::Centre } else { Side::Neighbour };
+        self.ranges.push(self.range_of(&op));
         self.insts.push(Inst { op, side });
         let k = self.insts.len() - 1;
         if self.options.common_subexpressions {
@@ -345,17 +464,25 @@ mod tests {
     #[test]
     fn constants_fold_unless_they_raise_a_flag_and_strength_is_reduced() {
         let b = body("distance2(color) * (2 + 3)", LowerOptions::ALL);
-        assert_eq!(b.insts.last().unwrap().op, Op::Binary(BinaryOp::Mul, Operand::Value(0), Operand::literal(5.0)));
+        // A distance times 5 is never tiny but may pass BIG: only the ceiling is left.
+        assert_eq!(
+            b.insts.last().unwrap().op,
+            Op::Arith(BinaryOp::Mul, Operand::Value(0), Operand::literal(5.0), Guard::Ceiling)
+        );
         // sqrt of a negative value raises a domain flag at run time: it stays an instruction.
         let b = body("sqrt(0 - 1)", LowerOptions::ALL);
         assert!(matches!(b.insts[0].op, Op::Unary(UnaryOp::Sqrt, Operand::Literal(_))), "{b:?}");
         let b = body("pow(distance2(normal), 2) + distance1(color) / 4", LowerOptions::ALL);
         assert_eq!(b.insts[0].op, Op::Distance2Squared(Feature::Normal, Feature::Normal));
-        assert!(b.insts.iter().any(|i| i.op == Op::Scale(Operand::Value(1), 0.25f32.to_bits())), "{b:?}");
+        assert!(
+            b.insts.iter().any(|i| i.op == Op::Scale(Operand::Value(1), 0.25f32.to_bits(), Guard::FlushNonNegative)),
+            "{b:?}"
+        );
         let (_, neighbour, result) = b.print("_e");
         assert_eq!(neighbour[0], "let _e0 = fj_distance2sq(feat_i_normal, feat_j_normal);");
         assert_eq!(result, "_e3");
-        assert_eq!(b.helpers(), ["fj_add", "fj_distance1", "fj_distance2sq", "fj_fin"].map(String::from).into());
+        // The sum of two non-negative terms never tiny needs only `min`: no `fj_add`.
+        assert_eq!(b.helpers(), ["fj_distance1", "fj_distance2sq", "fj_flush_pos"].map(String::from).into());
     }
 
     #[test]

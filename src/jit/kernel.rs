@@ -13,7 +13,7 @@ use crate::pipeline::Stencil;
 
 /// Bumped whenever the template or the lowering changes what a kernel computes
 /// or how it binds its inputs; part of every pipeline-cache key.
-pub const TEMPLATE_VERSION: u32 = 7;
+pub const TEMPLATE_VERSION: u32 = 8;
 
 /// Workgroup shape of every filter kernel.
 pub const WORKGROUP: [u32; 2] = [8, 8];
@@ -279,7 +279,10 @@ pub struct LowerOptions {
     /// result and every literal is already in range (saturated and flushed,
     /// docs/SEMANTICS.md), so negating it, taking its absolute value or
     /// clamping the final weight at zero needs no second pass through
-    /// `fj_fin`. (Variances are read raw, so they keep the full helpers.)
+    /// `fj_fin`; and where the operands' ranges prove the clamp or the flush
+    /// of a sum, product, quotient, `exp` or `sqrt` idle, leave that part out
+    /// (`super::range`: the same f32 results). (Variances are read raw, so
+    /// they keep the full helpers.)
     pub skip_redundant_checks: bool,
     /// Stage the colour and neighbour features of each workgroup's window in
     /// workgroup memory, for this window radius (the kernel then runs only

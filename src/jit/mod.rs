@@ -12,6 +12,7 @@ pub mod kernel;
 pub mod lower;
 pub mod planefit;
 pub mod prepass;
+pub mod range;
 pub mod reduce;
 pub mod spread;
 pub mod temporal;
