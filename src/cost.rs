@@ -92,6 +92,7 @@ impl CostModel {
             Op::Arith(op, ..) => self.binary(op),
             Op::ExpNonPositive(_) => self.unary(UnaryOp::Exp),
             Op::SqrtNonNegative(..) => self.unary(UnaryOp::Sqrt),
+            Op::PowNonNegative(..) => self.binary(BinaryOp::Pow),
             // The squared distance: `distance2` without its square root (never cheaper than a dot product).
             Op::Distance2Squared(..) => {
                 (self.pair(PairOp::Distance2) - self.unary(UnaryOp::Sqrt)).max(self.pair(PairOp::Dot))

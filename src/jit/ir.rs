@@ -18,7 +18,7 @@
 //!   without its square root), `pow(x, 1)` is x, `x / c` a multiplication by 1/c;
 //! * skipping checks: `-x` and `abs(x)` of an in-range value need no saturation,
 //!   and where a value's range proves a part of `fin` idle (src/jit/range.rs)
-//!   sums, products, quotients, `exp` and `sqrt` leave that part out.
+//!   sums, products, quotients, `exp`, `sqrt` and `pow` leave that part out.
 
 use std::collections::{BTreeSet, HashMap};
 
@@ -81,6 +81,8 @@ pub enum Op {
     ExpNonPositive(Operand),
     /// `sqrt(x)` of a non-negative x: no domain flag, no flush.
     SqrtNonNegative(Operand, Guard),
+    /// `pow(a, b)` of a non-negative a: no domain flag, no sign (`fj_pow_nonneg`).
+    PowNonNegative(Operand, Operand),
 }
 
 impl Op {
@@ -93,7 +95,7 @@ impl Op {
             | Op::Scale(a, ..)
             | Op::ExpNonPositive(a)
             | Op::SqrtNonNegative(a, _) => (Some(a), None),
-            Op::Binary(_, a, b) | Op::Arith(_, a, b, _) => (Some(a), Some(b)),
+            Op::Binary(_, a, b) | Op::Arith(_, a, b, _) | Op::PowNonNegative(a, b) => (Some(a), Some(b)),
             Op::Pair(..) | Op::Distance2Squared(..) => (None, None),
         };
         a.into_iter().chain(b)
@@ -112,6 +114,7 @@ impl Op {
                 guard.helper().map(String::from)
             }
             Op::ExpNonPositive(_) => Some("fj_exp_nonpos".into()),
+            Op::PowNonNegative(..) => Some("fj_pow_nonneg".into()),
         }
     }
 }
@@ -202,6 +205,7 @@ impl Body {
                 }
                 Op::ExpNonPositive(a) => format!("fj_exp_nonpos({})", operand(a)),
                 Op::SqrtNonNegative(a, guard) => guard.apply(&format!("sqrt({})", operand(a))),
+                Op::PowNonNegative(a, b) => format!("fj_pow_nonneg({}, {})", operand(a), operand(b)),
             };
             let line = format!("let {prefix}{k} = {value};");
             match inst.side {
@@ -355,7 +359,7 @@ impl Builder {
             BinaryOp::Sub => Range::sum(ra, rb.negated()),
             BinaryOp::Mul => Range::product(ra, rb),
             BinaryOp::Div => return Range::quotient(ra, rb).map(|r| Op::Arith(op, a, b, r.guard().0)),
-            BinaryOp::Pow => return None,
+            BinaryOp::Pow => return ra.non_negative().then_some(Op::PowNonNegative(a, b)),
         };
         let guard = range.guard().0;
         (guard != Guard::Fin).then_some(Op::Arith(op, a, b, guard))
@@ -387,6 +391,7 @@ impl Builder {
             }
             Op::ExpNonPositive(a) => Range::unary(UnaryOp::Exp, self.range(a)),
             Op::SqrtNonNegative(a, _) => self.range(a).sqrt_non_negative().1,
+            Op::PowNonNegative(a, b) => Range::binary(BinaryOp::Pow, self.range(a), self.range(b)),
         }
     }
 
@@ -492,6 +497,7 @@ mod tests {
         assert_eq!(b.insts.len(), 3, "{b:?}");
         let plain = LowerOptions { strength_reduction: false, ..LowerOptions::ALL };
         let b = body("pow(distance2(normal), 1) * distance1(color)", plain);
-        assert!(b.insts.iter().any(|i| matches!(i.op, Op::Binary(BinaryOp::Pow, ..))), "{b:?}");
+        // Without strength reduction the power stays (of a distance: the sign-free helper).
+        assert!(b.insts.iter().any(|i| matches!(i.op, Op::PowNonNegative(..))), "{b:?}");
     }
 }
