@@ -7,7 +7,7 @@
 //!
 //!     cargo bench --bench image_loads
 
-use std::time::Instant;
+mod common;
 
 use wgpu::util::DeviceExt;
 
@@ -44,14 +44,7 @@ fn kernel(declarations: &str, load: &str, skip_outside: bool) -> String {
 }
 
 fn main() {
-    let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
-    descriptor.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-    let instance = wgpu::Instance::new(descriptor);
-    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-        .expect("a GPU adapter (on Linux without a GPU: apt-get install -y mesa-vulkan-drivers)");
-    println!("image_loads on {} ({:?})", adapter.get_info().name, adapter.get_info().backend);
-    let (device, queue) =
-        pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).expect("a device");
+    let (device, queue) = common::device("image_loads");
     let pixels = (SIDE * SIDE) as usize;
     let images: Vec<Vec<[f32; 4]>> = (0..IMAGES)
         .map(|k| {
@@ -118,19 +111,7 @@ fn main() {
     ];
     for (k, (name, declarations, load)) in variants.iter().enumerate() {
         for skip_outside in [true, false] {
-            let source = kernel(declarations, load, skip_outside);
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: None,
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: None,
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+            let pipeline = common::pipeline(&device, kernel(declarations, load, skip_outside));
             let mut entries = vec![wgpu::BindGroupEntry { binding: 0, resource: out.as_entire_binding() }];
             let resource = |i: usize| match k {
                 0 => buffers[i].as_entire_binding(),
@@ -145,26 +126,11 @@ fn main() {
                 layout: &layout,
                 entries: &entries,
             });
-            let mut times: Vec<f64> = (0..8)
-                .map(|_| {
-                    let mut encoder = device.create_command_encoder(&Default::default());
-                    {
-                        let mut pass = encoder.begin_compute_pass(&Default::default());
-                        pass.set_pipeline(&pipeline);
-                        pass.set_bind_group(0, &group, &[]);
-                        pass.dispatch_workgroups(SIDE / 8, SIDE / 8, 1);
-                    }
-                    let start = Instant::now();
-                    queue.submit([encoder.finish()]);
-                    device.poll(wgpu::PollType::wait_indefinitely()).expect("the dispatch finishes");
-                    start.elapsed().as_secs_f64() * 1e3
-                })
-                .collect();
-            // The first dispatch compiles on software drivers: left out.
-            times.remove(0);
-            times.sort_by(f64::total_cmp);
+            let median = common::median_ms(&device, &queue, 8, |encoder| {
+                common::dispatch(encoder, &pipeline, &group, (SIDE / 8, SIDE / 8))
+            });
             let skip = if skip_outside { "taps outside skipped" } else { "taps clamped" };
-            println!("{:8.1} ms  {name}, {skip}", times[times.len() / 2]);
+            println!("{median:8.1} ms  {name}, {skip}");
         }
     }
 }

@@ -11,7 +11,7 @@
 //!
 //!     cargo bench --bench pass_layouts
 
-use std::time::Instant;
+mod common;
 
 use wgpu::util::DeviceExt;
 
@@ -92,14 +92,7 @@ fn kernel(layout: Layout, output: Output) -> String {
 }
 
 fn main() {
-    let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle();
-    descriptor.backends = wgpu::Backends::from_env().unwrap_or(wgpu::Backends::all());
-    let instance = wgpu::Instance::new(descriptor);
-    let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions::default()))
-        .expect("a GPU adapter (on Linux without a GPU: apt-get install -y mesa-vulkan-drivers)");
-    println!("pass_layouts on {} ({:?}), {WIDTH}x{HEIGHT}", adapter.get_info().name, adapter.get_info().backend);
-    let (device, queue) =
-        pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor::default())).expect("a device");
+    let (device, queue) = common::device(&format!("pass_layouts, {WIDTH}x{HEIGHT},"));
     let pixels = (WIDTH * HEIGHT) as usize;
     let value = |i: usize, k: usize| ((i * 7 + k * 13) % 101) as f32 / 101.0;
     let rgba: Vec<[f32; 4]> = (0..pixels).map(|i| [value(i, 0), value(i, 1), value(i, 2), value(i, 3)]).collect();
@@ -154,19 +147,7 @@ fn main() {
     let next_texture = f32x4(5);
     for output in [Output::BufferThenCopy, Output::Store] {
         for layout in [Layout::Four, Layout::ThreeSpread, Layout::PackedHalves, Layout::Float16] {
-            let source = kernel(layout, output);
-            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: None,
-                source: wgpu::ShaderSource::Wgsl(source.into()),
-            });
-            let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: None,
-                layout: None,
-                module: &module,
-                entry_point: Some("main"),
-                compilation_options: Default::default(),
-                cache: None,
-            });
+            let pipeline = common::pipeline(&device, kernel(layout, output));
             let view = |t: &wgpu::Texture| t.create_view(&Default::default());
             let mut views = vec![view(&color), view(&position)];
             match layout {
@@ -192,51 +173,29 @@ fn main() {
                 layout: &pipeline.get_bind_group_layout(0),
                 entries: &entries,
             });
-            let mut times: Vec<f64> = (0..6)
-                .map(|_| {
-                    let mut encoder = device.create_command_encoder(&Default::default());
-                    {
-                        let mut pass = encoder.begin_compute_pass(&Default::default());
-                        pass.set_pipeline(&pipeline);
-                        pass.set_bind_group(0, &group, &[]);
-                        pass.dispatch_workgroups(WIDTH.div_ceil(8), HEIGHT.div_ceil(8), 1);
-                    }
-                    if output == Output::BufferThenCopy {
-                        encoder.copy_buffer_to_texture(
-                            wgpu::TexelCopyBufferInfo {
-                                buffer: &out_buffer,
-                                layout: wgpu::TexelCopyBufferLayout {
-                                    offset: 0,
-                                    bytes_per_row: Some(16 * WIDTH),
-                                    rows_per_image: Some(HEIGHT),
-                                },
+            let median = common::median_ms(&device, &queue, 6, |encoder| {
+                common::dispatch(encoder, &pipeline, &group, (WIDTH.div_ceil(8), HEIGHT.div_ceil(8)));
+                if output == Output::BufferThenCopy {
+                    encoder.copy_buffer_to_texture(
+                        wgpu::TexelCopyBufferInfo {
+                            buffer: &out_buffer,
+                            layout: wgpu::TexelCopyBufferLayout {
+                                offset: 0,
+                                bytes_per_row: Some(16 * WIDTH),
+                                rows_per_image: Some(HEIGHT),
                             },
-                            next_texture.as_image_copy(),
-                            extent,
-                        );
-                    }
-                    let start = Instant::now();
-                    queue.submit([encoder.finish()]);
-                    device.poll(wgpu::PollType::wait_indefinitely()).expect("the dispatch finishes");
-                    start.elapsed().as_secs_f64() * 1e3
-                })
-                .collect();
-            // The first dispatch compiles on software drivers: left out.
-            times.remove(0);
-            times.sort_by(f64::total_cmp);
-            println!("{:8.1} ms  {layout:?}, {output:?}", times[times.len() / 2]);
+                        },
+                        next_texture.as_image_copy(),
+                        extent,
+                    );
+                }
+            });
+            println!("{median:8.1} ms  {layout:?}, {output:?}");
         }
     }
 }
 
-/// An f32's nearest half (round to nearest even; the values here are in [0, 1]).
+/// An f32's nearest half, its bits.
 fn half_bits(v: f32) -> u16 {
-    let bits = v.to_bits();
-    let exponent = ((bits >> 23) & 0xff) as i32 - 127 + 15;
-    if v == 0.0 || exponent <= 0 {
-        return 0;
-    }
-    let mantissa = bits & 0x7f_ffff;
-    let rounded = (mantissa + 0x0fff + ((mantissa >> 13) & 1)) >> 13;
-    ((exponent as u32) << 10).wrapping_add(rounded) as u16
+    half::f16::from_f32(v).to_bits()
 }

@@ -53,19 +53,6 @@ fn fj_sub(a: f32, b: f32) -> f32 { return fj_fin(a - b); }
 fn fj_mul(a: f32, b: f32) -> f32 { return fj_fin(a * b); }
 fn fj_div(a: f32, b: f32) -> f32 { return fj_fin(a / fj_protect(b)); }
 
-fn fj_pow(a: f32, b: f32) -> f32 {
-    let integral = b == round(b);
-    if (a < 0.0 && !integral) {
-        fj_domain |= FJ_FLAG_POW;
-    }
-    if (a == 0.0) {
-        return select(select(0.0, 1.0, b == 0.0), FJ_BIG, b < 0.0);
-    }
-    let e = clamp(b * log2(max(abs(a), FJ_TINY)), -200.0, FJ_LOG2_BIG);
-    let magnitude = select(exp2(e), 0.0, e < -100.0);
-    let odd = integral && (b - 2.0 * floor(b * 0.5)) == 1.0;
-    return fj_fin(select(magnitude, -magnitude, a < 0.0 && odd));
-}
 // fj_pow of a non-negative base (src/jit/range.rs): no domain flag, no sign.
 fn fj_pow_nonneg(a: f32, b: f32) -> f32 {
     if (a == 0.0) {
@@ -74,7 +61,17 @@ fn fj_pow_nonneg(a: f32, b: f32) -> f32 {
     let e = clamp(b * log2(max(a, FJ_TINY)), -200.0, FJ_LOG2_BIG);
     return fj_fin_pos(select(exp2(e), 0.0, e < -100.0));
 }
-
+// The magnitude is the power of |a| (a zero base included); the sign is a's
+// for an odd integral power (`fin` is symmetric, and `0.0 - m` keeps a zero +0).
+fn fj_pow(a: f32, b: f32) -> f32 {
+    let integral = b == round(b);
+    if (a < 0.0 && !integral) {
+        fj_domain |= FJ_FLAG_POW;
+    }
+    let magnitude = fj_pow_nonneg(abs(a), b);
+    let odd = integral && (b - 2.0 * floor(b * 0.5)) == 1.0;
+    return select(magnitude, 0.0 - magnitude, a < 0.0 && odd);
+}
 fn fj_sin(a: f32) -> f32 { return fj_fin(sin(fj_turn(a))); }
 fn fj_cos(a: f32) -> f32 { return fj_fin(cos(fj_turn(a))); }
 fn fj_tan(a: f32) -> f32 {

@@ -14,7 +14,7 @@
 //! NaN and infinity are never acceptable in either result.
 
 use filterjit::cpu;
-use filterjit::gpu::SceneBuffers;
+use filterjit::gpu::{Filtered, Gpu, SceneBuffers};
 use filterjit::jit::{self, KernelKind, KernelLayout};
 use filterjit::lang::random::Alphabet;
 use filterjit::lang::{parse_expr, BinaryOp, Expr, Feature, PairOp, UnaryOp};
@@ -308,22 +308,44 @@ fn equal_canonical_text_hits_the_pipeline_cache() {
     assert!(second.cache_hit, "the same canonical text reuses the pipeline");
 }
 
+/// The expressions the lowering's rewrites are checked on: the shipped
+/// filters, the test corpus and `random` random ones over the whole operator
+/// table, of depth 3 to 3 + `depths` - 1.
+fn rewrite_corpus(seed: u64, random: usize, depths: usize) -> Vec<Expr> {
+    let mut exprs: Vec<Expr> = corpus::named().iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
+    exprs.extend(
+        crate::common::named_entries(include_str!("data/corpus.txt")).iter().map(|(_, t)| parse_expr(t).unwrap()),
+    );
+    let alphabet = Alphabet::full();
+    let mut rng = Rng::seeded(seed);
+    for _ in 0..random {
+        let depth = 3 + rng.below(depths);
+        exprs.push(alphabet.grow(&mut rng, depth));
+    }
+    exprs
+}
+
+/// `e` lowered with `options` and filtered over `scene` at radius 2.
+fn filtered_with(
+    gpu: &Gpu,
+    e: &Expr,
+    options: jit::LowerOptions,
+    buffers: &mut SceneBuffers,
+    scene: &Scene,
+) -> (jit::ValidatedKernel, Filtered) {
+    let kernel =
+        jit::validate(jit::lower(e, jit::KernelSpec { options, ..jit::KernelSpec::default() }).unwrap()).unwrap();
+    let filtered = gpu.filter(&kernel, buffers, scene, 2).unwrap();
+    (kernel, filtered)
+}
+
 #[test]
 fn each_optimisation_gives_the_plain_kernels_results() {
     let gpu = gpu();
     use filterjit::jit::LowerOptions;
     let scene = synthetic_scene(16, 12, 8);
     let mut buffers = SceneBuffers::new(&gpu, &scene);
-    let mut exprs: Vec<Expr> = corpus::named().iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
-    exprs.extend(
-        crate::common::named_entries(include_str!("data/corpus.txt")).iter().map(|(_, t)| parse_expr(t).unwrap()),
-    );
-    let alphabet = Alphabet::full();
-    let mut rng = Rng::seeded(404);
-    for _ in 0..env_usize("FILTERJIT_RANDOM_EXPRS", 40) / 4 {
-        let depth = 3 + rng.below(4);
-        exprs.push(alphabet.grow(&mut rng, depth));
-    }
+    let exprs = rewrite_corpus(404, env_usize("FILTERJIT_RANDOM_EXPRS", 40) / 4, 4);
     let variants = [
         ("fold", LowerOptions { fold_constants: true, ..LowerOptions::NONE }),
         ("cse", LowerOptions { common_subexpressions: true, ..LowerOptions::NONE }),
@@ -335,9 +357,7 @@ fn each_optimisation_gives_the_plain_kernels_results() {
         ("all+tiles", LowerOptions::ALL.with_tiles(2)),
     ];
     let run = |e: &Expr, options: LowerOptions, buffers: &mut SceneBuffers| {
-        let kernel =
-            jit::validate(jit::lower(e, jit::KernelSpec { options, ..jit::KernelSpec::default() }).unwrap()).unwrap();
-        gpu.filter(&kernel, buffers, &scene, 2).unwrap()
+        filtered_with(&gpu, e, options, buffers, &scene).1
     };
     for e in &exprs {
         let plain = run(e, LowerOptions::NONE, &mut buffers);
@@ -366,22 +386,12 @@ fn guards_a_range_proves_idle_change_no_bit() {
     use filterjit::jit::LowerOptions;
     let scene = synthetic_scene(16, 12, 9);
     let mut buffers = SceneBuffers::new(&gpu, &scene);
-    let mut exprs: Vec<Expr> = corpus::named().iter().map(|(_, t)| parse_expr(t).unwrap()).collect();
-    exprs.extend(
-        crate::common::named_entries(include_str!("data/corpus.txt")).iter().map(|(_, t)| parse_expr(t).unwrap()),
-    );
-    let alphabet = Alphabet::full();
-    let mut rng = Rng::seeded(405);
-    for _ in 0..env_usize("FILTERJIT_RANDOM_EXPRS", 40) {
-        let depth = 3 + rng.below(5);
-        exprs.push(alphabet.grow(&mut rng, depth));
-    }
+    let exprs = rewrite_corpus(405, env_usize("FILTERJIT_RANDOM_EXPRS", 40), 5);
     let run = |e: &Expr, options: LowerOptions, buffers: &mut SceneBuffers| {
-        let kernel =
-            jit::validate(jit::lower(e, jit::KernelSpec { options, ..jit::KernelSpec::default() }).unwrap()).unwrap();
+        let (kernel, filtered) = filtered_with(&gpu, e, options, buffers, &scene);
         let guarded =
             ["fj_fin_pos(", "fj_flush", "fj_exp_nonpos(", "FJ_BIG)"].iter().any(|h| kernel.wgsl().contains(h));
-        (gpu.filter(&kernel, buffers, &scene, 2).unwrap(), guarded)
+        (filtered, guarded)
     };
     let mut elided = 0;
     for e in &exprs {

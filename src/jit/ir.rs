@@ -144,7 +144,7 @@ pub struct Body {
 impl Body {
     /// Lower `expr` with `options`.
     pub fn of(expr: &Expr, options: LowerOptions) -> Body {
-        let mut builder = Builder { options, insts: Vec::new(), ranges: Vec::new(), known: HashMap::new() };
+        let mut builder = Builder::new(options);
         let result = builder.build(expr);
         Body { insts: builder.insts, result }
     }
@@ -250,6 +250,10 @@ struct Builder {
 }
 
 impl Builder {
+    fn new(options: LowerOptions) -> Builder {
+        Builder { options, insts: Vec::new(), ranges: Vec::new(), known: HashMap::new() }
+    }
+
     fn build(&mut self, e: &Expr) -> Operand {
         match e {
             Expr::Const(c) => Operand::literal(semantics::literal(*c)),
@@ -353,16 +357,13 @@ impl Builder {
         if a.literal_value().is_some() && b.literal_value().is_some() {
             return None;
         }
-        let (ra, rb) = (self.range(a), self.range(b));
-        let range = match op {
-            BinaryOp::Add => Range::sum(ra, rb),
-            BinaryOp::Sub => Range::sum(ra, rb.negated()),
-            BinaryOp::Mul => Range::product(ra, rb),
-            BinaryOp::Div => return Range::quotient(ra, rb).map(|r| Op::Arith(op, a, b, r.guard().0)),
-            BinaryOp::Pow => return ra.non_negative().then_some(Op::PowNonNegative(a, b)),
-        };
-        let guard = range.guard().0;
-        (guard != Guard::Fin).then_some(Op::Arith(op, a, b, guard))
+        let ra = self.range(a);
+        if op == BinaryOp::Pow {
+            return ra.non_negative().then_some(Op::PowNonNegative(a, b));
+        }
+        let guard = Range::arithmetic(op, ra, self.range(b))?.guard().0;
+        // A bare quotient drops its zero guard, worth it even with all of `fin`.
+        (guard != Guard::Fin || op == BinaryOp::Div).then_some(Op::Arith(op, a, b, guard))
     }
 
     /// What the value of `op` (with its operands' ranges known) can be.
@@ -381,13 +382,7 @@ impl Builder {
             Op::Distance2Squared(..) => Range::pair(PairOp::Distance2),
             Op::Scale(a, r, _) => after(Range::product(self.range(a), Range::literal(f32::from_bits(r) as f64))),
             Op::Arith(op, a, b, _) => {
-                let (ra, rb) = (self.range(a), self.range(b));
-                after(match op {
-                    BinaryOp::Add => Range::sum(ra, rb),
-                    BinaryOp::Sub => Range::sum(ra, rb.negated()),
-                    BinaryOp::Mul => Range::product(ra, rb),
-                    _ => Range::quotient(ra, rb).expect("a bare quotient's divisor is away from zero"),
-                })
+                after(Range::arithmetic(op, self.range(a), self.range(b)).expect("a bare operation's range is known"))
             }
             Op::ExpNonPositive(a) => Range::unary(UnaryOp::Exp, self.range(a)),
             Op::SqrtNonNegative(a, _) => self.range(a).sqrt_non_negative().1,
@@ -416,7 +411,7 @@ impl Builder {
         if !self.options.fold_constants {
             return None;
         }
-        let mut probe = Builder { options: self.options, insts: Vec::new(), ranges: Vec::new(), known: HashMap::new() };
+        let mut probe = Builder::new(self.options);
         match probe.build(e) {
             Operand::Literal(bits) if probe.insts.is_empty() => Some(f32::from_bits(bits) as f64),
             _ => None,

@@ -132,12 +132,9 @@ impl Range {
 
     /// `a · b` before `fin`.
     pub fn product(a: Range, b: Range) -> Range {
-        let products = [a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi];
-        if products.iter().any(|p| p.is_nan()) {
+        let Some((lo, hi)) = span([a.lo * b.lo, a.lo * b.hi, a.hi * b.lo, a.hi * b.hi]) else {
             return Range::ANY;
-        }
-        let lo = products.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = products.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        };
         // Rounding may take a product half an ulp below the exact one.
         Range::new(lo, hi, a.floor * b.floor * (1.0 - MARGIN))
     }
@@ -148,24 +145,30 @@ impl Range {
         if b.lo < DIV_EPS && b.hi > -DIV_EPS {
             return None;
         }
-        let quotients = [a.lo / b.lo, a.lo / b.hi, a.hi / b.lo, a.hi / b.hi];
-        if quotients.iter().any(|q| q.is_nan()) {
+        let Some((lo, hi)) = span([a.lo / b.lo, a.lo / b.hi, a.hi / b.lo, a.hi / b.hi]) else {
             return Some(Range::ANY);
-        }
-        let lo = quotients.iter().copied().fold(f64::INFINITY, f64::min);
-        let hi = quotients.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        };
         Some(Range::new(lo, hi, a.floor / b.magnitude().hi * (1.0 - MARGIN)))
+    }
+
+    /// `a op b` as the bare operation computes it, before `fin`: a sum,
+    /// difference or product, or a quotient whose zero guard is idle; `None`
+    /// for a power and a quotient that needs its guard.
+    pub fn arithmetic(op: BinaryOp, a: Range, b: Range) -> Option<Range> {
+        match op {
+            BinaryOp::Add => Some(Range::sum(a, b)),
+            BinaryOp::Sub => Some(Range::sum(a, b.negated())),
+            BinaryOp::Mul => Some(Range::product(a, b)),
+            BinaryOp::Div => Range::quotient(a, b),
+            BinaryOp::Pow => None,
+        }
     }
 
     /// The range of an operator's helper result (which ends in `fin`).
     pub fn binary(op: BinaryOp, a: Range, b: Range) -> Range {
         match op {
-            BinaryOp::Add => Range::sum(a, b).finned(),
-            BinaryOp::Sub => Range::sum(a, b.negated()).finned(),
-            BinaryOp::Mul => Range::product(a, b).finned(),
-            BinaryOp::Div => Range::quotient(a, b).unwrap_or(Range::FINITE).finned(),
             BinaryOp::Pow if a.non_negative() => Range { lo: 0.0, ..Range::FINITE },
-            BinaryOp::Pow => Range::FINITE,
+            _ => Range::arithmetic(op, a, b).unwrap_or(Range::FINITE).finned(),
         }
     }
 
@@ -201,10 +204,19 @@ impl Range {
     /// `min(sqrt(a), BIG)`, and the range after it.
     pub fn sqrt_non_negative(self) -> (Guard, Range) {
         debug_assert!(self.non_negative());
-        let root = Range { lo: self.lo.sqrt(), hi: self.hi.sqrt(), floor: TINY };
-        let guard = if root.hi <= BIG { Guard::None } else { Guard::Ceiling };
-        (guard, root.finned())
+        Range { lo: self.lo.sqrt(), hi: self.hi.sqrt(), floor: TINY }.guard()
     }
+}
+
+/// The least and the greatest of the four products or quotients of two
+/// ranges' bounds; `None` where one is undefined (0 · ∞, ∞ / ∞).
+fn span(values: [f64; 4]) -> Option<(f64, f64)> {
+    if values.iter().any(|v| v.is_nan()) {
+        return None;
+    }
+    let lo = values.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = values.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    Some((lo, hi))
 }
 
 impl Guard {
