@@ -171,7 +171,7 @@ pub(super) fn pipeline_stages(gpu: &Gpu, scene: &Scene, repeats: usize) -> anyho
 /// ([`frames`]).
 pub(super) fn whole_frames(
     gpu: &Gpu,
-    scene: &Scene,
+    renders: &[Scene],
     repeats: usize,
     peer: Option<&crate::oidn::Oidn>,
     scratch: &std::path::Path,
@@ -185,26 +185,37 @@ pub(super) fn whole_frames(
                 .then(|| Ok(FrameMethod { name: format!("@{name}"), expr: parse_expr(text)?, pipeline }))
         })
         .collect::<anyhow::Result<_>>()?;
-    frames(gpu, scene, (FRAME_SIDE, FRAME_SIDE), &methods, repeats, peer, scratch)
+    frames(gpu, renders, (FRAME_SIDE, FRAME_SIDE), &methods, repeats, peer, scratch)
 }
 
 /// `methods` and OIDN colour + albedo + normal (where its program is
 /// found) on whole frames of `size`, the bench scene tiled, in interleaved
-/// rounds: a filter's frame is its pre-pass, temporal stage (a still
-/// sequence's, its history carried from round to round after a few frames
-/// to settle), guide and passes in one submission (the frame's buffers made
-/// afresh each round, uploads not counted), as a renderer runs it; OIDN's is
-/// its program's own time for each execution on the device it chose.
+/// rounds: a filter's frame is its pre-pass, temporal stage, guide and passes
+/// in one submission (the frame's buffers made afresh each round, uploads
+/// not counted), as a renderer runs it; OIDN's is its program's own time for
+/// each execution on the device it chose.
+///
+/// `renders` are the bench scene rendered with different seeds, the first
+/// the one every single-image filter and OIDN take. A temporal filter's
+/// frames are a still camera's sequence as a renderer makes it, each frame
+/// its own noise: its k-th frame is render k mod n's, and its history is
+/// carried from round to round after a few frames to settle. (One render
+/// fed again and again is no renderer's sequence: its history converges on
+/// that render's own samples, and the history test then cuts every pixel
+/// whose sample stands out from its neighbours, each frame.)
 pub fn frames(
     gpu: &Gpu,
-    scene: &Scene,
+    renders: &[Scene],
     (width, height): (usize, usize),
     methods: &[FrameMethod],
     repeats: usize,
     peer: Option<&crate::oidn::Oidn>,
     scratch: &std::path::Path,
 ) -> anyhow::Result<Vec<FrameResult>> {
-    let frame = scene.tiled_to(width, height).still();
+    let scene = renders.first().expect("the bench scene has a render");
+    let sequence: Vec<Scene> = renders.iter().map(|render| render.tiled_to(width, height).still()).collect();
+    let frame = &sequence[0];
+    let mut frame_index = vec![0usize; methods.len()];
     let mpx = frame.pixels() as f64 / 1e6;
     let radius = 2;
     let reference = scene.reference.as_ref().expect("the bench scene has a reference");
@@ -216,14 +227,16 @@ pub fn frames(
         let kernel =
             jit::compile(expr, jit::KernelSpec { shape: jit::Shape::of(pipeline), ..jit::KernelSpec::default() })?;
         let mut state = crate::gpu::TemporalState::new();
-        let mut buffers = SceneBuffers::for_frame(gpu, &frame, pipeline)?;
-        gpu.filter_frame(&kernel, &mut buffers, &frame, radius, &mut state)?;
+        let mut buffers = SceneBuffers::for_frame(gpu, frame, pipeline)?;
+        gpu.filter_frame(&kernel, &mut buffers, frame, radius, &mut state)?;
         let compile = ms(t.elapsed());
         // A temporal stage settles over its first frames: time it once it has.
-        for _ in 0..SETTLING_FRAMES.min(if pipeline.is_temporal() { SETTLING_FRAMES } else { 0 }) {
-            let mut buffers = SceneBuffers::for_frame(gpu, &frame, pipeline)?;
-            gpu.filter_frame(&kernel, &mut buffers, &frame, radius, &mut state)?;
+        for k in 1..=SETTLING_FRAMES.min(if pipeline.is_temporal() { SETTLING_FRAMES } else { 0 }) {
+            let frame = &sequence[k % sequence.len()];
+            let mut buffers = SceneBuffers::for_frame(gpu, frame, pipeline)?;
+            gpu.filter_frame(&kernel, &mut buffers, frame, radius, &mut state)?;
         }
+        frame_index[prepared.len()] = if pipeline.is_temporal() { SETTLING_FRAMES + 1 } else { 0 };
         let mut on_scene = SceneBuffers::for_frame(gpu, &still, pipeline)?;
         let light = metrics::light(&gpu.filter(&kernel, &mut on_scene, &still, radius)?.rgb(), reference);
         prepared.push((method, kernel, state, compile, light));
@@ -235,8 +248,14 @@ pub fn frames(
         for (k, (method, kernel, state, _, _)) in prepared.iter_mut().enumerate() {
             // A frame as a renderer runs it: the pre-pass, the temporal stage, the
             // guide (where the weight reads it) and the passes in one submission, uploads excluded.
-            let mut buffers = SceneBuffers::for_frame(gpu, &frame, &method.pipeline)?;
-            let whole = gpu.filter_frame(kernel, &mut buffers, &frame, radius, state)?.time;
+            let frame = if method.pipeline.is_temporal() {
+                frame_index[k] += 1;
+                &sequence[(frame_index[k] - 1) % sequence.len()]
+            } else {
+                frame
+            };
+            let mut buffers = SceneBuffers::for_frame(gpu, frame, &method.pipeline)?;
+            let whole = gpu.filter_frame(kernel, &mut buffers, frame, radius, state)?.time;
             times[k].push(ms(whole.wall));
             // Its parts on the device's clock where it has one, else the
             // recording's wall time (the passes' then hold the waiting).
@@ -255,7 +274,7 @@ pub fn frames(
     let oidn = match peer {
         Some(oidn) => {
             let dir = scratch.join(format!("filterjit-bench-oidn-{}", std::process::id()));
-            let denoised = oidn.denoise(&frame, crate::oidn::Auxiliary::AlbedoNormal, repeats.max(1) * 2, &dir);
+            let denoised = oidn.denoise(frame, crate::oidn::Auxiliary::AlbedoNormal, repeats.max(1) * 2, &dir);
             let on_scene = oidn.denoise(scene, crate::oidn::Auxiliary::AlbedoNormal, 1, &dir);
             let _ = std::fs::remove_dir_all(&dir);
             let denoised = denoised?;

@@ -105,25 +105,33 @@ pub struct FramesSettings<'a> {
 }
 
 /// Whole frames of `methods` and OIDN at every size of `settings`, from
-/// `scene` tiled to each ([`frames::frames`]).
+/// `renders` (the bench scene with different seeds) tiled to each
+/// ([`frames::frames`]).
 pub fn frames_at(
     gpu: &Gpu,
-    scene: &Scene,
+    renders: &[Scene],
     methods: &[FrameMethod],
     settings: &FramesSettings,
     peer: Option<&crate::oidn::Oidn>,
     progress: &mut dyn FnMut(&str),
 ) -> anyhow::Result<FramesReport> {
     let FramesSettings { sizes, repeats, scratch } = *settings;
+    let scene = renders.first().expect("the bench scene has a render");
     let mut all = Vec::new();
     for &size in sizes {
         progress(&format!("whole frames {}x{}", size.0, size.1));
-        all.extend(frames::frames(gpu, scene, size, methods, repeats, peer, scratch)?);
+        all.extend(frames::frames(gpu, renders, size, methods, repeats, peer, scratch)?);
     }
     Ok(FramesReport {
         device: gpu.describe(),
         clock: if gpu.has_device_clock() { Clock::Device } else { Clock::Wall },
-        source: format!("{} ({}x{}), tiled to each size", scene.name, scene.width, scene.height),
+        source: format!(
+            "{} ({}x{}), tiled to each size; a temporal filter's frames cycle through {} renders of it with their own seeds",
+            scene.name,
+            scene.width,
+            scene.height,
+            renders.len()
+        ),
         repeats,
         frames: all,
     })
@@ -139,15 +147,18 @@ pub enum Clock {
     Wall,
 }
 
-/// Run everything on `scene` (which must carry the corpus's features and a reference).
+/// Run everything on `renders[0]` (which must carry the corpus's features
+/// and a reference); the other renders are the same scene with other seeds,
+/// a temporal filter's later frames ([`frames::frames`]).
 pub fn run(
     gpu: &Gpu,
-    scene: &Scene,
+    renders: &[Scene],
     generation_scenes: &mut dyn FnMut(u32) -> anyhow::Result<Scene>,
     settings: &BenchSettings,
     peer: Option<&crate::oidn::Oidn>,
     progress: &mut dyn FnMut(&str),
 ) -> anyhow::Result<Report> {
+    let scene = renders.first().expect("the bench scene has a render");
     let mut buffers = SceneBuffers::new(gpu, scene);
     let measured = expressions::measure(gpu, scene, &mut buffers, settings, progress)?;
     progress(&format!("population of {}", settings.population));
@@ -164,7 +175,7 @@ pub fn run(
         "whole frames on {FRAME_SIDE}x{FRAME_SIDE}{}",
         if peer.is_some() { ", and OIDN" } else { " (OIDN not found)" }
     ));
-    let frames = frames::whole_frames(gpu, scene, settings.repeats, peer, &settings.scratch)?;
+    let frames = frames::whole_frames(gpu, renders, settings.repeats, peer, &settings.scratch)?;
     let generations = generation::measure(gpu, generation_scenes, settings, progress)?;
     Ok(Report {
         device: gpu.describe(),

@@ -12,9 +12,9 @@ pub(crate) fn bench(
 ) -> Result<()> {
     let gpu = gpu::Gpu::open(&env.adapter)?;
     let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
-    let scene_at = |gpu: &gpu::Gpu, w: u32, h: u32| -> Result<filterjit::Scene> {
+    let render_at = |gpu: &gpu::Gpu, w: u32, h: u32, seed: u32| -> Result<filterjit::Scene> {
         let d = render::builtin("glossy-floor").expect("built in")?;
-        let rs = render::RenderSettings { width: w, height: h, spp: 4, reference_spp: 64, seed: 0 };
+        let rs = render::RenderSettings { width: w, height: h, spp: 4, reference_spp: 64, seed };
         let dir = render::cached(gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
         let request = scene::Request {
             features: lang::Feature::ALL.iter().copied().collect(),
@@ -26,15 +26,21 @@ pub(crate) fn bench(
         Ok(scene::load(&dir, &request)?)
     };
     eprintln!("bench     on {}", gpu.describe());
-    let scene = scene_at(&gpu, size.0, size.1)?;
-    let mut generation_scene = |s: u32| scene_at(&gpu, s, s);
+    let renders =
+        (0..SEQUENCE_RENDERS).map(|seed| render_at(&gpu, size.0, size.1, seed)).collect::<Result<Vec<_>>>()?;
+    let mut generation_scene = |s: u32| render_at(&gpu, s, s, 0);
     let mut progress = |what: &str| eprintln!("          {what}");
-    let report = filterjit::bench::run(&gpu, &scene, &mut generation_scene, settings, peer.as_ref(), &mut progress)?;
+    let report = filterjit::bench::run(&gpu, &renders, &mut generation_scene, settings, peer.as_ref(), &mut progress)?;
     print!("{}", filterjit::bench::table(&report));
     filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())?;
     println!("wrote     {}", output.display());
     Ok(())
 }
+
+/// How many renders of the bench scene, each with its own seed, a temporal
+/// filter's frames cycle through: a still camera's sequence, each frame its
+/// own noise.
+const SEQUENCE_RENDERS: u32 = 4;
 
 /// `bench --frames SIZES`: whole frames only, from a 256² render of
 /// glossy-floor tiled to each size.
@@ -58,18 +64,22 @@ pub(crate) fn bench_frames(
     let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
     eprintln!("bench     whole frames on {}", gpu.describe());
     let d = render::builtin("glossy-floor").expect("built in")?;
-    let rs = render::RenderSettings { width: 256, height: 256, spp: 4, reference_spp: 64, seed: 0 };
-    let dir = render::cached(&gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
     let mut features: std::collections::BTreeSet<lang::Feature> =
         methods.iter().flat_map(|m| m.expr.features()).collect();
     features.extend(methods.iter().flat_map(|m| m.pipeline.features()));
     let variances = methods.iter().flat_map(|m| m.expr.stored_variables()).collect();
     let request = scene::Request { features, variances, reference: true, albedo: true, ..Default::default() };
-    let scene = scene::load(&dir, &request)?;
+    let renders = (0..SEQUENCE_RENDERS)
+        .map(|seed| {
+            let rs = render::RenderSettings { width: 256, height: 256, spp: 4, reference_spp: 64, seed };
+            let dir = render::cached(&gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
+            Ok(scene::load(&dir, &request)?)
+        })
+        .collect::<Result<Vec<_>>>()?;
     let sizes: Vec<(usize, usize)> = sizes.iter().map(|&(w, h)| (w as usize, h as usize)).collect();
     let mut progress = |what: &str| eprintln!("          {what}");
     let settings = filterjit::bench::FramesSettings { sizes: &sizes, repeats, scratch: &env.scratch };
-    let report = filterjit::bench::frames_at(&gpu, &scene, &methods, &settings, peer.as_ref(), &mut progress)?;
+    let report = filterjit::bench::frames_at(&gpu, &renders, &methods, &settings, peer.as_ref(), &mut progress)?;
     print!("{}", filterjit::bench::frames_report(&report));
     filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())?;
     println!("wrote     {}", output.display());

@@ -487,8 +487,9 @@ mod tests {
         let checker: Vec<[f32; 3]> = (0..w * h).map(|p| [2.0 * ((p % w + p / w) % 2) as f32; 3]).collect();
         let (_, motion) = still(w, h, 0.0);
         let out = accumulate(stage(0.2), &checker, &motion, w, h, None);
-        // Around the centre every pixel's 7×7 holds 25 of one value and 24 of the other.
-        let p = 25.0f64 / 49.0;
+        // Around the centre every pixel's window holds one more of its own value than of the other.
+        let taps = (2 * pipeline::TEMPORAL_VARIANCE_RADIUS + 1).pow(2);
+        let p = f64::from(taps + 1) / 2.0 / f64::from(taps);
         let expected = 4.0 * p * (1.0 - p);
         let centre = 7 * w + 7;
         assert!((out.variance[centre] as f64 - expected).abs() < 1e-5, "{} against {expected}", out.variance[centre]);
