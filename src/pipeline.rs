@@ -218,7 +218,8 @@ pub struct Temporal {
     pub feedback: u32,
     /// γ of the history's clamp, if any: each channel of the reprojected
     /// history is clamped to the current frame's 3×3 mean ± γ standard
-    /// deviations, so that a history the frame disagrees with (a moving
+    /// deviations, and its modulation to the range of the frame's 3×3
+    /// modulations, so that a history the frame disagrees with (a moving
     /// shadow, a reflection) fades instead of ghosting.
     pub clamp: Option<f32>,
     /// κ of the history's test, if any (`antilag=K`): where the history's

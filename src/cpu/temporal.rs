@@ -110,12 +110,14 @@ pub fn accumulate(
             let own = motion.albedo[i].map(|c| (c as f64).max(pipeline::ALBEDO_FLOOR));
             let own = [own[0], own[1], own[2]];
             let (blend, m1, m2, r, modulation) = match taken {
-                Some(Taken { color: mut past, moments, modulation }) => {
+                Some(Taken { color: mut past, moments, mut modulation }) => {
                     if let Some(gamma) = temporal.clamp {
                         let (mean, deviation) = neighbourhood(color, x, y, w, h);
+                        let (lowest, highest) = modulation_range(motion, x, y, w, h);
                         for k in 0..3 {
                             let g = gamma as f64 * deviation[k];
                             past[k] = past[k].clamp(mean[k] - g, mean[k] + g);
+                            modulation[k] = modulation[k].clamp(lowest[k], highest[k]);
                         }
                     }
                     let blend = [0, 1, 2].map(|k| past[k] * (1.0 - a) + d[k] * a);
@@ -144,6 +146,26 @@ pub fn accumulate(
         .map(|(x, y)| (prefiltered(&samples, x, y, w, h) * out.moments[(y * w + x) as usize][2] as f64) as f32)
         .collect();
     out
+}
+
+/// The lowest and highest modulation, max(albedo, `ALBEDO_FLOOR`), channel
+/// by channel over the frame's 3×3 around (`x`, `y`) inside the image: the
+/// range a history's modulation is clamped to with `clamp` (a texture's
+/// edge keeps its mix of both sides; a reflection's history, which the
+/// motion of the surface reflecting it does not follow, does not ghost).
+fn modulation_range(motion: &Motion, x: i64, y: i64, w: i64, h: i64) -> ([f64; 3], [f64; 3]) {
+    let (mut lowest, mut highest) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for (xj, yj) in (-1..=1).flat_map(|dy| (-1..=1).map(move |dx| (x + dx, y + dy))) {
+        if inside(xj, yj, w, h) {
+            let albedo = motion.albedo[(yj * w + xj) as usize];
+            for k in 0..3 {
+                let m = (albedo[k] as f64).max(pipeline::ALBEDO_FLOOR);
+                lowest[k] = lowest[k].min(m);
+                highest[k] = highest[k].max(m);
+            }
+        }
+    }
+    (lowest, highest)
 }
 
 /// The sample variance around (`x`, `y`) blurred by the 3×3 Gaussian
