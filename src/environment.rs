@@ -19,6 +19,10 @@ pub const CACHE: &str = "FILTERJIT_CACHE";
 /// Intel Open Image Denoise's `oidnDenoise` program, for `report`.
 pub const OIDN: &str = "FILTERJIT_OIDN";
 
+/// glibc's own allocator settings: where one is set, filterjit leaves the
+/// allocator as the user set it (`gpu::host_memory`).
+pub const MALLOC_KNOBS: [&str; 3] = ["MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "GLIBC_TUNABLES"];
+
 /// What the environment asks for.
 #[derive(Clone, Debug)]
 pub struct Environment {
@@ -53,6 +57,7 @@ impl Environment {
                 None => Request::default().backends,
             },
             name: text(ADAPTER).filter(|n| !n.is_empty()),
+            keep_freed_images: MALLOC_KNOBS.iter().all(|name| var(name).is_none()),
         };
         let scratch = var("TMPDIR").map_or_else(|| PathBuf::from("/tmp"), PathBuf::from);
         let cache = match (var(CACHE), var("XDG_CACHE_HOME"), var("HOME")) {
@@ -85,7 +90,11 @@ mod tests {
     #[test]
     fn variables_become_plain_values() {
         let env = with(&[(BACKEND, "Vulkan"), (ADAPTER, "llvmpipe"), ("HOME", "/home/u")]).unwrap();
-        assert_eq!(env.adapter, Request { backends: wgpu::Backends::VULKAN, name: Some("llvmpipe".into()) });
+        assert_eq!(
+            env.adapter,
+            Request { backends: wgpu::Backends::VULKAN, name: Some("llvmpipe".into()), keep_freed_images: true }
+        );
+        assert!(!with(&[("MALLOC_MMAP_THRESHOLD_", "65536")]).unwrap().adapter.keep_freed_images);
         assert_eq!(env.cache, PathBuf::from("/home/u/.cache/filterjit"));
         let env = with(&[(CACHE, "/c"), ("XDG_CACHE_HOME", "/x"), ("HOME", "/h")]).unwrap();
         assert_eq!(env.cache, PathBuf::from("/c"));

@@ -16,11 +16,15 @@ use super::GpuError;
 pub struct Request {
     pub backends: wgpu::Backends,
     pub name: Option<String>,
+    /// On a software device, ask the C library to keep freed images for the
+    /// next frame's (`gpu::host_memory`); false where the user set its own
+    /// knobs (`MALLOC_MMAP_THRESHOLD_`, `MALLOC_TRIM_THRESHOLD_`, `GLIBC_TUNABLES`).
+    pub keep_freed_images: bool,
 }
 
 impl Default for Request {
     fn default() -> Self {
-        Request { backends: ALL_NATIVE, name: None }
+        Request { backends: ALL_NATIVE, name: None, keep_freed_images: true }
     }
 }
 

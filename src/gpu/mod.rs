@@ -7,6 +7,7 @@ mod clock;
 mod filter;
 mod fitness;
 mod guide;
+mod host_memory;
 mod planefit;
 mod prepass;
 mod raw;
@@ -131,12 +132,19 @@ impl Gpu {
 
     /// Open the adapter [`adapter::choose`] picks for `request`.
     pub fn open(request: &adapter::Request) -> Result<Gpu, GpuError> {
-        Self::from_adapter(adapter::choose(request)?)
+        Self::from_chosen(adapter::choose(request)?, request)
     }
 
     /// Open the adapter for the `index`-th process on this machine ([`adapter::choose_for`]).
     pub fn open_for(request: &adapter::Request, index: usize) -> Result<Gpu, GpuError> {
-        Self::from_adapter(adapter::choose_for(request, index)?)
+        Self::from_chosen(adapter::choose_for(request, index)?, request)
+    }
+
+    fn from_chosen(adapter: wgpu::Adapter, request: &adapter::Request) -> Result<Gpu, GpuError> {
+        if request.keep_freed_images && adapter.get_info().device_type == wgpu::DeviceType::Cpu {
+            host_memory::keep_freed_images();
+        }
+        Self::from_adapter(adapter)
     }
 
     fn from_adapter(adapter: wgpu::Adapter) -> Result<Gpu, GpuError> {
