@@ -503,6 +503,35 @@ mod tests {
     }
 
     #[test]
+    fn the_clamp_holds_a_historys_modulation_to_the_frames_neighbourhood() {
+        let (w, h) = (6, 5);
+        let with_albedo = |albedo: &dyn Fn(usize) -> f32| {
+            let (color, mut motion) = still(w, h, 1.0);
+            motion.albedo = (0..w * h).map(|p| [albedo(p % w), albedo(p % w), albedo(p % w), 0.0]).collect();
+            (color, motion)
+        };
+        let clamped = Temporal { clamp: Some(2.0), ..stage(0.2) };
+        let second_frame = |temporal: Temporal, before: &dyn Fn(usize) -> f32, now: &dyn Fn(usize) -> f32| {
+            let (color, motion) = with_albedo(before);
+            let first = accumulate(temporal, &color, &motion, w, h, None);
+            let history = keep(&first, first.color.clone(), &motion, w, h);
+            let (color, motion) = with_albedo(now);
+            accumulate(temporal, &color, &motion, w, h, Some(&history))
+        };
+        // A reflection: the same surface, another texture on it. The clamp
+        // takes the frame's; without it the two are blended evenly.
+        let centre = 2 * w + 2;
+        let out = second_frame(clamped, &|_| 0.9, &|_| 0.3);
+        assert!((out.modulation[centre][0] - 0.3).abs() < 1e-6, "{}", out.modulation[centre][0]);
+        let out = second_frame(stage(0.2), &|_| 0.9, &|_| 0.3);
+        assert!((out.modulation[centre][0] - 0.6).abs() < 1e-6, "{}", out.modulation[centre][0]);
+        // A texture's edge whose pixel saw the dark side, then the bright one:
+        // its 3x3 holds both, so the clamp keeps the mix.
+        let out = second_frame(clamped, &|x| if x < 3 { 0.2 } else { 0.8 }, &|x| if x < 2 { 0.2 } else { 0.8 });
+        assert!((out.modulation[centre][0] - 0.5).abs() < 1e-6, "{}", out.modulation[centre][0]);
+    }
+
+    #[test]
     fn a_short_history_takes_its_variance_from_the_neighbourhood() {
         let (w, h) = (15, 15);
         // Alternating 0 and 2: a sample variance of about 1 around every pixel of the frame.
