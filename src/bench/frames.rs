@@ -213,9 +213,12 @@ pub fn frames(
     scratch: &std::path::Path,
 ) -> anyhow::Result<Vec<FrameResult>> {
     let scene = renders.first().expect("the bench scene has a render");
-    let sequence: Vec<Scene> = renders.iter().map(|render| render.tiled_to(width, height).still()).collect();
+    // Only a temporal filter reads the renders after the first.
+    let used = if methods.iter().any(|m| m.pipeline.is_temporal()) { renders.len() } else { 1 };
+    let sequence: Vec<Scene> = renders[..used].iter().map(|render| render.tiled_to(width, height).still()).collect();
     let frame = &sequence[0];
-    let mut frame_index = vec![0usize; methods.len()];
+    // A temporal filter's n-th frame (0: the one its kernels compile on).
+    let nth_frame = |n: usize| &sequence[n % sequence.len()];
     let mpx = frame.pixels() as f64 / 1e6;
     let radius = 2;
     let reference = scene.reference.as_ref().expect("the bench scene has a reference");
@@ -231,12 +234,12 @@ pub fn frames(
         gpu.filter_frame(&kernel, &mut buffers, frame, radius, &mut state)?;
         let compile = ms(t.elapsed());
         // A temporal stage settles over its first frames: time it once it has.
-        for k in 1..=SETTLING_FRAMES.min(if pipeline.is_temporal() { SETTLING_FRAMES } else { 0 }) {
-            let frame = &sequence[k % sequence.len()];
+        let settling = if pipeline.is_temporal() { SETTLING_FRAMES } else { 0 };
+        for n in 1..=settling {
+            let frame = nth_frame(n);
             let mut buffers = SceneBuffers::for_frame(gpu, frame, pipeline)?;
             gpu.filter_frame(&kernel, &mut buffers, frame, radius, &mut state)?;
         }
-        frame_index[prepared.len()] = if pipeline.is_temporal() { SETTLING_FRAMES + 1 } else { 0 };
         let mut on_scene = SceneBuffers::for_frame(gpu, &still, pipeline)?;
         let light = metrics::light(&gpu.filter(&kernel, &mut on_scene, &still, radius)?.rgb(), reference);
         prepared.push((method, kernel, state, compile, light));
@@ -244,16 +247,11 @@ pub fn frames(
     let mut times = vec![Vec::new(); prepared.len()];
     let mut parts = vec![[Vec::new(), Vec::new(), Vec::new(), Vec::new()]; prepared.len()];
     let mut on_device = vec![Vec::new(); prepared.len()];
-    for _ in 0..repeats.max(1) * 2 {
+    for round in 0..repeats.max(1) * 2 {
         for (k, (method, kernel, state, _, _)) in prepared.iter_mut().enumerate() {
             // A frame as a renderer runs it: the pre-pass, the temporal stage, the
             // guide (where the weight reads it) and the passes in one submission, uploads excluded.
-            let frame = if method.pipeline.is_temporal() {
-                frame_index[k] += 1;
-                &sequence[(frame_index[k] - 1) % sequence.len()]
-            } else {
-                frame
-            };
+            let frame = if method.pipeline.is_temporal() { nth_frame(SETTLING_FRAMES + 1 + round) } else { frame };
             let mut buffers = SceneBuffers::for_frame(gpu, frame, &method.pipeline)?;
             let whole = gpu.filter_frame(kernel, &mut buffers, frame, radius, state)?.time;
             times[k].push(ms(whole.wall));

@@ -126,11 +126,14 @@ pub fn frames_at(
         device: gpu.describe(),
         clock: if gpu.has_device_clock() { Clock::Device } else { Clock::Wall },
         source: format!(
-            "{} ({}x{}), tiled to each size; a temporal filter's frames cycle through {} renders of it with their own seeds",
+            "{} ({}x{}), tiled to each size{}",
             scene.name,
             scene.width,
             scene.height,
-            renders.len()
+            match renders.len() {
+                1 => String::new(),
+                n => format!("; a temporal filter's frames cycle through {n} renders of it with their own seeds"),
+            }
         ),
         repeats,
         frames: all,

@@ -12,23 +12,17 @@ pub(crate) fn bench(
 ) -> Result<()> {
     let gpu = gpu::Gpu::open(&env.adapter)?;
     let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
-    let render_at = |gpu: &gpu::Gpu, w: u32, h: u32, seed: u32| -> Result<filterjit::Scene> {
-        let d = render::builtin("glossy-floor").expect("built in")?;
-        let rs = render::RenderSettings { width: w, height: h, spp: 4, reference_spp: 64, seed };
-        let dir = render::cached(gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
-        let request = scene::Request {
-            features: lang::Feature::ALL.iter().copied().collect(),
-            variances: lang::ScalarVar::ALL.iter().copied().collect(),
-            reference: true,
-            albedo: true,
-            ..Default::default()
-        };
-        Ok(scene::load(&dir, &request)?)
+    let request = scene::Request {
+        features: lang::Feature::ALL.iter().copied().collect(),
+        variances: lang::ScalarVar::ALL.iter().copied().collect(),
+        reference: true,
+        albedo: true,
+        ..Default::default()
     };
     eprintln!("bench     on {}", gpu.describe());
-    let renders =
-        (0..SEQUENCE_RENDERS).map(|seed| render_at(&gpu, size.0, size.1, seed)).collect::<Result<Vec<_>>>()?;
-    let mut generation_scene = |s: u32| render_at(&gpu, s, s, 0);
+    let renders = bench_renders(env, &gpu, size, SEQUENCE_RENDERS, &request)?;
+    let mut generation_scene =
+        |s: u32| Ok(bench_renders(env, &gpu, (s, s), 1, &request)?.pop().expect("one render asked for"));
     let mut progress = |what: &str| eprintln!("          {what}");
     let report = filterjit::bench::run(&gpu, &renders, &mut generation_scene, settings, peer.as_ref(), &mut progress)?;
     print!("{}", filterjit::bench::table(&report));
@@ -41,6 +35,25 @@ pub(crate) fn bench(
 /// filter's frames cycle through: a still camera's sequence, each frame its
 /// own noise.
 const SEQUENCE_RENDERS: u32 = 4;
+
+/// The bench scene (glossy-floor, 4 spp, 64-spp references) at `size`,
+/// rendered `count` times with seeds 0, 1, … (cached), loaded as `request` asks.
+fn bench_renders(
+    env: &Environment,
+    gpu: &gpu::Gpu,
+    (width, height): (u32, u32),
+    count: u32,
+    request: &scene::Request,
+) -> Result<Vec<filterjit::Scene>> {
+    let d = render::builtin("glossy-floor").expect("built in")?;
+    (0..count)
+        .map(|seed| {
+            let rs = render::RenderSettings { width, height, spp: 4, reference_spp: 64, seed };
+            let dir = render::cached(gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
+            Ok(scene::load(&dir, request)?)
+        })
+        .collect()
+}
 
 /// `bench --frames SIZES`: whole frames only, from a 256² render of
 /// glossy-floor tiled to each size.
@@ -63,19 +76,14 @@ pub(crate) fn bench_frames(
     let gpu = gpu::Gpu::open(&env.adapter)?;
     let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
     eprintln!("bench     whole frames on {}", gpu.describe());
-    let d = render::builtin("glossy-floor").expect("built in")?;
     let mut features: std::collections::BTreeSet<lang::Feature> =
         methods.iter().flat_map(|m| m.expr.features()).collect();
     features.extend(methods.iter().flat_map(|m| m.pipeline.features()));
     let variances = methods.iter().flat_map(|m| m.expr.stored_variables()).collect();
     let request = scene::Request { features, variances, reference: true, albedo: true, ..Default::default() };
-    let renders = (0..SEQUENCE_RENDERS)
-        .map(|seed| {
-            let rs = render::RenderSettings { width: 256, height: 256, spp: 4, reference_spp: 64, seed };
-            let dir = render::cached(&gpu, &env.cache, &d, &rs, &mut |_, _| {})?;
-            Ok(scene::load(&dir, &request)?)
-        })
-        .collect::<Result<Vec<_>>>()?;
+    // Only a temporal filter's frames read more than one render.
+    let count = if methods.iter().any(|m| m.pipeline.is_temporal()) { SEQUENCE_RENDERS } else { 1 };
+    let renders = bench_renders(env, &gpu, (256, 256), count, &request)?;
     let sizes: Vec<(usize, usize)> = sizes.iter().map(|&(w, h)| (w as usize, h as usize)).collect();
     let mut progress = |what: &str| eprintln!("          {what}");
     let settings = filterjit::bench::FramesSettings { sizes: &sizes, repeats, scratch: &env.scratch };

@@ -17,8 +17,8 @@ pub struct Request {
     pub backends: wgpu::Backends,
     pub name: Option<String>,
     /// On a software device, ask the C library to keep freed images for the
-    /// next frame's (`gpu::host_memory`); false where the user set its own
-    /// knobs (`MALLOC_MMAP_THRESHOLD_`, `MALLOC_TRIM_THRESHOLD_`, `GLIBC_TUNABLES`).
+    /// next frame's (`gpu::host_memory`); false where the user set one of its
+    /// own knobs (`environment::MALLOC_KNOBS`).
     pub keep_freed_images: bool,
 }
 
