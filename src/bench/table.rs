@@ -190,8 +190,5 @@ pub fn frames_table(frames: &[super::FrameResult]) -> String {
             f.light.map_or("-".into(), |v| format!("{v:.3}")),
         );
     }
-    if !frames.iter().any(|f| f.compile_ms.is_none()) {
-        t += "  (OIDN's oidnDenoise not found: FILTERJIT_OIDN, PATH or `pip install pyoidn`)\n";
-    }
     t
 }

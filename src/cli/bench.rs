@@ -3,6 +3,23 @@
 
 use super::*;
 
+/// OIDN, the peer every table compares with, unless `--no-oidn` leaves it
+/// out; where it is missing the table's OIDN columns stay empty, and this
+/// says why (left out, or where it was looked for).
+fn peer(env: &Environment, no_oidn: bool) -> Option<filterjit::oidn::Oidn> {
+    if no_oidn {
+        eprintln!("          OIDN left out (--no-oidn): no OIDN row or ratio");
+        return None;
+    }
+    match filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()) {
+        Ok(oidn) => Some(oidn),
+        Err(why) => {
+            eprintln!("          OIDN not measured: {why}");
+            None
+        }
+    }
+}
+
 pub(crate) fn bench(
     env: &Environment,
     size: (u32, u32),
@@ -11,7 +28,7 @@ pub(crate) fn bench(
     output: &Path,
 ) -> Result<()> {
     let gpu = gpu::Gpu::open(&env.adapter)?;
-    let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
+    let peer = peer(env, no_oidn);
     let request = scene::Request {
         features: lang::Feature::ALL.iter().copied().collect(),
         variances: lang::ScalarVar::ALL.iter().copied().collect(),
@@ -74,7 +91,7 @@ pub(crate) fn bench_frames(
             .collect::<Result<_>>()?,
     };
     let gpu = gpu::Gpu::open(&env.adapter)?;
-    let peer = if no_oidn { None } else { filterjit::oidn::Oidn::find(env.oidn.as_deref(), env.path.as_deref()).ok() };
+    let peer = peer(env, no_oidn);
     eprintln!("bench     whole frames on {}", gpu.describe());
     let mut features: std::collections::BTreeSet<lang::Feature> =
         methods.iter().flat_map(|m| m.expr.features()).collect();
