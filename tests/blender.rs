@@ -128,12 +128,13 @@ fn a_blender_file_with_other_layers_or_passes_is_named_in_the_error() {
     assert!(!ok && stderr.contains(dark.to_str().unwrap()) && stderr.contains("Combined.R"), "{stderr}");
 }
 
-/// Today's Blender renders a short sequence whose camera climbs as it
-/// slides (`render_cycles.py -- colonnade-climb`, 3 frames at 48², 16 spp:
-/// seconds): its Vector pass, read as filterjit reads it (x right, y up),
-/// moves the frame before's albedo onto the frame's, and read with y down
-/// does not; and the sequence filters end to end with no flag. Runs where
-/// `blender` is on PATH; CI installs it and requires it.
+/// Today's Blender renders short sequences (`render_cycles.py`, 3 frames at
+/// 48² and 128², 16 spp: seconds each): `colonnade-climb`, whose camera climbs as it
+/// slides, and `study`, whose camera dollies in at an angle past a moving
+/// object. Each one's Vector pass, read as filterjit reads it (x right, y
+/// up), moves the frame before's albedo onto the frame's, and read with y
+/// down does not; and each sequence filters end to end with no flag. Runs
+/// where `blender` is on PATH; CI installs it and requires it.
 #[test]
 fn blenders_vector_pass_reads_y_up_on_a_sequence_rendered_today() {
     let found = Command::new("blender").arg("--version").output().is_ok_and(|o| o.status.success());
@@ -147,16 +148,23 @@ fn blenders_vector_pass_reads_y_up_on_a_sequence_rendered_today() {
         );
         return;
     }
-    let dir = temp_dir("blender", "sequence");
+    // The study's dolly moves its pixels less than a pixel a frame at 48².
+    for (scene, side) in [("colonnade-climb", "48"), ("study", "128")] {
+        vector_pass_reads_y_up(scene, side);
+    }
+}
+
+fn vector_pass_reads_y_up(scene: &str, side: &str) {
+    let dir = temp_dir("blender", &format!("{scene}-sequence"));
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/blender/render_cycles.py");
     let noisy = dir.join("noisy");
     let o = Command::new("blender")
         .args(["-b", "--factory-startup", "-noaudio", "-P"])
         .arg(&script)
         .arg("--")
-        .arg("colonnade-climb")
+        .arg(scene)
         .arg(&noisy)
-        .args(["16", "7", "48", "3"])
+        .args(["16", "7", side, "3"])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
@@ -169,15 +177,15 @@ fn blenders_vector_pass_reads_y_up_on_a_sequence_rendered_today() {
         let moved = crate::temporal::moved_difference((a0, a1), &pair[1], [1.0, 1.0]);
         let down = crate::temporal::moved_difference((a0, a1), &pair[1], [1.0, -1.0]);
         let still = crate::temporal::moved_difference((a0, a1), &pair[1], [0.0, 0.0]);
-        eprintln!("{}: moved {moved:.4}, with y down {down:.4}, still {still:.4}", pair[1].name);
+        eprintln!("{scene} {}: moved {moved:.4}, with y down {down:.4}, still {still:.4}", pair[1].name);
         assert!(
             moved < 0.8 * down && moved < 0.8 * still,
-            "{}: moved {moved}, y down {down}, still {still}",
+            "{scene} {}: moved {moved}, y down {down}, still {still}",
             pair[1].name
         );
     }
     let out = dir.join("out");
     let o = filterjit(&["filter", noisy.to_str().unwrap(), "-o", out.to_str().unwrap()]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(out.join("frame_0003.exr").is_file() && out.join("animation.png").is_file());
+    assert!(out.join("frame_0003.exr").is_file() && out.join("animation.png").is_file(), "{scene}");
 }

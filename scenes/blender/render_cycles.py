@@ -1,7 +1,9 @@
 # Blender Cycles renders of a test scene, one frame or an animated sequence. Run inside Blender:
 #   blender -b --factory-startup -noaudio -P render_cycles.py -- SCENE OUT SPP SEED RES [FRAMES]
 # SCENE: colonnade, or colonnade-climb (the same arcade, the camera climbing as it slides: motion vectors
-# with a vertical part, whose sign tests/blender.rs checks). Add your own scenes beside them. Output: OpenEXR MultiLayer with Combined and the Denoising Data
+# with a vertical part, whose sign tests/blender.rs checks), or study (a room lit by one area light and what
+# bounces, the camera dollying in at an angle, a rough-metal head moving across a textured desk; another
+# sequence to judge temporal filters by). Add your own scenes beside them. Output: OpenEXR MultiLayer with Combined and the Denoising Data
 # passes (Denoising Albedo/Normal/Depth) plus Normal, Depth and Position, as a Blender user writes them.
 # With FRAMES > 1 the scene is animated (camera and one object move), OUT is a folder, frames are written as
 # OUT/frame_0001.exr ... with the Vector (motion) pass, and each frame has its own noise (animated seed).
@@ -87,12 +89,36 @@ if scene_name in ('colonnade', 'colonnade-climb'):
     sun.rotation_euler = (math.radians(50), 0, math.radians(-25))
     world((0.5, 0.65, 1.0), 0.8)
     camera((-0.9, -4.5, 1.4), (0.0, 2.0, 1.0), lens=28)
+elif scene_name == 'study':
+    # a room lit from above by one area light, most of the light indirect; a wooden-looking desk, a striped
+    # rug, a rough-metal head moving across the desk, a glossy vase; the camera dollies in at an angle
+    box('floor', (0, 0, -0.05), (4, 4, 0.05), material('floor', (0.55, 0.35, 0.2), 0.4, tex='noise', scale=14))
+    box('back', (0, 2.5, 1.5), (4, 0.05, 1.5), material('back', (0.75, 0.75, 0.7), 0.9))
+    box('left', (-2.5, 0, 1.5), (0.05, 4, 1.5), material('left', (0.6, 0.2, 0.15), 0.9))
+    box('right', (2.5, 0, 1.5), (0.05, 4, 1.5), material('right', (0.2, 0.35, 0.6), 0.9))
+    box('ceiling', (0, 0, 3.05), (4, 4, 0.05), material('ceiling', (0.8, 0.8, 0.8), 0.9))
+    box('rug', (0.3, 0.6, 0.01), (1.4, 0.9, 0.01), material('rug', (0.8, 0.7, 0.3), 0.9, tex='checker', scale=18))
+    box('desk', (0.0, 1.2, 0.75), (1.3, 0.5, 0.04), material('desk', (0.5, 0.3, 0.15), 0.35, tex='noise', scale=30))
+    for x in (-1.2, 1.2):
+        box('leg', (x, 1.2, 0.37), (0.05, 0.45, 0.37), material('leg', (0.2, 0.2, 0.22), 0.3, metal=1.0))
+    bpy.ops.mesh.primitive_monkey_add(size=0.45, location=(-0.9, 1.1, 1.05), rotation=(0, 0, math.radians(200)))
+    head = bpy.context.object; head.name = 'Head'
+    head.data.materials.append(material('head', (0.95, 0.75, 0.45), 0.3, metal=1.0))
+    bpy.ops.object.shade_smooth()
+    bpy.ops.mesh.primitive_cylinder_add(radius=0.15, depth=0.5, location=(0.8, 1.3, 1.04), vertices=48)
+    bpy.context.object.data.materials.append(material('vase', (0.1, 0.3, 0.25), 0.15))
+    bpy.ops.object.shade_smooth()
+    bpy.ops.object.light_add(type='AREA', location=(0.6, 0.4, 2.95)); lamp = bpy.context.object
+    lamp.data.energy = 250.0; lamp.data.size = 0.6
+    world((0.02, 0.02, 0.03), 1.0)
+    camera((-1.6, -2.2, 1.6), (0.2, 1.4, 0.9), lens=24)
 else:
     raise SystemExit(f'unknown scene {scene_name}')
 
 # the animation: the camera moves 0.06 units a frame (plus the scene's own object), frames 1..FRAMES
 MOVES = {'colonnade': ((0.09, 0.0, 0.0), 'Sphere', (0.12, -0.03, 0.0)),
-         'colonnade-climb': ((0.06, 0.0, 0.08), 'Sphere', (0.12, -0.03, 0.0))}
+         'colonnade-climb': ((0.06, 0.0, 0.08), 'Sphere', (0.12, -0.03, 0.0)),
+         'study': ((0.04, 0.07, -0.01), 'Head', (0.1, 0.0, 0.0))}
 if frames > 1:
     cam_step, mover, obj_step = MOVES[scene_name]
     cam = sc.camera; obj = bpy.data.objects[mover]
