@@ -276,10 +276,39 @@ pub const TEMPORAL_MAX_ALPHA: f32 = 1.0;
 /// emitter's (or a void's). A history sample and a pixel see the same
 /// surface only where both are black or neither is: an emitter sliding over
 /// a wall it lies flat on leaves light whose demodulated value is ten times
-/// its own behind, though depth and normal agree. Any other albedos mix,
-/// so that a texture's edges are averaged over the pixel's samples of many
-/// frames, as the reference averages them.
+/// its own behind, though depth and normal agree. Other albedos mix, so
+/// that a texture's edges are averaged over the pixel's samples of many
+/// frames, as the reference averages them, except where an emitter's edge
+/// gives itself away ([`TEMPORAL_ALIKE_ALBEDO`]).
 pub const TEMPORAL_BLACK_ALBEDO: f64 = 0.05;
+
+/// Two albedos are alike when the smaller of their luminances is at least
+/// this share of the larger ([`alike_albedo`]). A pixel partly covered by an
+/// emitter has a darker albedo than the surface around it (the emitter's
+/// samples are black) and, demodulated, the emitter's light divided by the
+/// surface's albedo: tens of times the surface's own. Only neighbours of
+/// alike albedo lend a pixel their history (the wider search) or count in
+/// its spatial variance; on the built-in moving light their light leaked
+/// into the ceiling the emitter had left (docs/JOURNAL.md, "Emitters' edges
+/// in the history").
+pub const TEMPORAL_ALIKE_ALBEDO: f64 = 0.8;
+
+/// A bilinear history tap whose albedo is not alike the pixel's is still
+/// taken where the history's luminance there is at most this many times the
+/// pixel's own, plus [`TEMPORAL_UNLIKE_SLACK`]: a texture's edge (whose
+/// demodulated light is the surface's on both sides) keeps its history, an
+/// emitter's edge (whose demodulated light is the emitter's) does not.
+pub const TEMPORAL_UNLIKE_LIGHT: f64 = 8.0;
+
+/// See [`TEMPORAL_UNLIKE_LIGHT`]: what a dark pixel's bound starts from.
+pub const TEMPORAL_UNLIKE_SLACK: f64 = 0.01;
+
+/// Whether albedos `a` and `b` are alike: the smaller luminance at least
+/// [`TEMPORAL_ALIKE_ALBEDO`] of the larger (two black ones are alike).
+pub fn alike_albedo(a: [f64; 3], b: [f64; 3]) -> bool {
+    let (la, lb) = (luminance(a), luminance(b));
+    la.min(lb) >= TEMPORAL_ALIKE_ALBEDO * la.max(lb)
+}
 
 /// A pixel's surface as the history's test compares it: the normal's
 /// direction (unit, or zero: no surface, the sky), the depth and the albedo

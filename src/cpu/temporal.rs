@@ -81,17 +81,30 @@ pub fn accumulate(
         for x in 0..w {
             let i = (y * w + x) as usize;
             let at = surface(motion, i);
+            let l = luminance[i];
             let taken = history.and_then(|history| {
-                let same = |xj: i64, yj: i64| {
-                    inside(xj, yj, w, h) && {
-                        let j = (yj * w + xj) as usize;
-                        pipeline::same_surface(surface_of(history.surface[j], history.albedo[j]), at)
+                // Tap (xj, yj) of the frame before: whether it sees p's
+                // surface, and whether its albedo is alike p's.
+                let seen = |xj: i64, yj: i64| {
+                    if !inside(xj, yj, w, h) {
+                        return None;
                     }
+                    let j = (yj * w + xj) as usize;
+                    let s = surface_of(history.surface[j], history.albedo[j]);
+                    pipeline::same_surface(s, at).then(|| (j, pipeline::alike_albedo(s.albedo, at.albedo)))
                 };
-                reproject(history, motion.vectors[i], (x, y), same)
+                let bilinear = |xj: i64, yj: i64| {
+                    seen(xj, yj).is_some_and(|(j, alike)| {
+                        alike || {
+                            let past = pipeline::luminance(history.color[j].map(f64::from));
+                            past <= pipeline::TEMPORAL_UNLIKE_LIGHT * l + pipeline::TEMPORAL_UNLIKE_SLACK
+                        }
+                    })
+                };
+                let wider = |xj: i64, yj: i64| seen(xj, yj).is_some_and(|(_, alike)| alike);
+                reproject(history, motion.vectors[i], (x, y), bilinear, wider)
             });
             let d = color[i].map(f64::from);
-            let l = luminance[i];
             let mut before = taken.as_ref().map_or(0.0, |t| t.moments[3]);
             // The history's test: where its light is off the frame's, it is cut to one frame.
             if let (Some(kappa), Some(t)) = (temporal.antilag, &taken) {
@@ -225,15 +238,16 @@ fn inside(x: i64, y: i64, w: i64, h: i64) -> bool {
 }
 
 /// The history at pixel (`x`, `y`) moved by `vector`: the bilinear taps
-/// around where the pixel was that see its surface (`same`), weighted and
+/// around where the pixel was that qualify (`bilinear`), weighted and
 /// renormalised; where they hold less than `TEMPORAL_MIN_FOOTPRINT` of the
-/// footprint, the mean of the 3×3 taps around the nearest pixel that do
-/// (SVGF's wider search); else none.
+/// footprint, the mean of the 3×3 taps around the nearest pixel that
+/// qualify for it (`wider`: SVGF's wider search); else none.
 fn reproject(
     history: &History,
     vector: [f32; 2],
     (x, y): (i64, i64),
-    same: impl Fn(i64, i64) -> bool,
+    bilinear: impl Fn(i64, i64) -> bool,
+    wider: impl Fn(i64, i64) -> bool,
 ) -> Option<Taken> {
     let w = history.width as i64;
     // In f32, as on the device: the same floor, the same taps.
@@ -262,7 +276,7 @@ fn reproject(
     for dy in 0..2 {
         for dx in 0..2 {
             let (xj, yj) = (x0 + dx, y0 + dy);
-            if same(xj, yj) {
+            if bilinear(xj, yj) {
                 let weight = if dx == 1 { fx } else { 1.0 - fx } * if dy == 1 { fy } else { 1.0 - fy };
                 add(&mut sums, weight, (yj * w + xj) as usize);
                 total.add(weight);
@@ -278,7 +292,7 @@ fn reproject(
     for dy in -1..=1 {
         for dx in -1..=1 {
             let (xj, yj) = (cx + dx, cy + dy);
-            if same(xj, yj) {
+            if wider(xj, yj) {
                 add(&mut sums, 1.0, (yj * w + xj) as usize);
                 count += 1.0;
             }
@@ -318,14 +332,20 @@ fn neighbourhood(color: &[[f32; 3]], x: i64, y: i64, w: i64, h: i64) -> ([f64; 3
 }
 
 /// The variance of the luminance over the (2R+1)² pixels around (`x`, `y`)
-/// that see its surface (R = `TEMPORAL_VARIANCE_RADIUS`): a history too
-/// short for its moments (SVGF's spatial estimate).
+/// that see its surface with an albedo alike its own (R =
+/// `TEMPORAL_VARIANCE_RADIUS`): a history too short for its moments (SVGF's
+/// spatial estimate).
 fn spatial_variance(luminance: &[f64], motion: &Motion, x: i64, y: i64, w: i64, h: i64) -> f64 {
     let at = surface(motion, (y * w + x) as usize);
     let r = pipeline::TEMPORAL_VARIANCE_RADIUS as i64;
     let taps: Vec<f64> = (-r..=r)
         .flat_map(|dy| (-r..=r).map(move |dx| (x + dx, y + dy)))
-        .filter(|&(xj, yj)| inside(xj, yj, w, h) && pipeline::same_surface(surface(motion, (yj * w + xj) as usize), at))
+        .filter(|&(xj, yj)| {
+            inside(xj, yj, w, h) && {
+                let s = surface(motion, (yj * w + xj) as usize);
+                pipeline::same_surface(s, at) && pipeline::alike_albedo(s.albedo, at.albedo)
+            }
+        })
         .map(|(xj, yj)| luminance[(yj * w + xj) as usize])
         .collect();
     let n = taps.len() as f64;
@@ -406,6 +426,42 @@ mod tests {
                 assert_eq!(second.length[y * w + x], if fresh { 1.0 } else { 2.0 }, "({x}, {y})");
             }
         }
+    }
+
+    /// A wall an emitter slid off: in the frame before, pixel 0 was the
+    /// emitter's edge (its albedo a quarter of the wall's, its demodulated
+    /// light the emitter's over that albedo) and pixel 1 a texture's darker
+    /// side (a fifth of the wall's albedo, the wall's light). Now both see
+    /// the plain wall: the texture's edge keeps its history; the emitter's
+    /// edge lends none, and the wider search takes the wall's around it.
+    #[test]
+    fn an_emitters_edge_lends_no_history_where_a_textures_edge_does() {
+        let (w, h) = (6, 3);
+        let (mut before, mut motion) = still(w, h, 0.3);
+        let wall = [0.75, 0.75, 0.75, 0.0];
+        motion.albedo = vec![wall; w * h];
+        let edge = w + 1;
+        let texture = w + 4;
+        motion.albedo[edge] = [0.19, 0.19, 0.19, 0.0];
+        before[edge] = [40.0; 3];
+        motion.albedo[texture] = [0.15, 0.15, 0.15, 0.0];
+        let first = accumulate(stage(0.2), &before, &motion, w, h, None);
+        let history = keep(&first, first.color.clone(), &motion, w, h);
+        let now = Motion { albedo: vec![wall; w * h], ..motion.clone() };
+        let (wall_light, _) = still(w, h, 0.3);
+        let second = accumulate(stage(0.2), &wall_light, &now, w, h, Some(&history));
+        assert_eq!(second.length[texture], 2.0, "a texture's edge keeps its history");
+        assert_eq!(second.length[edge], 2.0, "the wall around the emitter's edge lends it its history");
+        for (i, c) in second.color.iter().enumerate() {
+            assert!((c[0] - 0.3).abs() < 1e-6, "pixel {i}: {c:?}: the emitter's light leaked");
+        }
+        // Without the tests of the albedo, the emitter's light is the edge's history.
+        let mut unlike = motion.clone();
+        unlike.albedo[edge] = [0.7, 0.7, 0.7, 0.0];
+        let first = accumulate(stage(0.2), &before, &unlike, w, h, None);
+        let history = keep(&first, first.color.clone(), &unlike, w, h);
+        let leaked = accumulate(stage(0.2), &wall_light, &now, w, h, Some(&history));
+        assert!(leaked.color[edge][0] > 10.0, "{:?}", leaked.color[edge]);
     }
 
     #[test]
