@@ -241,6 +241,9 @@ fn the_web_module_filters_a_sequence_as_filter_does() {
     let out = dir.join("filtered");
     let o = Command::new(bin).arg("filter").arg(&noisy).arg("-o").arg(&out).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // Where `filter` runs on llvmpipe through GL, its short history's window takes a few taps
+    // differently from the Vulkan drivers' (2.6e-4 in a first frame; tests/export.rs says more).
+    let tolerance = if crate::common::gpu().info().backend == wgpu::Backend::Gl { 1e-3 } else { TOLERANCE };
     for (k, frame) in sequence.frames.iter().enumerate() {
         let expected =
             scene::exr_io::read_channels(&out.join(frame.path.file_name().unwrap()), &["R", "G", "B"]).unwrap();
@@ -254,10 +257,7 @@ fn the_web_module_filters_a_sequence_as_filter_does() {
         }
         eprintln!("frame {}: the web module on SwiftShader against filter: {worst:.2e}", k + 1);
         // Measured: 5.4e-7 at worst over the three frames; the history carries a frame's last bits into
-        // the next, so a sequence meets the same tolerance as one frame only while it is short. Where
-        // `filter` runs on llvmpipe through GL, its short history's window takes a few taps differently
-        // X
-        let tolerance = if crate::common::gpu().info().backend == wgpu::Backend::Gl { 1e-3 } else { TOLERANCE };
+        // the next, so a sequence meets the same tolerance as one frame only while it is short.
         assert!(worst < tolerance, "frame {}: the web module differs from filter by {worst:e}", k + 1);
     }
 }

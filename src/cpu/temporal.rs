@@ -428,10 +428,10 @@ mod tests {
         }
     }
 
-    /// A wall an emitter slid off: in the frame before, pixel 0 was the
+    /// A wall an emitter slid off: in the frame before, pixel `edge` was the
     /// emitter's edge (its albedo a quarter of the wall's, its demodulated
-    /// light the emitter's over that albedo) and pixel 1 a texture's darker
-    /// side (a fifth of the wall's albedo, the wall's light). Now both see
+    /// light the emitter's over that albedo) and pixel `texture` a texture's
+    /// darker side (a fifth of the wall's albedo, the wall's light). Now both see
     /// the plain wall: the texture's edge keeps its history; the emitter's
     /// edge lends none, and the wider search takes the wall's around it.
     #[test]
