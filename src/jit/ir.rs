@@ -332,6 +332,7 @@ impl Builder {
     fn range(&self, operand: Operand) -> Range {
         match operand {
             Operand::Literal(bits) => Range::literal(f32::from_bits(bits) as f64),
+            Operand::Var(ScalarVar::Level) => Range::level(),
             Operand::Var(_) => Range::ANY,
             Operand::Value(k) => self.ranges[k],
         }
@@ -483,6 +484,25 @@ mod tests {
         assert_eq!(result, "_e3");
         // The sum of two non-negative terms never tiny needs only `min`: no `fj_add`.
         assert_eq!(b.helpers(), ["fj_distance1", "fj_distance2sq", "fj_flush_pos"].map(String::from).into());
+    }
+
+    #[test]
+    fn the_pass_level_is_a_small_whole_number() {
+        // A first pass picked out by `exp(-20 * level)` keeps the weight's colour scale positive,
+        // so the weight's exponent is provably non-positive and takes the guard-free exp.
+        let b = body(
+            "exp(-(distance1(color) / ((4 - exp(-20 * level)) * sqrt(colorVariance) + 0.001)))",
+            LowerOptions::ALL,
+        );
+        assert!(b.insts.iter().any(|i| matches!(i.op, Op::ExpNonPositive(..))), "{b:?}");
+        let b = body(
+            "exp(-(distance1(color) / ((4 - exp(-20 * texVariance)) * sqrt(colorVariance) + 0.001)))",
+            LowerOptions::ALL,
+        );
+        assert!(
+            b.insts.iter().all(|i| !matches!(i.op, Op::ExpNonPositive(..))),
+            "a raw variance can be anything: {b:?}"
+        );
     }
 
     #[test]

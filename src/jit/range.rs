@@ -58,6 +58,12 @@ impl Range {
     /// Any result of `fin`.
     const FINITE: Range = Range { lo: -BIG, hi: BIG, floor: TINY };
 
+    /// The à-trous pass `level`: a whole number, 0 up to the last pass the
+    /// longest pipeline runs (0 in the window form and in fitness kernels).
+    pub fn level() -> Range {
+        Range { lo: 0.0, hi: (crate::pipeline::MAX_ATROUS_PASSES - 1) as f64, floor: 1.0 }
+    }
+
     /// A literal's f32 value.
     pub fn literal(value: f64) -> Range {
         Range { lo: value, hi: value, floor: if value == 0.0 { f64::INFINITY } else { value.abs() } }
