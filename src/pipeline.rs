@@ -262,12 +262,13 @@ pub const TEMPORAL_MAX_HISTORY: f64 = 255.0;
 pub const TEMPORAL_SHORT_HISTORY: f64 = 4.0;
 
 /// The spatial variance estimate's neighbourhood: (2R+1)² pixels. SVGF's
-/// 7×7 (R = 3) gave the same errors on the public and built-in sequences as
-/// this 5×5, at a third more of the stage's time: a history test cuts a few
-/// per cent of the pixels every frame, and a SIMD group with one of them
-/// pays for the window on every lane (docs/JOURNAL.md, "A 5×5 window for a
-/// short history").
-pub const TEMPORAL_VARIANCE_RADIUS: i32 = 2;
+/// 7×7 (R = 3) and a 5×5 gave the same errors on the two Cycles and five
+/// built-in sequences as this 3×3, at a third and a sixth more of the
+/// stage's time: a history test cuts a few per cent of the pixels every
+/// frame, and a SIMD group with one of them pays for the window on every
+/// lane (docs/JOURNAL.md, "A 5×5 window for a short history", "A 3×3 window
+/// for a short history").
+pub const TEMPORAL_VARIANCE_RADIUS: i32 = 1;
 
 /// The largest α_min: a history that forgets faster than this is no history.
 pub const TEMPORAL_MAX_ALPHA: f32 = 1.0;

@@ -241,11 +241,6 @@ fn the_web_module_filters_a_sequence_as_filter_does() {
     let out = dir.join("filtered");
     let o = Command::new(bin).arg("filter").arg(&noisy).arg("-o").arg(&out).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // Where `filter` runs on llvmpipe through GL, its short history's window takes one tap
-    // differently from the Vulkan drivers' (2.6e-4 in a first frame): an albedo pair at the
-    // alike test's ratio to the last bit, which a fused multiply-add rounds the other way
-    // (tests/export.rs says more).
-    let tolerance = if crate::common::gpu().info().backend == wgpu::Backend::Gl { 1e-3 } else { TOLERANCE };
     for (k, frame) in sequence.frames.iter().enumerate() {
         let expected =
             scene::exr_io::read_channels(&out.join(frame.path.file_name().unwrap()), &["R", "G", "B"]).unwrap();
@@ -260,7 +255,7 @@ fn the_web_module_filters_a_sequence_as_filter_does() {
         eprintln!("frame {}: the web module on SwiftShader against filter: {worst:.2e}", k + 1);
         // Measured: 5.4e-7 at worst over the three frames; the history carries a frame's last bits into
         // the next, so a sequence meets the same tolerance as one frame only while it is short.
-        assert!(worst < tolerance, "frame {}: the web module differs from filter by {worst:e}", k + 1);
+        assert!(worst < TOLERANCE, "frame {}: the web module differs from filter by {worst:e}", k + 1);
     }
 }
 
