@@ -428,10 +428,11 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
             // frames). Where a test at a threshold meets a pair of values at it to the last bit, one
             // ulp decides it, and the two programs may decide it apart: the short history's 5×5
             // window did, at (x, y) = (13, 36) and (15, 35) of the committed crop's first frame, whose
-            // albedo luminances 0.3031752 and 0.37896898 are 0.8 apart to the last bit
+            // albedo luminances 0.3031752 and 0.37896898 are in the ratio 0.8 to the last bit
             // (`TEMPORAL_ALIKE_ALBEDO`; the luminance's multiply-adds fused say "alike", unfused
             // "unlike"), and GL's two programs differed by 2.6e-4 around them. The 3×3 window
-            // keeps them apart (docs/JOURNAL.md, "Why GL's first frame differs").
+            // keeps them apart (docs/JOURNAL.md, "The colour term's σ on seven sequences", its
+            // last paragraph).
             assert!(error <= 5e-6, "{text}, frame {}: the export differs from filter by {error:e}", k + 1);
             last = ours;
         }

@@ -332,7 +332,7 @@ impl Builder {
     fn range(&self, operand: Operand) -> Range {
         match operand {
             Operand::Literal(bits) => Range::literal(f32::from_bits(bits) as f64),
-            Operand::Var(ScalarVar::Level) => Range::level(),
+            Operand::Var(ScalarVar::Level) => Range::LEVEL,
             Operand::Var(_) => Range::ANY,
             Operand::Value(k) => self.ranges[k],
         }

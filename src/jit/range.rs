@@ -60,9 +60,7 @@ impl Range {
 
     /// The à-trous pass `level`: a whole number, 0 up to the last pass the
     /// longest pipeline runs (0 in the window form and in fitness kernels).
-    pub fn level() -> Range {
-        Range { lo: 0.0, hi: (crate::pipeline::MAX_ATROUS_PASSES - 1) as f64, floor: 1.0 }
-    }
+    pub const LEVEL: Range = Range { lo: 0.0, hi: (crate::pipeline::MAX_ATROUS_PASSES - 1) as f64, floor: 1.0 };
 
     /// A literal's f32 value.
     pub fn literal(value: f64) -> Range {
