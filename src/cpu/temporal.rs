@@ -273,6 +273,7 @@ fn reproject(
     };
     let mut sums: Sums = Default::default();
     let mut total = Neumaier::default();
+    let mut qualified = 0;
     for dy in 0..2 {
         for dx in 0..2 {
             let (xj, yj) = (x0 + dx, y0 + dy);
@@ -280,11 +281,16 @@ fn reproject(
                 let weight = if dx == 1 { fx } else { 1.0 - fx } * if dy == 1 { fy } else { 1.0 - fy };
                 add(&mut sums, weight, (yj * w + xj) as usize);
                 total.add(weight);
+                qualified += 1;
             }
         }
     }
     if total.total() > pipeline::TEMPORAL_MIN_FOOTPRINT {
-        return Some(taken(sums, total.total()));
+        let mut taken = taken(sums, total.total());
+        if qualified == 4 {
+            taken.modulation = sharp_modulation(history, (x0, y0), (fx, fy));
+        }
+        return Some(taken);
     }
     let (cx, cy) = ((qx + 0.5).floor() as i64, (qy + 0.5).floor() as i64);
     let mut sums: Sums = Default::default();
@@ -299,6 +305,44 @@ fn reproject(
         }
     }
     (count > 0.0).then(|| taken(sums, count))
+}
+
+/// The Catmull-Rom spline's weights for the four texels around a fraction `t`.
+fn catmull_rom(t: f64) -> [f64; 4] {
+    [
+        0.5 * (((2.0 - t) * t - 1.0) * t),
+        0.5 * ((3.0 * t - 5.0) * t * t + 2.0),
+        0.5 * (((4.0 - 3.0 * t) * t + 1.0) * t),
+        0.5 * ((t - 1.0) * t * t),
+    ]
+}
+
+/// The history's modulation at (`x0` + `fx`, `y0` + `fy`), where all four
+/// bilinear taps qualify: the Catmull-Rom spline over the 4×4 texels around
+/// it (their positions held to the image), each channel held to the range
+/// of the four bilinear taps it replaces. Resampled bilinearly every frame,
+/// a texture's edge would blur a little more each time, and the modulation
+/// is what the form's result is multiplied back by (docs/JOURNAL.md, "A
+/// sharp history for the modulation").
+fn sharp_modulation(history: &History, (x0, y0): (i64, i64), (fx, fy): (f64, f64)) -> [f64; 3] {
+    let (w, h) = (history.width as i64, history.height as i64);
+    let at = |xj: i64, yj: i64| history.modulation[(yj.clamp(0, h - 1) * w + xj.clamp(0, w - 1)) as usize];
+    let (wx, wy) = (catmull_rom(fx), catmull_rom(fy));
+    let mut sums: [Neumaier; 3] = Default::default();
+    for (j, weight_y) in wy.iter().enumerate() {
+        for (i, weight_x) in wx.iter().enumerate() {
+            let m = at(x0 + i as i64 - 1, y0 + j as i64 - 1);
+            for (s, c) in sums.iter_mut().zip(m) {
+                s.add(weight_x * weight_y * c as f64);
+            }
+        }
+    }
+    let inner = [(0, 0), (1, 0), (0, 1), (1, 1)].map(|(dx, dy)| at(x0 + dx, y0 + dy));
+    [0, 1, 2].map(|k| {
+        let lowest = inner.iter().map(|m| m[k] as f64).fold(f64::INFINITY, f64::min);
+        let highest = inner.iter().map(|m| m[k] as f64).fold(f64::NEG_INFINITY, f64::max);
+        sums[k].total().clamp(lowest, highest)
+    })
 }
 
 /// The mean of the luminance over the 3×3 pixels around (`x`, `y`) inside
@@ -462,6 +506,36 @@ mod tests {
         let history = keep(&first, first.color.clone(), &unlike, w, h);
         let leaked = accumulate(stage(0.2), &wall_light, &now, w, h, Some(&history));
         assert!(leaked.color[edge][0] > 10.0, "{:?}", leaked.color[edge]);
+    }
+
+    /// A texture's edge moved a quarter pixel: the history's modulation is
+    /// the Catmull-Rom spline's, sharper than the bilinear taps' mean, and
+    /// held to their range where the spline would ring.
+    #[test]
+    fn the_modulation_is_resampled_sharply_and_held_to_its_taps_range() {
+        let (w, h) = (8, 3);
+        let (color, mut motion) = still(w, h, 1.0);
+        // Albedo 0.2 left of x = 4, 0.8 from x = 4 on.
+        for (i, a) in motion.albedo.iter_mut().enumerate() {
+            let v = if i % w < 4 { 0.2 } else { 0.8 };
+            *a = [v, v, v, 0.0];
+        }
+        let first = accumulate(stage(0.2), &color, &motion, w, h, None);
+        let history = keep(&first, first.color.clone(), &motion, w, h);
+        // Pixel (4, 1) was at x = 3.25: taps x = 3 (0.2) and 4 (0.8).
+        let moved = Motion { vectors: vec![[-0.75, 0.0]; w * h], ..motion.clone() };
+        let second = accumulate(stage(0.2), &color, &moved, w, h, Some(&history));
+        let bilinear = 0.75 * 0.2 + 0.25 * 0.8;
+        let [w0, w1, w2, w3] = catmull_rom(0.25);
+        let spline = (w0 + w1) * 0.2 + (w2 + w3) * 0.8;
+        // The second frame of a history blends half and half.
+        let past = (second.modulation[w + 4][0] as f64 - 0.5 * 0.8) / 0.5;
+        assert!((past - spline).abs() < 1e-6, "{past} against the spline's {spline} (bilinear {bilinear})");
+        assert!(spline < bilinear - 0.02);
+        // Beside the edge (x = 2 was at 1.25, between 0.2 and 0.2) the spline would
+        // reach below 0.2 (its lobe over x = 3.. holds 0.8 above): held to 0.2.
+        let beside = (second.modulation[w + 2][0] as f64 - 0.5 * 0.2) / 0.5;
+        assert!((beside - 0.2).abs() < 1e-6, "{beside}");
     }
 
     #[test]
