@@ -12,7 +12,7 @@ use crate::corpus;
 use crate::gpu::{Filtered, Gpu, SceneBuffers, TemporalState};
 use crate::jit;
 use crate::lang::{Expr, Feature, ScalarVar};
-use crate::pipeline::FilterPipeline;
+use crate::pipeline::{FilterPipeline, PixelFilter};
 use crate::scene::Scene;
 use crate::scene::{Holds, Needs, Request};
 
@@ -182,6 +182,28 @@ impl Choice {
             )),
             ..self
         })
+    }
+
+    /// This choice for frames whose renderer sampled every pixel at one
+    /// point (`point_sampled`: Cycles at one sample, `scene::point_sampled`),
+    /// the same point in every frame, while a reference integrates its
+    /// pixel filter: the pipeline ends with that filter
+    /// ([`PixelFilter::POINT_SAMPLED`]), unless the caller gave the pipeline
+    /// (`pipeline_given`) or it has one already. Why goes into
+    /// `chosen_because`, which then says so for a filter asked for too.
+    pub fn for_point_sampled(self, point_sampled: bool, pipeline_given: bool) -> Choice {
+        if !point_sampled || pipeline_given || self.pipeline.pixel_filter.is_some() {
+            return self;
+        }
+        let why = "then the pixel filter, as the frames sample each pixel at one point (Cycles at 1 sample)";
+        Choice {
+            pipeline: FilterPipeline { pixel_filter: Some(PixelFilter::POINT_SAMPLED), ..self.pipeline },
+            chosen_because: Some(match self.chosen_because {
+                Some(because) => format!("{because}; {why}"),
+                None => why.to_string(),
+            }),
+            ..self
+        }
     }
 
     /// The filter asked for, or else the best shipped one for what the

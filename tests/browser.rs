@@ -154,7 +154,8 @@ fn the_web_module_runs_an_exported_filter_as_filter_does() {
 /// The shipped temporal filter exported: `web/filterjit.js` in Chromium
 /// keeps the manifest's `history` from frame to frame and gives, frame after
 /// frame of the committed Cycles sequence, what `filterjit filter SEQ_DIR`
-/// writes; `reset()` starts the sequence again.
+/// writes (with the pixel filter its 1-sample frames get); `reset()` starts
+/// the sequence again.
 #[test]
 fn the_web_module_filters_a_sequence_as_filter_does() {
     if chromium("the_web_module_filters_a_sequence_as_filter_does").is_none() {
@@ -162,8 +163,11 @@ fn the_web_module_filters_a_sequence_as_filter_does() {
     }
     let dir = temp_dir("browser", "sequence");
     let bin = env!("CARGO_BIN_EXE_filterjit");
+    // As `filter` runs it on the committed frames, Cycles' at one sample: the pixel filter last.
+    let stored = corpus::resolve_with_pipeline("@temporal").unwrap().pipeline.unwrap();
+    let pipeline = format!("{stored},pixelfilter=0.4");
     let o = Command::new(bin)
-        .args(["export", "@temporal", "--format", "rgba32float", "-o"])
+        .args(["export", "@temporal", "--format", "rgba32float", "--pipeline", &pipeline, "-o"])
         .arg(dir.join("temporal.wgsl"))
         .output()
         .unwrap();
@@ -171,6 +175,7 @@ fn the_web_module_filters_a_sequence_as_filter_does() {
     let manifest: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("temporal.wgsl.json")).unwrap()).unwrap();
     assert!(manifest["temporal"].is_object() && manifest["history"].is_array(), "a temporal export");
+    assert!(manifest["pixelfilter"].is_object(), "the pixel filter, last");
 
     let noisy = crate::temporal::committed().join("noisy");
     let expr = corpus::resolve_with_pipeline("@temporal").unwrap().expr;

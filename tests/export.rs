@@ -165,6 +165,9 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         // `planefit` after the form: with the modulation divided out and multiplied back, and without.
         (named("evolvedAtrous64Surface"), "outliers=2.5,trim,keep=surface,demodulate,atrous=4,planefit=3"),
         (named("bilateral"), "atrous=2,planefit=2"),
+        // `pixelfilter`, last: after planefit's `fitted`, and after the form's `filtered`.
+        (named("bilateral"), "atrous=2,planefit=2,pixelfilter=0.6"),
+        (named("crossBilateral"), "outliers=2,demodulate,atrous=3,pixelfilter=0.3"),
         (parse_expr("exp(-(distance2(guide) * 2 + distance2(normal) * 4))").unwrap(), "atrous3x3=3"),
         (parse_expr("exp(-(distance2(guide, color) + distance2(pixel) / 8))").unwrap(), "window"),
         // What the outlier rule measured, from the exported pre-pass's packed `local` texture.
@@ -181,7 +184,8 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         let manifest = serde_json::to_value(&exported.manifest).unwrap();
         assert_eq!(
             exported.stage(StageName::Prepass).is_some(),
-            !["atrous=2", "atrous3x3=3", "window", "atrous=2,planefit=2"].contains(&text),
+            !["atrous=2", "atrous3x3=3", "window", "atrous=2,planefit=2", "atrous=2,planefit=2,pixelfilter=0.6"]
+                .contains(&text),
             "{text}: a pre-pass exactly where the pipeline has one"
         );
         let measures = ["localMean", "localStd", "clampedShare"];
@@ -210,6 +214,11 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
             exported.stage(StageName::PlaneFit).is_some(),
             text.contains("planefit"),
             "{text}: planefit exactly where it fits"
+        );
+        assert_eq!(
+            exported.stage(StageName::PixelFilter).is_some(),
+            text.contains("pixelfilter"),
+            "{text}: the pixel filter exactly where the pipeline has it"
         );
         let mut frame = frame_of(&scene, &manifest);
         frame
@@ -248,7 +257,8 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         assert!(error < 1e-4, "the exported `{text}` pipeline differs from filter by {error:e}");
         let passes = manifest["passes"].as_u64().unwrap();
         assert_eq!(passes, pipeline.passes() as u64);
-        let form = text.split(',').rfind(|stage| !stage.starts_with("planefit")).unwrap();
+        let form =
+            text.split(',').rfind(|stage| !stage.starts_with("planefit") && !stage.starts_with("pixelfilter")).unwrap();
         assert_eq!(passes, form.split_once('=').map_or(1, |(_, k)| k.parse().unwrap()), "{text}");
     }
 }
@@ -368,6 +378,12 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
         ("outliers=2,keep,demodulate,temporal=0.1,feedback=0,clamp=2,antilag=3,window", "exp(-distance2(color))", 2),
         ("temporal=0.5,feedback=2,atrous=2,planefit=2", "exp(-(distance2(color) + historyLength))", 0),
         ("@temporal", "", 0),
+        // What `filter` runs on frames sampled at one point: the pixel filter last.
+        (
+            "outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=3,pixelfilter=0.4",
+            "@temporal",
+            0,
+        ),
     ];
     let gpu = gpu();
     let (device, queue) = host::open_device().expect("a wgpu adapter for the plain host");
@@ -376,6 +392,9 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
             Some(_) => {
                 let resolved = corpus::resolve_with_pipeline(text).unwrap();
                 (resolved.expr, resolved.pipeline.unwrap())
+            }
+            None if weight.starts_with('@') => {
+                (corpus::resolve_with_pipeline(weight).unwrap().expr, text.parse().unwrap())
             }
             None => (parse_expr(weight).unwrap(), text.parse().unwrap()),
         };

@@ -251,6 +251,8 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "atrous=2,planefit=2",
         "outliers=2,demodulate,window,planefit=1",
         "atrous3x3=2",
+        "outliers=2,demodulate,atrous=3,pixelfilter=0.6",
+        "atrous=2,planefit=2,pixelfilter=0.3",
     ] {
         let p = pipeline(text);
         for e in exprs {
@@ -794,4 +796,15 @@ fn an_image_wider_than_a_texture_is_refused_naming_it() {
     assert!(message.contains("panorama") && message.contains(&format!("{}x1", scene.width)), "{message}");
     let window = gpu_filter(&gpu, &parse_expr("exp(-distance2(color))").unwrap(), &scene, &FilterPipeline::WINDOW, 1);
     assert_eq!(window.len(), scene.width);
+}
+
+#[test]
+fn a_search_refuses_the_pixel_filter_by_name() {
+    let gpu = gpu();
+    let scene = scene_with_albedo(16, 16, 2);
+    let error = FitnessScene::for_pipeline(&gpu, &scene, &pipeline("atrous=2,pixelfilter=0.4"))
+        .err()
+        .expect("a search's pipeline has no pixel filter")
+        .to_string();
+    assert!(error.contains("pixelfilter") && error.contains("one point"), "{error}");
 }

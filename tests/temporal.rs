@@ -11,7 +11,7 @@ use filterjit::gpu::{SceneBuffers, TemporalState};
 use filterjit::jit::{self, Shape};
 use filterjit::lang::parse_expr;
 use filterjit::pipeline::FilterPipeline;
-use filterjit::scene::{exr_io, Request, Sequence};
+use filterjit::scene::{self, exr_io, Request, Sequence};
 use filterjit::Scene;
 
 use crate::cli::filterjit;
@@ -192,6 +192,8 @@ fn a_sequence_filters_end_to_end_with_no_flag() {
     assert!(o.status.success(), "{stderr}");
     let temporal = filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0];
     assert!(stderr.contains(&format!("filter    @{temporal} (")), "says which filter and why: {stderr}");
+    // The committed frames are Cycles' at one sample, as their headers say: the pixel filter ends the pipeline.
+    assert!(stderr.contains(",pixelfilter=0.4): ") && stderr.contains("at one point"), "{stderr}");
     assert!(stdout.contains("sequence  noisy (3 frames, 64x64)"), "{stdout}");
     for k in 1..=3 {
         for ext in ["exr", "png"] {
@@ -264,6 +266,23 @@ fn sequence_with(
         std::fs::copy(committed().join("reference").join(&name), reference.join(&name)).unwrap();
     }
     dir
+}
+
+/// The pixel filter follows what the first frame's header says: Cycles'
+/// `cycles.ViewLayer.samples` of 1 in the committed frames, none in a copy
+/// written without it (as filterjit's own renders and other renderers' are).
+#[test]
+fn the_pixel_filter_follows_the_sample_count_in_the_header() {
+    let noisy = committed().join("noisy");
+    assert_eq!(scene::samples_per_pixel(&noisy.join("frame_0001.exr"), None).unwrap(), Some(1));
+    assert_eq!(scene::samples_per_pixel(&noisy.join("frame_0001.exr"), Some("Other")).unwrap(), None);
+    let dir = sequence_with("headerless", &[1, 2], 1, |_, values| Some(values), None);
+    assert_eq!(scene::samples_per_pixel(&dir.join("noisy/frame_0001.exr"), None).unwrap(), None);
+    let out = dir.join("out");
+    let o = filterjit(&["filter", dir.join("noisy").to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("filter    @") && !stderr.contains("pixelfilter"), "no header, no pixel filter: {stderr}");
 }
 
 /// A damaged sequence is refused with the file and what is wrong named,

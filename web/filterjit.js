@@ -13,15 +13,16 @@
 // `temporal=A`: the blend with the history, then its variance), the guide's
 // (where the weight reads `guide`), then the form's shader `passes` times,
 // its colour and carried variance ping-ponged between textures, then
-// planefit's (where the pipeline has `planefit`). A temporal filter keeps the
+// planefit's (where the pipeline has `planefit`), then the pixel filter's
+// (where it has `pixelfilter`). A temporal filter keeps the
 // manifest's `history` from one `run` to the next: frames of a sequence in
 // order; `reset()` starts a new sequence.
 
 /** The manifest layout this module reads (filterjit's `export::MANIFEST_VERSION`). */
-export const MANIFEST_VERSION = 5;
+export const MANIFEST_VERSION = 6;
 
 /** The shaders a manifest may have besides the form's, in the order they run. */
-const STAGES = ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit"];
+const STAGES = ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit", "pixelfilter"];
 
 const WRITTEN = GPUTextureUsage.STORAGE_BINDING | GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_SRC;
 
@@ -243,6 +244,8 @@ export class Filter {
     // `planefit` after the form: `filtered` is the last pass's output; it writes the frame.
     images.set("filtered", images.get(colour));
     if (sequence("planefit")) colour = "fitted";
+    // `pixelfilter`, last: it reads `fitted` or `filtered` (as its manifest names) and writes the frame.
+    if (sequence("pixelfilter")) colour = "pixelfiltered";
     keep(undefined);
     if (history.length > 0) {
       this.frames = first ? 1 : this.frames + 1;

@@ -10,7 +10,8 @@
 //! guide shader (where the weight reads `guide`), then the form's shader
 //! `passes` times (à-trous: pass k with step 2^k, colour and carried
 //! variance ping-ponged between textures), then the planefit shader (where
-//! the pipeline has `planefit`). A sequence keeps the manifest's `history`
+//! the pipeline has `planefit`), then the pixel filter's (where it has
+//! `pixelfilter`). A sequence keeps the manifest's `history`
 //! from frame to frame ([`Sequence`]).
 
 use std::collections::HashMap;
@@ -18,7 +19,7 @@ use std::collections::HashMap;
 use serde_json::Value;
 
 /// The layout of the manifest this host reads (filterjit's `export::MANIFEST_VERSION`).
-const MANIFEST_VERSION: u64 = 5;
+const MANIFEST_VERSION: u64 = 6;
 
 /// The stages besides the form's that run before it, in order.
 const BEFORE_THE_FORM: [&str; 4] = ["spread", "temporal", "temporal_variance", "guide"];
@@ -509,6 +510,20 @@ pub fn filter_frame(
         first,
     )? {
         colour = "fitted".to_string();
+    }
+    // `pixelfilter`, last: it reads the frame so far (`fitted`, or `filtered`: the last pass's output).
+    if run_stage(
+        &mut images,
+        &mut encoder,
+        manifest,
+        "pixelfilter",
+        stage_shader("pixelfilter"),
+        workgroup,
+        frame,
+        Some(&colour),
+        first,
+    )? {
+        colour = "pixelfiltered".to_string();
     }
     // What the next frame reads of this one.
     for (from, into) in keep_after(None) {

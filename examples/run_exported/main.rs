@@ -51,7 +51,7 @@ fn main() -> Result<(), String> {
 
     // The other stages' shaders (the pre-pass's, the spread's…), where the pipeline has them, are files beside the form's.
     let mut stages = HashMap::new();
-    for name in ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit"] {
+    for name in ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit", "pixelfilter"] {
         let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { continue };
         let file = Path::new(shader).with_file_name(stage["file"].as_str().ok_or("a stage's file")?);
         stages

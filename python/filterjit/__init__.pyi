@@ -20,7 +20,11 @@ def denoise(
 ) -> npt.NDArray[np.float32]: ...
 class Denoiser:
     def __init__(
-        self, filter: Optional[str] = ..., pipeline: Optional[str] = ..., radius: Optional[int] = ...
+        self,
+        filter: Optional[str] = ...,
+        pipeline: Optional[str] = ...,
+        radius: Optional[int] = ...,
+        point_sampled: bool = ...,
     ) -> None: ...
     def denoise(
         self,

@@ -303,6 +303,12 @@ fn check_given(choice: &Choice, given: &Provided) -> PyResult<()> {
 ///     else the best filter of single renders, frame by frame.
 /// :param pipeline: the filter pipeline; by default the filter's own.
 /// :param radius: the window form's radius; by default the stored one, else 5.
+/// :param point_sampled: whether the renderer sampled every pixel at one
+///     point, the same in every frame (Blender Cycles at 1 sample: the
+///     header's ``cycles.ViewLayer.samples`` is 1), while the references it
+///     is judged against integrate its pixel filter; the filter then ends
+///     with that filter (``pixelfilter=0.4``) unless ``pipeline`` is given,
+///     as ``filterjit filter`` does for such frames.
 ///
 /// Every frame gives the same inputs as the first. A frame of another size
 /// than the one before starts a new history, as :meth:`reset` does.
@@ -311,6 +317,7 @@ struct Denoiser {
     filter: Option<String>,
     pipeline: Option<FilterPipeline>,
     radius: Option<u32>,
+    point_sampled: bool,
     /// The filter taken at the first frame, its kernel, and the inputs that frame gave.
     chosen: Option<(Choice, Arc<ValidatedKernel>, Provided)>,
     state: TemporalState,
@@ -319,9 +326,10 @@ struct Denoiser {
 #[pymethods]
 impl Denoiser {
     #[new]
-    #[pyo3(signature = (filter=None, pipeline=None, radius=None))]
-    fn new(filter: Option<String>, pipeline: Option<&str>, radius: Option<u32>) -> PyResult<Self> {
-        Ok(Denoiser { filter, pipeline: parse_pipeline(pipeline)?, radius, chosen: None, state: TemporalState::new() })
+    #[pyo3(signature = (filter=None, pipeline=None, radius=None, point_sampled=false))]
+    fn new(filter: Option<String>, pipeline: Option<&str>, radius: Option<u32>, point_sampled: bool) -> PyResult<Self> {
+        let pipeline = parse_pipeline(pipeline)?;
+        Ok(Denoiser { filter, pipeline, radius, point_sampled, chosen: None, state: TemporalState::new() })
     }
 
     /// Denoise the next frame and return it, float32 (H, W, 3).
@@ -350,8 +358,9 @@ impl Denoiser {
         let (images, mut given) = arrays(color, [albedo, normal, position, depth, variance], motion, spp)?;
         given.sequence = true;
         if self.chosen.is_none() {
-            let choice =
-                Choice::asked_or_best(self.filter.as_deref(), self.pipeline, self.radius, &given).map_err(value)?;
+            let choice = Choice::asked_or_best(self.filter.as_deref(), self.pipeline, self.radius, &given)
+                .map_err(value)?
+                .for_point_sampled(self.point_sampled, self.pipeline.is_some());
             check_given(&choice, &given)?;
             let kernel = kernel(&choice)?;
             self.chosen = Some((choice, kernel, given.clone()));

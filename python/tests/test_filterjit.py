@@ -309,6 +309,21 @@ def test_a_denoiser_carries_its_history_through_a_sequence(sequence):
     assert np.array_equal(again, alone), "after reset, the frame is a sequence's first"
 
 
+def test_point_sampled_frames_end_with_the_pixel_filter_unless_a_pipeline_is_given(sequence):
+    frame = sequence[0]["inputs"]
+    jittered = filterjit.Denoiser()
+    jittered.denoise(**frame)
+    assert "pixelfilter" not in jittered.pipeline
+    point = filterjit.Denoiser(point_sampled=True)
+    out = point.denoise(**frame)
+    assert point.filter == jittered.filter and point.pipeline == jittered.pipeline + ",pixelfilter=0.4"
+    assert np.isfinite(out).all()
+    given = "demodulate,temporal=0.2,feedback=1,atrous=3"
+    kept = filterjit.Denoiser(pipeline=given, point_sampled=True)
+    kept.denoise(**frame)
+    assert kept.pipeline == given, "a pipeline given is kept as given"
+
+
 def test_a_denoiser_refuses_a_frame_with_other_inputs(sequence):
     denoiser = filterjit.Denoiser()
     denoiser.denoise(**sequence[0]["inputs"])

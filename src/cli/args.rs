@@ -80,8 +80,8 @@ pub(crate) enum Command {
         /// The shader file; its manifest goes to FILE.json.
         #[arg(short, long)]
         output: PathBuf,
-        /// The pipeline to export [default: the one the expression was stored with, else `window`].
-        /// Only `window` can be exported so far: pass it to export the weight of a filter stored with another.
+        /// The pipeline to export [default: the one the expression was stored with, else `window`]:
+        /// every stage is exported, each a shader of its own beside the form's (examples/README.md).
         #[arg(long)]
         pipeline: Option<filterjit::pipeline::FilterPipeline>,
     },

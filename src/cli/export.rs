@@ -20,6 +20,7 @@ fn describe(name: StageName, dispatches: usize) -> String {
         StageName::TemporalVariance => "the temporal stage's variance: one dispatch after the blend".into(),
         StageName::Guide => "the guide: one dispatch before the form".into(),
         StageName::PlaneFit => "planefit: one dispatch after the form".into(),
+        StageName::PixelFilter => "the pixel filter: one dispatch, last".into(),
     }
 }
 

@@ -280,12 +280,20 @@ fn report_sequence(env: &Environment, args: &ReportArgs, dir: &std::path::Path) 
         false => args.exprs.iter().map(String::as_str).collect(),
     };
     let render = &args.scene.render;
+    // Frames sampled at one point a pixel: every filter ends with the pixel filter, as `filter` runs them.
+    let first = &sequence.frames.first().context("the sequence has no frames")?.path;
+    let point_sampled =
+        filterjit::scene::point_sampled(first, None).with_context(|| format!("reading frame {}", first.display()))?;
     let mut filters = Vec::new();
     for (k, arg) in asked.iter().enumerate() {
         let choice = filterjit::denoise::Choice::asked(arg, render.pipeline, render.radius)
-            .with_context(|| format!("filter {arg}"))?;
+            .with_context(|| format!("filter {arg}"))?
+            .for_point_sampled(point_sampled, render.pipeline.is_some());
         let name = if arg.starts_with('@') { arg.to_string() } else { format!("expr{}", k + 1) };
         filters.push((name, choice));
+    }
+    if let Some((_, filterjit::denoise::Choice { chosen_because: Some(because), .. })) = filters.first() {
+        eprintln!("filters   {because}");
     }
     let oidn = report_peer(env, args.no_oidn);
     let gpu = gpu::Gpu::open(&env.adapter)?;

@@ -85,6 +85,9 @@ pub(crate) fn filter_sequence(
             Choice::asked_or_best(None, pipeline, radius, &provided)?
         }
     };
+    let point_sampled = scene::point_sampled(first, view_layer.as_deref())
+        .with_context(|| format!("reading frame {}", first.display()))?;
+    let choice = choice.for_point_sampled(point_sampled, pipeline.is_some());
     super::refuse_radius(radius, &choice.pipeline)?;
     if let Some(because) = &choice.chosen_because {
         eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);

@@ -496,11 +496,41 @@ pub fn filter_frame(
         let normals = scene.required_feature(Feature::Normal)?;
         out.color = planefit(&image, normals, prepared.modulation.as_deref(), scene.width, scene.height, fit);
     }
+    if let Some(pixel) = pipeline.pixel_filter {
+        // Stored as f32 before the stage reads it, as on the device.
+        let image: Vec<[f32; 3]> = out.color.iter().map(|c| c.map(|v| v as f32)).collect();
+        out.color = pixel_filter(&image, scene.width, scene.height, pixel);
+    }
     let kept = accumulated.map(|(_, motion, accumulated)| {
         let feedback = feedback.expect("the feedback pass is among the form's passes (`most_feedback`)");
         temporal::keep(&accumulated, feedback, motion, scene.width, scene.height)
     });
     Ok((out, kept))
+}
+
+/// `pixelfilter=S` on the filtered `image` (docs/SEMANTICS.md, "The
+/// pipeline"): each pixel the sum over its 3×3 of w(dx)·w(dy) times the tap,
+/// with `pipeline::PixelFilter::weights` and taps outside the image clamped
+/// to its edge. The reference of `templates/pixelfilter.wgsl.tera`.
+pub fn pixel_filter(image: &[[f32; 3]], width: usize, height: usize, filter: pipeline::PixelFilter) -> Vec<[f64; 3]> {
+    let [centre, side] = filter.weights().map(f64::from);
+    let tap = |x: i64, y: i64| {
+        let (x, y) = (x.clamp(0, width as i64 - 1) as usize, y.clamp(0, height as i64 - 1) as usize);
+        image[y * width + x].map(f64::from)
+    };
+    // As the kernel sums: each row weighed by w(dx), then the rows by w(dy).
+    let row = |x: i64, y: i64| {
+        let (left, middle, right) = (tap(x - 1, y), tap(x, y), tap(x + 1, y));
+        std::array::from_fn::<f64, 3, _>(|k| side * (left[k] + right[k]) + centre * middle[k])
+    };
+    let mut out = Vec::with_capacity(image.len());
+    for y in 0..height as i64 {
+        for x in 0..width as i64 {
+            let (above, middle, below) = (row(x, y - 1), row(x, y), row(x, y + 1));
+            out.push(std::array::from_fn(|k| side * (above[k] + below[k]) + centre * middle[k]));
+        }
+    }
+    out
 }
 
 /// `planefit=R` on the form's output `image` (docs/SEMANTICS.md, "The
@@ -613,4 +643,40 @@ pub fn weight_at(expr: &Expr, scene: &Scene, i: usize, j: usize) -> (f64, u32) {
     let mut flags = 0;
     let w = eval(expr, &Pixels { scene, i, j, width: scene.width, level: 0 }, &mut flags);
     (w, flags)
+}
+
+#[cfg(test)]
+mod pixel_filter_tests {
+    use super::pixel_filter;
+    use crate::pipeline::PixelFilter;
+
+    #[test]
+    fn an_impulse_spreads_into_the_separable_weights_and_keeps_its_light() {
+        let (width, height) = (5, 4);
+        let mut image = vec![[0.0f32; 3]; width * height];
+        image[2 * width + 2] = [1.0, 2.0, 0.0];
+        let filter = PixelFilter { sigma: 0.5 };
+        let [centre, side] = filter.weights().map(f64::from);
+        let out = pixel_filter(&image, width, height, filter);
+        let w = |d: i64| if d == 0 { centre } else { side };
+        for y in 0..height as i64 {
+            for x in 0..width as i64 {
+                let (dx, dy) = (x - 2, y - 2);
+                let expected = if dx.abs() <= 1 && dy.abs() <= 1 { w(dx) * w(dy) } else { 0.0 };
+                let got = out[y as usize * width + x as usize];
+                assert!((got[0] - expected).abs() < 1e-12 && (got[1] - 2.0 * expected).abs() < 1e-12, "({x}, {y})");
+            }
+        }
+        let total: f64 = out.iter().map(|c| c[0]).sum();
+        assert!((total - 1.0).abs() < 1e-6, "the light is kept: {total}");
+    }
+
+    #[test]
+    fn an_even_image_stays_even_to_its_edges() {
+        let (width, height) = (3, 2);
+        let image = vec![[0.25f32, 4.0, 1.0]; width * height];
+        for c in pixel_filter(&image, width, height, PixelFilter { sigma: 1.0 }) {
+            assert!((c[0] - 0.25).abs() < 1e-6 && (c[1] - 4.0).abs() < 1e-6, "{c:?}");
+        }
+    }
 }

@@ -66,6 +66,7 @@ pub(super) enum Stages {
     Spread,
     Guide,
     PlaneFit,
+    PixelFilter,
     Temporal,
     TemporalVariance,
 }
@@ -79,6 +80,7 @@ impl From<StageName> for Stages {
             StageName::TemporalVariance => Stages::TemporalVariance,
             StageName::Guide => Stages::Guide,
             StageName::PlaneFit => Stages::PlaneFit,
+            StageName::PixelFilter => Stages::PixelFilter,
         }
     }
 }
@@ -149,6 +151,15 @@ pub(super) fn bindings(
                     None,
                 ),
                 (Role::Output, Stages::PlaneFit) => ("fitted".into(), "xyzw", written("the filtered frame"), None),
+                (Role::Color, Stages::PixelFilter) => (
+                    "color".into(),
+                    "xyz",
+                    "the frame so far: `fitted` after planefit, else `filtered`, the form's last output".into(),
+                    None,
+                ),
+                (Role::Output, Stages::PixelFilter) => {
+                    ("pixelfiltered".into(), "xyzw", written("the filtered frame"), None)
+                }
                 (Role::Output, Stages::Guide) => ("guide".into(), "xyzw", written("the guide"), None),
                 (Role::Color, Stages::Form) => {
                     ("color".into(), "xyzw", "noisy colour, linear RGB; alpha is copied to the output".into(), None)
@@ -299,7 +310,7 @@ pub(super) fn bindings(
                     | Role::Accumulated,
                     _,
                 )
-                | (Role::Modulation, Stages::Guide | Stages::Temporal | Stages::TemporalVariance)
+                | (Role::Modulation, Stages::Guide | Stages::Temporal | Stages::TemporalVariance | Stages::PixelFilter)
                 | (Role::Color | Role::Output, Stages::TemporalVariance) => {
                     unreachable!("exported shaders bind no {:?}", b.role)
                 }

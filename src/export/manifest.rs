@@ -73,6 +73,12 @@ pub struct Manifest {
     /// writes `fitted`, the filtered frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub planefit: Option<Stage>,
+    /// `pixelfilter`'s shader, dispatched once last, where the pipeline has
+    /// it: it reads the frame so far (`fitted` after `planefit`, else
+    /// `filtered`, the form's last output) and writes `pixelfiltered`, the
+    /// filtered frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub pixelfilter: Option<Stage>,
     /// The image the form's first pass filters: `color` (the noisy colour),
     /// `prepared` (the pre-pass's), `kept` (the spread's) or `blend` (the
     /// temporal stage's).
@@ -144,8 +150,9 @@ pub struct Kept {
 /// to read it differently (2: `keep`'s `spread` stage and `filters`; 3: the
 /// `guide` stage, and the form's `guide` binding, which changes by pass; 4:
 /// the `planefit` stage after the form; 5: the temporal stage, its
-/// `history`, `carries` and a stage's `first_frame`).
-pub const MANIFEST_VERSION: u32 = 5;
+/// `history`, `carries` and a stage's `first_frame`; 6: the `pixelfilter`
+/// stage, last).
+pub const MANIFEST_VERSION: u32 = 6;
 
 /// Sampled textures per shader stage every WebGPU device allows.
 pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;

@@ -82,7 +82,8 @@ impl Code {
 }
 
 /// The shaders of a pipeline besides the form's, in the order a frame runs
-/// them (the form's passes come after the guide, planefit after the form).
+/// them (the form's passes come after the guide, planefit after the form,
+/// pixelfilter last).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum StageName {
     Prepass,
@@ -96,16 +97,19 @@ pub enum StageName {
     Guide,
     /// `planefit`, after the form.
     PlaneFit,
+    /// `pixelfilter`, last.
+    PixelFilter,
 }
 
 impl StageName {
-    pub const ALL: [StageName; 6] = [
+    pub const ALL: [StageName; 7] = [
         StageName::Prepass,
         StageName::Spread,
         StageName::Temporal,
         StageName::TemporalVariance,
         StageName::Guide,
         StageName::PlaneFit,
+        StageName::PixelFilter,
     ];
 
     /// The stage's key in the manifest, and the suffix of its shader's file.
@@ -117,6 +121,7 @@ impl StageName {
             StageName::TemporalVariance => "temporal_variance",
             StageName::Guide => "guide",
             StageName::PlaneFit => "planefit",
+            StageName::PixelFilter => "pixelfilter",
         }
     }
 }

@@ -118,6 +118,19 @@ pub(super) fn build(
             (stage.uniform_values, stage.sequence) = once(&values, &pairs);
             (stage, code)
         }
+        StageName::PixelFilter => {
+            let Some(filter) = pipeline.pixel_filter else { return Ok(None) };
+            let interface = jit::BindingInterface::pixel_filter(Some(format));
+            let module = jit::pixel_filter_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (mut stage, code) = stage(&interface, &module, &jit::pixel_filter_wgsl(Some(format)))?;
+            let params = jit::PixelFilterParams::of(filter, 0, 0);
+            // The f32 weights widened exactly: a host stores them as the same f32s.
+            let values = [("centre", params.centre as f64), ("side", params.side as f64)];
+            let frame = if manifest.planefit.is_some() { "fitted" } else { "filtered" };
+            (stage.uniform_values, stage.sequence) =
+                once(&values, &[("color", frame), ("pixelfiltered", "pixelfiltered")]);
+            (stage, code)
+        }
         StageName::Prepass | StageName::TemporalVariance | StageName::Guide => return Ok(None),
     };
     Ok(Some(built))
@@ -139,7 +152,7 @@ pub(super) fn place(manifest: &mut Manifest, name: StageName, stage: Stage, pipe
             let temporal = pipeline.temporal.expect("a temporal stage where the pipeline has one");
             manifest.history = history(temporal);
         }
-        StageName::TemporalVariance | StageName::Guide | StageName::PlaneFit => {}
+        StageName::TemporalVariance | StageName::Guide | StageName::PlaneFit | StageName::PixelFilter => {}
     }
     *manifest.stage_mut(name) = Some(stage);
 }
@@ -183,6 +196,7 @@ impl Manifest {
             StageName::TemporalVariance => self.temporal_variance.as_ref(),
             StageName::Guide => self.guide.as_ref(),
             StageName::PlaneFit => self.planefit.as_ref(),
+            StageName::PixelFilter => self.pixelfilter.as_ref(),
         }
     }
 
@@ -195,6 +209,7 @@ impl Manifest {
             StageName::TemporalVariance => &mut self.temporal_variance,
             StageName::Guide => &mut self.guide,
             StageName::PlaneFit => &mut self.planefit,
+            StageName::PixelFilter => &mut self.pixelfilter,
         }
     }
 }
@@ -361,6 +376,15 @@ pub(super) fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<Strin
             if pipeline.demodulate { format!(", modulation = {modulation}") } else { String::new() }
         ));
     }
+    if let Some(stage) = &manifest.pixelfilter {
+        steps.push(format!(
+            "pixelfilter (`pixelfilter`, one dispatch, centre = {}, side = {}): colour = {}; writes \
+             `pixelfiltered`: the filtered frame",
+            stage.uniform_values["centre"],
+            stage.uniform_values["side"],
+            if manifest.planefit.is_some() { "`fitted`" } else { "`filtered`, the form's last `output`" }
+        ));
+    }
     steps
 }
 
@@ -404,6 +428,7 @@ pub(super) fn manifest(
         temporal_variance: None,
         guide: None,
         planefit: None,
+        pixelfilter: None,
         filters: "color".into(),
         carries: interface.carried_variance().map(|v| v.name().to_string()),
         history: Vec::new(),

@@ -66,7 +66,8 @@ impl std::str::FromStr for TileSampling {
 /// tile takes over its crop: the one thing a tile only approximates), the
 /// first pass's `guide` (blurred once more; counted whether or not the weight
 /// reads it), then the window's radius or the sum of the à-trous passes'
-/// reaches (each pass filters the previous one's output), then `planefit`'s radius.
+/// reaches (each pass filters the previous one's output), then `planefit`'s
+/// radius and `pixelfilter`'s one pixel.
 pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
     let prepass = match pipeline.outliers {
         Some(outliers) => OUTLIER_RADIUS + outliers.keep.map_or(0, |keep| keep.reach()),
@@ -79,7 +80,8 @@ pub fn reach(pipeline: &FilterPipeline, radius: u32) -> u32 {
         }
     };
     let fit = pipeline.planefit.map_or(0, |fit| fit.radius);
-    prepass + crate::pipeline::GUIDE_STENCIL.half_width() as u32 + form + fit
+    let pixel_filter = u32::from(pipeline.pixel_filter.is_some());
+    prepass + crate::pipeline::GUIDE_STENCIL.half_width() as u32 + form + fit + pixel_filter
 }
 
 /// The halo cut around a tile: the pipeline's reach, rounded up to whole
@@ -190,6 +192,7 @@ mod tests {
             temporal: None,
             form: Form::Atrous { passes: 5, stencil: Default::default() },
             planefit: None,
+            pixel_filter: None,
         };
         // 2 (pre-pass) + 1 (guide) + 2 · (1 + 2 + 4 + 8 + 16).
         assert_eq!(reach(&atrous, 3), 65);
@@ -272,6 +275,7 @@ mod tests {
             temporal: None,
             form: Form::Atrous { passes: 4, stencil: Default::default() },
             planefit: None,
+            pixel_filter: None,
         };
         let shared = cut(std::slice::from_ref(&scene), sampling, &surface, 3, 5);
         assert_eq!(shared.len(), 1);

@@ -153,6 +153,10 @@ impl Gpu {
         if planefit.is_some() {
             self.planefit_pipeline(!buffers.pipeline.is_atrous())?;
         }
+        let pixel_filter = buffers.pipeline.pixel_filter;
+        if pixel_filter.is_some() {
+            self.prepare_pixel_filter()?;
+        }
         let sampled = super::sampled::sampled_roles(kernel);
         if !sampled.is_empty() || planefit.is_some() {
             self.blit_pipeline(Element::Vec4F32)?;
@@ -287,6 +291,15 @@ impl Gpu {
                 let fitted = self.planefit(&mut encoder, buffers, fit, &out)?;
                 dispatches += 1;
                 fitted
+            }
+            None => out,
+        };
+        // `pixelfilter`, last: one dispatch over the whole image.
+        let out = match pixel_filter {
+            Some(filter) => {
+                let filtered = self.pixel_filter(&mut encoder, filter, &out, (buffers.width, buffers.height))?;
+                dispatches += 1;
+                filtered
             }
             None => out,
         };

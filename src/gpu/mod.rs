@@ -8,6 +8,7 @@ mod filter;
 mod fitness;
 mod guide;
 mod host_memory;
+mod pixel_filter;
 mod planefit;
 mod prepass;
 mod raw;
@@ -66,6 +67,11 @@ pub enum GpuError {
     Shape { expression: String, shape: crate::jit::Shape, pipeline: crate::pipeline::FilterPipeline },
     #[error("scoring `planefit` needs an à-trous form before it; pipeline `{pipeline}` has a window")]
     PlaneFitAfterWindow { pipeline: crate::pipeline::FilterPipeline },
+    #[error(
+        "pipeline `{pipeline}`: `pixelfilter` is not scored in a search: it models how a render sampled its \
+         pixels, which `filter` adds by itself for frames sampled at one point (leave it out of the search's pipeline)"
+    )]
+    PixelFilterScored { pipeline: crate::pipeline::FilterPipeline },
     #[error(
         "scene `{scene}` is {width}x{height} pixels; pipeline `{pipeline}` reads its images as textures, which {adapter} \
          allows at most {limit} pixels a side (a `window` form without a pre-pass reads storage buffers instead)"

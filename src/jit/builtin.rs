@@ -1,5 +1,5 @@
 //! filterjit's own kernels, the ones no expression is compiled into: the
-//! path tracer, the pre-pass and its spreads, `planefit`, the blits, the
+//! path tracer, the pre-pass and its spreads, `planefit`, `pixelfilter`, the blits, the
 //! fitness reduction and the temporal stage. One list, so that the device
 //! gets, validates and caches every one of them the same way
 //! (`gpu::Gpu::built_in`), and every error carries the kernel's WGSL.
@@ -24,6 +24,8 @@ pub enum BuiltIn {
     PlaneFit,
     /// `planefit` as a fitness kernel.
     PlaneFitTerms,
+    /// `pixelfilter`, the last stage (`jit::pixel_filter`).
+    PixelFilter,
     /// A storage buffer of `Element`s into a texture of the same values (`jit::blit`).
     Blit(Element),
     /// The fitness reduction (`jit::reduce`).
@@ -44,6 +46,7 @@ impl BuiltIn {
             BuiltIn::Spread(Keep::Surface) => "<surface spread>",
             BuiltIn::PlaneFit => "<planefit>",
             BuiltIn::PlaneFitTerms => "<planefit terms>",
+            BuiltIn::PixelFilter => "<pixelfilter>",
             BuiltIn::Blit(_) => "<blit>",
             BuiltIn::Reduce => "<fitness reduction>",
             BuiltIn::Temporal => "<temporal>",
@@ -60,6 +63,7 @@ impl BuiltIn {
             BuiltIn::Spread(Keep::Surface) => super::spread_surface_wgsl(None),
             BuiltIn::PlaneFit => super::planefit_wgsl(None),
             BuiltIn::PlaneFitTerms => super::planefit_terms_wgsl(),
+            BuiltIn::PixelFilter => super::pixel_filter_wgsl(None),
             BuiltIn::Blit(element) => super::blit_wgsl(element),
             BuiltIn::Reduce => super::reduce_wgsl(),
             BuiltIn::Temporal => super::temporal_wgsl(None),
@@ -77,6 +81,7 @@ impl BuiltIn {
             BuiltIn::Spread(Keep::Surface) => super::spread_surface_module(None),
             BuiltIn::PlaneFit => super::planefit_module(None),
             BuiltIn::PlaneFitTerms => super::planefit_terms_module(),
+            BuiltIn::PixelFilter => super::pixel_filter_module(None),
             BuiltIn::Blit(element) => super::blit_module(element),
             BuiltIn::Reduce => super::reduce_module(),
             BuiltIn::Temporal => super::temporal_module(None),
@@ -95,13 +100,14 @@ impl BuiltIn {
     }
 
     /// Every built-in kernel.
-    pub const ALL: [BuiltIn; 11] = [
+    pub const ALL: [BuiltIn; 12] = [
         BuiltIn::PathTracer,
         BuiltIn::Prepass,
         BuiltIn::Spread(Keep::Even),
         BuiltIn::Spread(Keep::Surface),
         BuiltIn::PlaneFit,
         BuiltIn::PlaneFitTerms,
+        BuiltIn::PixelFilter,
         BuiltIn::Blit(Element::F32),
         BuiltIn::Blit(Element::Vec4F32),
         BuiltIn::Reduce,

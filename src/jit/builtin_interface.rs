@@ -152,6 +152,39 @@ impl BindingInterface {
         Self::image_stage(textures, true, &Self::PLANEFIT_READS, written, Self::PLANEFIT_UNIFORM)
     }
 
+    /// The interface of `pixelfilter`'s kernel (`jit::pixel_filter`): the
+    /// uniform `PixelFilterParams` (the two 1-D weights as f32), the
+    /// filtered image (`Color`, sampled) and its output: a storage buffer for
+    /// filterjit (`None`) or, exported, a storage texture of the output format.
+    pub fn pixel_filter(textures: Option<OutputFormat>) -> BindingInterface {
+        let (kind, params, written, out) = match textures {
+            None => (
+                KernelKind::Filter,
+                own_params(),
+                Resource::Storage { element: Element::Vec4F32, writable: true },
+                "buf_out",
+            ),
+            Some(format) => (
+                KernelKind::Export(format),
+                Resource::Uniform,
+                Resource::StorageTexture(TexelFormat::Color(format)),
+                "tex_out",
+            ),
+        };
+        let bindings = dense([
+            (Role::Params, params, "params".to_string()),
+            (Role::Color, Resource::SampledTexture, "tex_color".to_string()),
+            (Role::Output, written, out.to_string()),
+        ]);
+        let uniform = vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field("centre", "f32", 8, "the 1-D weight of the centre tap; tap (dx, dy) weighs w(dx) w(dy)"),
+            field("side", "f32", 12, "the 1-D weight of a tap one pixel off the centre"),
+        ];
+        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+    }
+
     /// The interface of `planefit`'s fitness kernel: [`BindingInterface::planefit`]'s
     /// on storage buffers, with the reference read and the relMSE terms and
     /// luminance (`Vec2F32`, as a fitness kernel's) written.

@@ -10,6 +10,7 @@ pub mod interface;
 pub mod ir;
 pub mod kernel;
 pub mod lower;
+pub mod pixel_filter;
 pub mod planefit;
 pub mod prepass;
 pub mod range;
@@ -27,6 +28,7 @@ pub use kernel::{
     TEMPLATE_VERSION, WORKGROUP, WORKGROUP_STORAGE_BUDGET,
 };
 pub use lower::{lower, lower_fused, KernelSource, LowerError};
+pub use pixel_filter::{pixel_filter_module, pixel_filter_wgsl, PixelFilterParams};
 pub use planefit::{
     planefit_module, planefit_terms_module, planefit_terms_wgsl, planefit_wgsl, PlaneFitParams, PLANEFIT_REMODULATED,
 };

@@ -22,6 +22,23 @@ pub fn channel_names(path: &Path) -> Result<(Vec<String>, usize, usize), SceneEr
     Ok((names, header.layer_size.width(), header.layer_size.height()))
 }
 
+/// The text attributes of the first layer's header (the image's and the
+/// layer's own), by name: what a renderer wrote about the render.
+pub fn text_attributes(path: &Path) -> Result<HashMap<String, String>, SceneError> {
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| SceneError::exr(path, e))?;
+    let header = meta
+        .headers
+        .first()
+        .ok_or_else(|| SceneError::Exr { file: path.to_path_buf(), message: "the file has no image layer".into() })?;
+    let attributes = header.shared_attributes.other.iter().chain(&header.own_attributes.other);
+    Ok(attributes
+        .filter_map(|(name, value)| match value {
+            exr::meta::attribute::AttributeValue::Text(text) => Some((name.to_string(), text.to_string())),
+            _ => None,
+        })
+        .collect())
+}
+
 /// Decode the named channels (all must exist) of the first layer; other
 /// channels are decompressed with their blocks but never converted or kept.
 pub fn read_channels(path: &Path, names: &[&str]) -> Result<ImageChannels, SceneError> {

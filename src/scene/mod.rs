@@ -416,6 +416,32 @@ pub fn has_motion(path: &Path, view_layer: Option<&str>) -> Result<bool, SceneEr
     Ok(pick(view.layout().motion(), &view.names).is_some())
 }
 
+/// The samples per pixel a render on disk says it took, where its header
+/// says (Cycles writes `cycles.<view layer>.samples`; through `view_layer`,
+/// else the first layer that says).
+pub fn samples_per_pixel(path: &Path, view_layer: Option<&str>) -> Result<Option<u32>, SceneError> {
+    let files = locate(path, &Request::default())?;
+    let attributes = exr_io::text_attributes(&files.noisy)?;
+    let mut said: Vec<(&String, &String)> = attributes
+        .iter()
+        .filter(|(name, _)| {
+            name.strip_prefix("cycles.")
+                .and_then(|rest| rest.strip_suffix(".samples"))
+                .is_some_and(|layer| view_layer.is_none_or(|wanted| wanted == layer))
+        })
+        .collect();
+    said.sort();
+    Ok(said.first().and_then(|(_, value)| value.trim().parse().ok()))
+}
+
+/// Whether a render on disk sampled each pixel at one point, the same in
+/// every frame: Cycles at one sample, as its header says (from two samples
+/// on it jitters over the pixel; docs/JOURNAL.md, "The 1-spp frames are not
+/// what their references average"). No other renderer is known to.
+pub fn point_sampled(path: &Path, view_layer: Option<&str>) -> Result<bool, SceneError> {
+    Ok(samples_per_pixel(path, view_layer)? == Some(1))
+}
+
 /// The features and variances a scene on disk provides, from its channel
 /// names alone (through `view_layer` in a Blender multilayer file).
 pub fn provides(path: &Path, view_layer: Option<&str>) -> Result<(BTreeSet<Feature>, BTreeSet<ScalarVar>), SceneError> {

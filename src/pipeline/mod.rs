@@ -12,8 +12,9 @@
 //! exactly as it was scored. This module owns the stages' constants; the CPU
 //! reference (`cpu::filter_pipeline`) and the kernels (`jit`) read them here.
 
-use std::fmt;
-use std::str::FromStr;
+mod text;
+
+pub use text::PipelineError;
 
 /// Luminance weights (Rec. 709) of the outlier rule.
 pub const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
@@ -402,6 +403,39 @@ impl PlaneFit {
     }
 }
 
+/// `pixelfilter=S`'s largest σ, in pixels: a 3×3 kernel holds no wider one.
+pub const MAX_PIXEL_FILTER_SIGMA: f32 = 1.0;
+
+/// `pixelfilter=S`, the last stage: the filtered image convolved with a 3×3
+/// Gaussian of σ = S pixels (taps outside the image clamped to its edge).
+/// For frames whose renderer sampled every pixel at one point (Cycles at one
+/// sample: the same point every frame) while their references integrate the
+/// renderer's pixel filter: the filtered frame estimates the point-sampled
+/// image, and this stage applies the filter the frames left out
+/// (docs/JOURNAL.md, "The 1-spp frames are not what their references average").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PixelFilter {
+    pub sigma: f32,
+}
+
+impl PixelFilter {
+    /// The σ `filter` applies to point-sampled frames: smaller than Cycles'
+    /// own filter (1.5-pixel Blackman-Harris, about σ 0.7 on the 3×3) since
+    /// the filtered frame is a little blurred already; the narrower side of
+    /// the best σ measured, as a wider one costs more than a narrower
+    /// (docs/JOURNAL.md, "A pixel filter for point-sampled frames").
+    pub const POINT_SAMPLED: PixelFilter = PixelFilter { sigma: 0.4 };
+
+    /// The 1-D weights (centre, each side), normalised to sum to 1 and
+    /// rounded to f32 once: the device and the CPU reference use these same
+    /// two numbers; tap (dx, dy) weighs w(dx)·w(dy).
+    pub fn weights(self) -> [f32; 2] {
+        let side = (-1.0 / (2.0 * (self.sigma as f64).powi(2))).exp();
+        let total = 1.0 + 2.0 * side;
+        [(1.0 / total) as f32, (side / total) as f32]
+    }
+}
+
 /// The whole pipeline of a filter.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FilterPipeline {
@@ -412,6 +446,8 @@ pub struct FilterPipeline {
     pub form: Form,
     /// `planefit=R` after the form, if any.
     pub planefit: Option<PlaneFit>,
+    /// `pixelfilter=S`, last, if any.
+    pub pixel_filter: Option<PixelFilter>,
 }
 
 impl Default for FilterPipeline {
@@ -423,8 +459,14 @@ impl Default for FilterPipeline {
 
 impl FilterPipeline {
     /// The thesis's filter: one window pass, no pre-pass.
-    pub const WINDOW: FilterPipeline =
-        FilterPipeline { outliers: None, demodulate: false, temporal: None, form: Form::Window, planefit: None };
+    pub const WINDOW: FilterPipeline = FilterPipeline {
+        outliers: None,
+        demodulate: false,
+        temporal: None,
+        form: Form::Window,
+        planefit: None,
+        pixel_filter: None,
+    };
 
     /// The features the pipeline's own stages read (besides the colour and
     /// the albedo `demodulate` divides by): the normal, for `keep=surface`,
@@ -528,247 +570,6 @@ impl FilterPipeline {
     }
 }
 
-/// Text that is not a pipeline.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("pipeline `{text}`: {message} (write stages separated by commas, e.g. `outliers=2,demodulate,atrous=5` or `window`)")]
-pub struct PipelineError {
-    pub text: String,
-    pub message: String,
-}
-
-impl FromStr for FilterPipeline {
-    type Err = PipelineError;
-
-    fn from_str(text: &str) -> Result<Self, Self::Err> {
-        let error = |message: String| PipelineError { text: text.to_string(), message };
-        let mut pipeline = FilterPipeline::WINDOW;
-        let mut form_seen = false;
-        // `feedback=K` as written, checked against the form once it is known.
-        let mut feedback: Option<u32> = None;
-        for stage in text.split(',').map(str::trim) {
-            let (name, value) = match stage.split_once('=') {
-                Some((n, v)) => (n.trim(), Some(v.trim())),
-                None => (stage, None),
-            };
-            if form_seen && name != "planefit" {
-                return Err(error(format!(
-                    "`{stage}` comes after the form; only `planefit=R` follows the form (window or atrous)"
-                )));
-            }
-            match (name, value) {
-                ("planefit", Some(v)) => {
-                    let radius: u32 =
-                        v.parse().map_err(|_| error(format!("planefit={v}: the radius must be a whole number")))?;
-                    if !(1..=MAX_PLANEFIT_RADIUS).contains(&radius) {
-                        return Err(error(format!("planefit={v}: the radius must be from 1 to {MAX_PLANEFIT_RADIUS}")));
-                    }
-                    if !form_seen {
-                        return Err(error("`planefit=R` comes after the form (window or atrous)".into()));
-                    }
-                    if pipeline.planefit.is_some() {
-                        return Err(error("`planefit` appears once".into()));
-                    }
-                    pipeline.planefit = Some(PlaneFit { radius });
-                }
-                ("planefit", None) => return Err(error("`planefit` needs its radius: planefit=R".into())),
-                ("outliers", Some(v)) => {
-                    let k: f32 = v.parse().map_err(|_| error(format!("outliers={v}: k must be a number")))?;
-                    if !(k.is_finite() && k >= 0.0) {
-                        return Err(error(format!("outliers={v}: k must be finite and at least 0")));
-                    }
-                    if pipeline.outliers.is_some() || pipeline.demodulate || pipeline.temporal.is_some() {
-                        return Err(error("`outliers` is the first stage, and appears once".into()));
-                    }
-                    pipeline.outliers = Some(Outliers { k, trim: false, keep: None });
-                }
-                ("trim", None) => match &mut pipeline.outliers {
-                    Some(outliers) if !outliers.trim && outliers.keep.is_none() && !pipeline.demodulate && pipeline.temporal.is_none() => {
-                        outliers.trim = true
-                    }
-                    Some(_) => return Err(error("`trim` comes once, right after `outliers=K`".into())),
-                    None => return Err(error("`trim` changes the rule of `outliers=K`: write it after outliers=K".into())),
-                },
-                ("keep", None | Some("surface")) => match &mut pipeline.outliers {
-                    Some(outliers) if outliers.keep.is_none() && !pipeline.demodulate && pipeline.temporal.is_none() => {
-                        outliers.keep = Some(if value.is_some() { Keep::Surface } else { Keep::Even })
-                    }
-                    Some(_) => return Err(error("`keep` comes once, right after `outliers=K` (and `trim`)".into())),
-                    None => {
-                        return Err(error("`keep` puts back what `outliers=K` removes: write it after outliers=K".into()))
-                    }
-                },
-                ("keep", Some(v)) => {
-                    return Err(error(format!("keep={v}: write `keep` (evenly) or `keep=surface`")))
-                }
-                ("temporal", Some(v)) => {
-                    let alpha: f32 =
-                        v.parse().map_err(|_| error(format!("temporal={v}: the blend's α_min must be a number")))?;
-                    if !(alpha > 0.0 && alpha <= TEMPORAL_MAX_ALPHA) {
-                        return Err(error(format!(
-                            "temporal={v}: α_min must be above 0 and at most {TEMPORAL_MAX_ALPHA}"
-                        )));
-                    }
-                    if pipeline.temporal.is_some() {
-                        return Err(error("`temporal` appears once".into()));
-                    }
-                    pipeline.temporal = Some(Temporal { alpha, feedback: 0, clamp: None, antilag: None });
-                }
-                ("temporal", None) => {
-                    return Err(error("`temporal` needs its α_min, the least share of a frame: temporal=A".into()))
-                }
-                ("feedback", Some(v)) => {
-                    let passes: u32 =
-                        v.parse().map_err(|_| error(format!("feedback={v}: the passes must be a whole number")))?;
-                    match pipeline.temporal {
-                        Some(_) if feedback.is_none() => feedback = Some(passes),
-                        Some(_) => return Err(error("`feedback` appears once".into())),
-                        None => {
-                            return Err(error(
-                                "`feedback=K` says which pass the temporal stage keeps: write it after temporal=A"
-                                    .into(),
-                            ))
-                        }
-                    }
-                }
-                ("clamp", Some(v)) => {
-                    let gamma: f32 = v.parse().map_err(|_| error(format!("clamp={v}: γ must be a number")))?;
-                    if !(gamma.is_finite() && gamma > 0.0) {
-                        return Err(error(format!("clamp={v}: γ must be finite and above 0")));
-                    }
-                    match &mut pipeline.temporal {
-                        Some(temporal) if temporal.clamp.is_none() => temporal.clamp = Some(gamma),
-                        Some(_) => return Err(error("`clamp` appears once".into())),
-                        None => {
-                            return Err(error(
-                                "`clamp=G` clamps the temporal stage's history: write it after temporal=A".into(),
-                            ))
-                        }
-                    }
-                }
-                ("antilag", Some(v)) => {
-                    let kappa: f32 = v.parse().map_err(|_| error(format!("antilag={v}: κ must be a number")))?;
-                    if !(kappa.is_finite() && kappa > 0.0) {
-                        return Err(error(format!("antilag={v}: κ must be finite and above 0")));
-                    }
-                    match &mut pipeline.temporal {
-                        Some(temporal) if temporal.antilag.is_none() => temporal.antilag = Some(kappa),
-                        Some(_) => return Err(error("`antilag` appears once".into())),
-                        None => {
-                            return Err(error(
-                                "`antilag=K` cuts the temporal stage's history where the light changed: write it after temporal=A"
-                                    .into(),
-                            ))
-                        }
-                    }
-                }
-                ("feedback" | "clamp" | "antilag", None) => {
-                    return Err(error(format!("`{name}` needs its value: {name}=N")));
-                }
-                ("outliers", None) => return Err(error("`outliers` needs its strength: outliers=K".into())),
-                ("demodulate", None) => {
-                    if pipeline.demodulate {
-                        return Err(error("`demodulate` appears twice".into()));
-                    }
-                    if pipeline.temporal.is_some() {
-                        return Err(error("`demodulate` comes before `temporal`: the history is demodulated".into()));
-                    }
-                    pipeline.demodulate = true;
-                }
-                ("window", None) => {
-                    pipeline.form = Form::Window;
-                    form_seen = true;
-                }
-                ("atrous" | "atrous3x3", Some(v)) => {
-                    let stencil = if name == "atrous" { Stencil::Cubic5 } else { Stencil::Linear3 };
-                    let passes: u32 =
-                        v.parse().map_err(|_| error(format!("{name}={v}: passes must be a whole number")))?;
-                    if !(1..=MAX_ATROUS_PASSES).contains(&passes) {
-                        return Err(error(format!("{name}={v}: passes must be from 1 to {MAX_ATROUS_PASSES}")));
-                    }
-                    pipeline.form = Form::Atrous { passes, stencil };
-                    form_seen = true;
-                }
-                ("atrous" | "atrous3x3", None) => {
-                    return Err(error(format!("`{name}` needs its number of passes: {name}=N")))
-                }
-                (other, _) => {
-                    return Err(error(format!(
-                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, temporal=A, feedback=K, clamp=G, antilag=K, window, atrous=N, atrous3x3=N, planefit=R"
-                    )))
-                }
-            }
-        }
-        if !form_seen {
-            return Err(error("no form: end with `window`, `atrous=N` or `atrous3x3=N`".into()));
-        }
-        let most = pipeline.most_feedback();
-        if let Some(temporal) = &mut pipeline.temporal {
-            temporal.feedback = match feedback {
-                Some(k) if k > most => {
-                    return Err(error(format!(
-                        "feedback={k}: the history is a demodulated image after at most {most} passes of this form{}",
-                        if most < pipeline.passes() { " (its last pass multiplies the albedo back)" } else { "" }
-                    )))
-                }
-                Some(k) => k,
-                // SVGF's: the first pass's output.
-                None => most.min(1),
-            };
-        }
-        Ok(pipeline)
-    }
-}
-
-impl fmt::Display for FilterPipeline {
-    /// The canonical text: `parse(print(p)) == p`.
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if let Some(Outliers { k, trim, keep }) = self.outliers {
-            write!(f, "outliers={k},")?;
-            if trim {
-                write!(f, "trim,")?;
-            }
-            match keep {
-                None => {}
-                Some(Keep::Even) => write!(f, "keep,")?,
-                Some(Keep::Surface) => write!(f, "keep=surface,")?,
-            }
-        }
-        if self.demodulate {
-            write!(f, "demodulate,")?;
-        }
-        if let Some(Temporal { alpha, feedback, clamp, antilag }) = self.temporal {
-            write!(f, "temporal={alpha},feedback={feedback},")?;
-            if let Some(gamma) = clamp {
-                write!(f, "clamp={gamma},")?;
-            }
-            if let Some(kappa) = antilag {
-                write!(f, "antilag={kappa},")?;
-            }
-        }
-        match self.form {
-            Form::Window => write!(f, "window")?,
-            Form::Atrous { passes, stencil } => write!(f, "{}={passes}", stencil.stage_name())?,
-        }
-        if let Some(PlaneFit { radius }) = self.planefit {
-            write!(f, ",planefit={radius}")?;
-        }
-        Ok(())
-    }
-}
-
-impl serde::Serialize for FilterPipeline {
-    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
-        s.serialize_str(&self.to_string())
-    }
-}
-
-impl<'de> serde::Deserialize<'de> for FilterPipeline {
-    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
-        let text = String::deserialize(d)?;
-        text.parse().map_err(serde::de::Error::custom)
-    }
-}
-
 /// The luminance of a colour's non-negative part.
 pub fn luminance(c: [f64; 3]) -> f64 {
     (0..3).map(|k| LUMINANCE[k] * c[k].max(0.0)).sum()
@@ -803,6 +604,8 @@ mod tests {
             "demodulate,temporal=0.1,feedback=0,clamp=2,atrous3x3=3,planefit=3",
             "demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5",
             "temporal=0.05,feedback=1,window",
+            "demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5,pixelfilter=0.45",
+            "atrous=4,planefit=3,pixelfilter=1",
         ] {
             let p: FilterPipeline = text.parse().unwrap();
             assert_eq!(p.to_string(), text);
@@ -817,7 +620,7 @@ mod tests {
             ("atrous3x3", "atrous3x3=N"),
             ("outliers=-1,window", "at least 0"),
             ("demodulate", "no form"),
-            ("window,demodulate", "follows the form"),
+            ("window,demodulate", "follow the form"),
             ("blur,window", "unknown stage `blur`"),
             ("demodulate,outliers=2,window", "first stage"),
             ("keep,window", "after outliers=K"),
@@ -833,6 +636,13 @@ mod tests {
             ("atrous=4,planefit=0", "from 1 to"),
             ("atrous=4,planefit=3,planefit=3", "once"),
             ("atrous=4,planefit=3,demodulate", "only `planefit=R`"),
+            ("pixelfilter=0.5,atrous=4", "after the form"),
+            ("atrous=4,pixelfilter", "pixelfilter=S"),
+            ("atrous=4,pixelfilter=0", "above 0"),
+            ("atrous=4,pixelfilter=1.5", "at most 1"),
+            ("atrous=4,pixelfilter=wide", "number of pixels"),
+            ("atrous=4,pixelfilter=0.5,planefit=3", "last stage"),
+            ("atrous=4,pixelfilter=0.5,pixelfilter=0.5", "last stage"),
             ("temporal,atrous=4", "temporal=A"),
             ("temporal=0,atrous=4", "above 0"),
             ("temporal=0.2,demodulate,atrous=4", "before `temporal`"),
@@ -925,5 +735,20 @@ mod tests {
         assert_eq!(surface_normal_term([0.0, 0.0, 2.5], up), 1.0, "a direction, whatever its length");
         assert_eq!(surface_light_term(0.5, 0.0), 1.0);
         assert_eq!(surface_light_term(0.5, 0.25), 0.75);
+    }
+
+    #[test]
+    fn the_pixel_filter_keeps_the_light_and_narrows_with_sigma() {
+        let mut last_centre = 0.0;
+        for sigma in [1.0, 0.7, 0.45, 0.2] {
+            let [centre, side] = PixelFilter { sigma }.weights();
+            assert!((centre as f64 + 2.0 * side as f64 - 1.0).abs() < 1e-6, "σ {sigma}: sums to 1");
+            assert!(centre > side && side > 0.0, "σ {sigma}: {centre} {side}");
+            assert!(centre > last_centre, "a smaller σ keeps more of the pixel");
+            last_centre = centre;
+        }
+        // σ 0.4: a side tap is exp(-1 / 0.32) = 0.044 of the centre.
+        let [centre, side] = PixelFilter { sigma: 0.4 }.weights();
+        assert!((side / centre - (-1.0f32 / 0.32).exp()).abs() < 1e-4);
     }
 }
