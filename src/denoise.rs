@@ -184,10 +184,10 @@ impl Choice {
         })
     }
 
-    /// This choice for frames whose renderer sampled every pixel at one
-    /// point (`point_sampled`: Cycles at one sample, `scene::point_sampled`),
-    /// the same point in every frame, while a reference integrates its
-    /// pixel filter: the pipeline ends with that filter
+    /// This choice for a render (or a sequence's frames) whose renderer
+    /// sampled every pixel at one point (`point_sampled`: Cycles at one
+    /// sample, `scene::point_sampled`; the same point in every frame), while
+    /// a reference integrates its pixel filter: the pipeline ends with that filter
     /// ([`PixelFilter::POINT_SAMPLED`]), unless the caller gave the pipeline
     /// (`pipeline_given`) or it has one already. Why goes into
     /// `chosen_because`, which then says so for a filter asked for too.
@@ -195,7 +195,7 @@ impl Choice {
         if !point_sampled || pipeline_given || self.pipeline.pixel_filter.is_some() {
             return self;
         }
-        let why = "then the pixel filter, as the frames sample each pixel at one point (Cycles at 1 sample)";
+        let why = "then the pixel filter, as the render samples each pixel at one point (Cycles at 1 sample)";
         Choice {
             pipeline: FilterPipeline { pixel_filter: Some(PixelFilter::POINT_SAMPLED), ..self.pipeline },
             chosen_because: Some(match self.chosen_because {

@@ -270,7 +270,8 @@ fn sequence_with(
 
 /// The pixel filter follows what the first frame's header says: Cycles'
 /// `cycles.ViewLayer.samples` of 1 in the committed frames, none in a copy
-/// written without it (as filterjit's own renders and other renderers' are).
+/// written without it (as filterjit's own renders and other renderers' are);
+/// and a single render's header likewise.
 #[test]
 fn the_pixel_filter_follows_the_sample_count_in_the_header() {
     let noisy = committed().join("noisy");
@@ -283,6 +284,11 @@ fn the_pixel_filter_follows_the_sample_count_in_the_header() {
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
     assert!(stderr.contains("filter    @") && !stderr.contains("pixelfilter"), "no header, no pixel filter: {stderr}");
+    // One frame alone, filtered as a render of its own: the same rule.
+    let (frame, out) = (noisy.join("frame_0002.exr"), dir.join("one.exr"));
+    let o = filterjit(&["filter", frame.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success() && stderr.contains(",pixelfilter=0.4): "), "{stderr}");
 }
 
 /// A damaged sequence is refused with the file and what is wrong named,

@@ -36,6 +36,10 @@ pub(crate) fn filter(
     let load_time = load_start.elapsed();
     // A chosen filter may give way to its variant for the render's light (one read by the same request).
     let choice = choice.for_light(&scene.color)?;
+    // A render sampled at one point a pixel: the pixel filter its reference integrates, last.
+    let point_sampled = scene::point_sampled(scene_path, request.view_layer.as_deref())
+        .with_context(|| format!("reading scene {}", scene_path.display()))?;
+    let choice = choice.for_point_sampled(point_sampled, pipeline.is_some());
     if let Some(because) = &choice.chosen_because {
         eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
     }
