@@ -17,6 +17,7 @@ def denoise(
     filter: Optional[str] = ...,
     pipeline: Optional[str] = ...,
     radius: Optional[int] = ...,
+    point_sampled: bool = ...,
 ) -> npt.NDArray[np.float32]: ...
 class Denoiser:
     def __init__(

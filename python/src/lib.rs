@@ -166,6 +166,12 @@ fn parse_pipeline(pipeline: Option<&str>) -> PyResult<Option<FilterPipeline>> {
 /// :param pipeline: the filter pipeline, e.g. ``"outliers=2,demodulate,atrous=5"``;
 ///     by default the one the filter was stored with.
 /// :param radius: window radius of the ``window`` form; by default the stored one, else 5.
+/// :param point_sampled: whether the renderer sampled every pixel at one
+///     point (Blender Cycles at 1 sample: the header's
+///     ``cycles.ViewLayer.samples`` is 1) while a reference integrates its
+///     pixel filter: the filter then ends with that filter
+///     (``pixelfilter=0.4``) unless ``pipeline`` is given, as ``filterjit
+///     filter`` does by the header.
 /// :returns: float32 array of shape (H, W, 3).
 /// :raises TypeError: an input is not a float32 numpy array.
 /// :raises ValueError: a shape differs from ``color``'s, a value is not
@@ -176,7 +182,7 @@ fn parse_pipeline(pipeline: Option<&str>) -> PyResult<Option<FilterPipeline>> {
 /// The GIL is released while the GPU works.
 #[pyfunction]
 #[pyo3(signature = (color, *, albedo=None, normal=None, position=None, depth=None, variance=None,
-                    spp=None, filter=None, pipeline=None, radius=None))]
+                    spp=None, filter=None, pipeline=None, radius=None, point_sampled=false))]
 #[allow(clippy::too_many_arguments)]
 fn denoise<'py>(
     py: Python<'py>,
@@ -190,15 +196,17 @@ fn denoise<'py>(
     filter: Option<&str>,
     pipeline: Option<&str>,
     radius: Option<u32>,
+    point_sampled: bool,
 ) -> PyResult<Bound<'py, PyAny>> {
     let (images, given) = arrays(color, [albedo, normal, position, depth, variance], None, spp)?;
-    let choice = Choice::asked_or_best(filter, parse_pipeline(pipeline)?, radius, &given).map_err(value)?;
+    let pipeline = parse_pipeline(pipeline)?;
+    let choice = Choice::asked_or_best(filter, pipeline, radius, &given).map_err(value)?;
     check_given(&choice, &given)?;
     let request = scene::Request { reference: false, ..choice.request() };
     let (height, width) = (images.height, images.width);
     let scene = scene::prepare(images, &request).map_err(value)?;
     // As `filterjit filter`: a chosen filter may give way to its variant for the render's light.
-    let choice = choice.for_light(&scene.color).map_err(value)?;
+    let choice = choice.for_light(&scene.color).map_err(value)?.for_point_sampled(point_sampled, pipeline.is_some());
     let kernel = kernel(&choice)?;
     let gpu = device()?;
     let filtered = py.detach(|| filterjit::denoise::filter(&gpu, &choice, &kernel, &scene)).map_err(runtime)?;

@@ -322,6 +322,10 @@ def test_point_sampled_frames_end_with_the_pixel_filter_unless_a_pipeline_is_giv
     kept = filterjit.Denoiser(pipeline=given, point_sampled=True)
     kept.denoise(**frame)
     assert kept.pipeline == given, "a pipeline given is kept as given"
+    # One render: the same rule; the 3x3 filter moves the image, and keeps its light.
+    still = {k: v for k, v in frame.items() if k != "motion"}
+    plain, filtered = filterjit.denoise(**still), filterjit.denoise(**still, point_sampled=True)
+    assert not np.array_equal(plain, filtered) and abs(filtered.mean() / plain.mean() - 1) < 1e-3
 
 
 def test_a_denoiser_refuses_a_frame_with_other_inputs(sequence):
