@@ -145,10 +145,7 @@ impl BindingInterface {
     /// textures in, and a storage buffer out for filterjit (`None`) or,
     /// exported, a storage texture of the output format.
     pub fn planefit(textures: Option<OutputFormat>) -> BindingInterface {
-        let written = match textures {
-            None => Resource::Storage { element: Element::Vec4F32, writable: true },
-            Some(format) => Resource::StorageTexture(TexelFormat::Color(format)),
-        };
+        let written = Self::frame_written(textures);
         Self::image_stage(textures, true, &Self::PLANEFIT_READS, written, Self::PLANEFIT_UNIFORM)
     }
 
@@ -157,32 +154,23 @@ impl BindingInterface {
     /// filtered image (`Color`, sampled) and its output: a storage buffer for
     /// filterjit (`None`) or, exported, a storage texture of the output format.
     pub fn pixel_filter(textures: Option<OutputFormat>) -> BindingInterface {
-        let (kind, params, written, out) = match textures {
-            None => (
-                KernelKind::Filter,
-                own_params(),
-                Resource::Storage { element: Element::Vec4F32, writable: true },
-                "buf_out",
-            ),
-            Some(format) => (
-                KernelKind::Export(format),
-                Resource::Uniform,
-                Resource::StorageTexture(TexelFormat::Color(format)),
-                "tex_out",
-            ),
-        };
-        let bindings = dense([
-            (Role::Params, params, "params".to_string()),
-            (Role::Color, Resource::SampledTexture, "tex_color".to_string()),
-            (Role::Output, written, out.to_string()),
-        ]);
         let uniform = vec![
             field("width", "u32", 0, "image width in pixels"),
             field("height", "u32", 4, "image height in pixels"),
             field("centre", "f32", 8, "the 1-D weight of the centre tap; tap (dx, dy) weighs w(dx) w(dy)"),
             field("side", "f32", 12, "the 1-D weight of a tap one pixel off the centre"),
         ];
-        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
+        let written = Self::frame_written(textures);
+        Self::image_stage_with(textures, true, &[(Role::Color, "color")], written, uniform)
+    }
+
+    /// What a stage that writes the filtered frame writes: a storage buffer
+    /// for filterjit (`None`), or exported, a storage texture of the output format.
+    fn frame_written(textures: Option<OutputFormat>) -> Resource {
+        match textures {
+            None => Resource::Storage { element: Element::Vec4F32, writable: true },
+            Some(format) => Resource::StorageTexture(TexelFormat::Color(format)),
+        }
     }
 
     /// The interface of `planefit`'s fitness kernel: [`BindingInterface::planefit`]'s
@@ -206,7 +194,7 @@ impl BindingInterface {
         ("demodulate", "1: divide by modulation before the fit and multiply after; 0: modulation is not read"),
     ];
 
-    /// A built-in image stage's interface (the spreads, `planefit`): the
+    /// A built-in image stage's interface (the spreads, `planefit`, `pixelfilter`): the
     /// uniform (width, height, then two u32 `fields`), `reads` (sampled
     /// textures `tex_NAME` where `sampled` or exported, as
     /// [`Self::samples_images`] says why; else storage buffers `buf_NAME`),
@@ -217,6 +205,17 @@ impl BindingInterface {
         reads: &[(Role, &str)],
         written: Resource,
         fields: [(&str, &str); 2],
+    ) -> BindingInterface {
+        Self::image_stage_with(textures, sampled, reads, written, image_uniform(fields))
+    }
+
+    /// [`Self::image_stage`] with its 16-byte uniform given whole (fields of other types than u32).
+    fn image_stage_with(
+        textures: Option<OutputFormat>,
+        sampled: bool,
+        reads: &[(Role, &str)],
+        written: Resource,
+        uniform: Vec<super::interface::UniformField>,
     ) -> BindingInterface {
         let (kind, params, out) = match textures {
             None => (KernelKind::Filter, own_params(), "buf_out"),
@@ -235,7 +234,7 @@ impl BindingInterface {
             written,
             out.to_string(),
         )]));
-        BindingInterface { kind, bindings, uniform: image_uniform(fields), uniform_bytes: 16 }
+        BindingInterface { kind, bindings, uniform, uniform_bytes: 16 }
     }
 
     /// The interface of the temporal stage (`jit::temporal`): the uniform
