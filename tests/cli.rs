@@ -555,6 +555,48 @@ fn bench_frames_times_the_filters_it_is_given() {
     assert!(text(&refused.stderr).contains("--frames"), "{}", text(&refused.stderr));
 }
 
+/// `--profile` prints each filter's frame kernel by kernel and writes the
+/// same into bench.json, in the order the passes ran; without `--frames` it
+/// is refused.
+#[test]
+fn bench_frames_profile_times_each_kernel_of_a_frame() {
+    let dir = crate::common::temp_dir("cli", "bench-frames-profile");
+    let json = dir.join("bench.json");
+    let bench = |extra: &[&str]| {
+        Command::new(env!("CARGO_BIN_EXE_filterjit"))
+            .args(["bench", "--repeats", "1", "--no-oidn", "--profile", "-o", json.to_str().unwrap()])
+            .args(extra)
+            .env("FILTERJIT_CACHE", dir.join("cache"))
+            .output()
+            .unwrap()
+    };
+    let run = bench(&["--frames", "64x48", "--filter", "@evolvedAtrous3x3"]);
+    assert!(run.status.success(), "{}\n{}", text(&run.stdout), text(&run.stderr));
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let frame = &report["frames"][0];
+    if frame["device_ms"].is_null() {
+        // No device clock (not lavapipe or llvmpipe, which have one): nothing to profile.
+        assert!(frame["profile"].is_null());
+        return;
+    }
+    let kernels: Vec<(&str, u64)> = frame["profile"]
+        .as_array()
+        .expect("a profile where the device has a clock")
+        .iter()
+        .map(|k| (k["kernel"].as_str().unwrap(), k["dispatches"].as_u64().unwrap()))
+        .collect();
+    // `outliers=2,demodulate,atrous3x3=4`: the pre-pass, then four passes of one band each.
+    let passes: Vec<String> = (0..4).map(|k| format!("form: à-trous pass {k}")).collect();
+    let expected: Vec<(&str, u64)> =
+        std::iter::once(("pre-pass", 1)).chain(passes.iter().map(|p| (p.as_str(), 1))).collect();
+    assert_eq!(kernels, expected);
+    let stdout = text(&run.stdout);
+    assert!(stdout.contains("profile @evolvedAtrous3x3 64x48") && stdout.contains("form: à-trous pass 3"), "{stdout}");
+    let refused = Command::new(env!("CARGO_BIN_EXE_filterjit")).args(["bench", "--profile"]).output().unwrap();
+    assert!(!refused.status.success());
+    assert!(text(&refused.stderr).contains("--frames"), "{}", text(&refused.stderr));
+}
+
 /// A flag the pipeline cannot honour is refused with why, not ignored:
 /// `--radius` sets a window's size, and an à-trous form has a fixed stencil.
 #[test]

@@ -58,6 +58,45 @@ pub struct FrameResult {
     pub wall_ms: f64,
     /// `device`'s median, where measured.
     pub device_ms: Option<f64>,
+    /// Where `bench --frames --profile` asked: each kernel's share of the
+    /// frame on the device's clock, in the order they first ran (none for
+    /// OIDN, and where the device has no clock).
+    pub profile: Option<Vec<KernelTime>>,
+}
+
+/// One kernel's compute passes in a profiled frame ([`crate::gpu::Gpu::set_profiling`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct KernelTime {
+    pub kernel: String,
+    /// Its passes a frame.
+    pub dispatches: usize,
+    /// Their time a frame on the device's clock, the median over [`PROFILED_FRAMES`].
+    pub device_ms: f64,
+}
+
+/// Frames each method is profiled over, after its timed rounds.
+pub const PROFILED_FRAMES: usize = 3;
+
+/// `passes` of [`PROFILED_FRAMES`] frames in the order they ran, gathered by
+/// kernel: its passes a frame and the median of its time a frame.
+fn by_kernel(frames: &[Vec<crate::gpu::TimedPass>]) -> Vec<KernelTime> {
+    let mut kernels: Vec<String> = Vec::new();
+    for pass in frames.iter().flatten() {
+        if !kernels.contains(&pass.kernel) {
+            kernels.push(pass.kernel.clone());
+        }
+    }
+    kernels
+        .into_iter()
+        .map(|kernel| {
+            let mine = |frame: &Vec<crate::gpu::TimedPass>| -> Vec<Option<Duration>> {
+                frame.iter().filter(|p| p.kernel == kernel).map(|p| p.device).collect()
+            };
+            let dispatches = frames.first().map_or(0, |f| mine(f).len());
+            let sums = frames.iter().map(|f| ms(mine(f).into_iter().flatten().sum())).collect();
+            KernelTime { kernel, dispatches, device_ms: stat(sums).median }
+        })
+        .collect()
 }
 
 /// The medians of a frame's parts, in ms.
@@ -185,7 +224,16 @@ pub(super) fn whole_frames(
                 .then(|| Ok(FrameMethod { name: format!("@{name}"), expr: parse_expr(text)?, pipeline }))
         })
         .collect::<anyhow::Result<_>>()?;
-    frames(gpu, renders, (FRAME_SIDE, FRAME_SIDE), &methods, repeats, peer, scratch)
+    frames(gpu, renders, (FRAME_SIDE, FRAME_SIDE), &methods, &Rounds { repeats, profile: false, scratch }, peer)
+}
+
+/// How each method's frames are measured: `repeats` (twice that many timed
+/// rounds), whether its kernels are profiled after them, and where OIDN's files go.
+#[derive(Clone, Copy)]
+pub struct Rounds<'a> {
+    pub repeats: usize,
+    pub profile: bool,
+    pub scratch: &'a std::path::Path,
 }
 
 /// `methods` and OIDN colour + albedo + normal (where its program is
@@ -193,7 +241,8 @@ pub(super) fn whole_frames(
 /// rounds: a filter's frame is its pre-pass, temporal stage, guide and passes
 /// in one submission (the frame's buffers made afresh each round, uploads
 /// not counted), as a renderer runs it; OIDN's is its program's own time for
-/// each execution on the device it chose.
+/// each execution on the device it chose. With `profile`, each method's
+/// kernels are then timed pass by pass over [`PROFILED_FRAMES`] more frames.
 ///
 /// `renders` are the bench scene rendered with different seeds, the first
 /// the one every single-image filter and OIDN take. A temporal filter's
@@ -208,10 +257,10 @@ pub fn frames(
     renders: &[Scene],
     (width, height): (usize, usize),
     methods: &[FrameMethod],
-    repeats: usize,
+    rounds: &Rounds,
     peer: Option<&crate::oidn::Oidn>,
-    scratch: &std::path::Path,
 ) -> anyhow::Result<Vec<FrameResult>> {
+    let Rounds { repeats, profile, scratch } = *rounds;
     let scene = renders.first().expect("the bench scene has a render");
     // Only a temporal filter reads the renders after the first.
     let used = if methods.iter().any(|m| m.pipeline.is_temporal()) { renders.len() } else { 1 };
@@ -269,6 +318,24 @@ pub fn frames(
             }
         }
     }
+    let mut profiles = vec![None; prepared.len()];
+    if profile && gpu.has_device_clock() {
+        for (k, (method, kernel, state, _, _)) in prepared.iter_mut().enumerate() {
+            let mut passes = Vec::new();
+            for n in 0..PROFILED_FRAMES {
+                let round = repeats.max(1) * 2 + n;
+                let frame = if method.pipeline.is_temporal() { nth_frame(SETTLING_FRAMES + 1 + round) } else { frame };
+                let mut buffers = SceneBuffers::for_frame(gpu, frame, &method.pipeline)?;
+                // Only the frame's own submission is profiled, not the uploads'.
+                gpu.set_profiling(true);
+                let filtered = gpu.filter_frame(kernel, &mut buffers, frame, radius, state);
+                passes.push(gpu.take_profile());
+                gpu.set_profiling(false);
+                filtered?;
+            }
+            profiles[k] = Some(by_kernel(&passes));
+        }
+    }
     let oidn = match peer {
         Some(oidn) => {
             let dir = scratch.join(format!("filterjit-bench-oidn-{}", std::process::id()));
@@ -286,30 +353,37 @@ pub fn frames(
         .zip(times)
         .zip(parts)
         .zip(on_device)
-        .map(|((((method, _, _, compile_ms, light), times), [prepass, temporal, guide, passes]), on_device)| {
-            let warm_ms = stat(times);
-            let parts_ms = FrameParts {
-                prepass: stat(prepass).median,
-                temporal: stat(temporal).median,
-                guide: stat(guide).median,
-                passes: stat(passes).median,
-            };
-            FrameResult {
-                method: method.name.clone(),
-                pipeline: method.pipeline.to_string(),
-                width,
-                height,
-                compile_ms: Some(compile_ms),
-                ms_per_mpx: warm_ms.median / mpx,
-                over_oidn: over(warm_ms.median),
-                wall_ms: warm_ms.median,
-                warm_ms,
-                light,
-                parts_ms: Some(parts_ms),
-                device_ms: (!on_device.is_empty()).then(|| stat(on_device.clone()).median),
-                device: (!on_device.is_empty()).then(|| stat(on_device)),
-            }
-        })
+        .zip(profiles)
+        .map(
+            |(
+                ((((method, _, _, compile_ms, light), times), [prepass, temporal, guide, passes]), on_device),
+                profile,
+            )| {
+                let warm_ms = stat(times);
+                let parts_ms = FrameParts {
+                    prepass: stat(prepass).median,
+                    temporal: stat(temporal).median,
+                    guide: stat(guide).median,
+                    passes: stat(passes).median,
+                };
+                FrameResult {
+                    method: method.name.clone(),
+                    pipeline: method.pipeline.to_string(),
+                    width,
+                    height,
+                    compile_ms: Some(compile_ms),
+                    ms_per_mpx: warm_ms.median / mpx,
+                    over_oidn: over(warm_ms.median),
+                    wall_ms: warm_ms.median,
+                    warm_ms,
+                    light,
+                    parts_ms: Some(parts_ms),
+                    device_ms: (!on_device.is_empty()).then(|| stat(on_device.clone()).median),
+                    device: (!on_device.is_empty()).then(|| stat(on_device)),
+                    profile,
+                }
+            },
+        )
         .collect();
     if let Some((warm_ms, light, device)) = oidn {
         results.push(FrameResult {
@@ -326,6 +400,7 @@ pub fn frames(
             parts_ms: None,
             device: None,
             device_ms: None,
+            profile: None,
         });
     }
     Ok(results)

@@ -20,7 +20,7 @@ use crate::scene::Scene;
 
 pub use calibration::{calibrate, CalibrationResult, THESIS_TABLE_4_1};
 pub use expressions::{corpus, CorpusResult, ExpressionResult, VARIANTS};
-pub use frames::{FrameMethod, FrameParts, FrameResult, StageResult, FRAME_SIDE};
+pub use frames::{FrameMethod, FrameParts, FrameResult, KernelTime, StageResult, FRAME_SIDE, PROFILED_FRAMES};
 pub use generation::GenerationResult;
 pub use handwritten::{HandWrittenResult, HANDWRITTEN_BILATERAL};
 pub use population::PopulationResult;
@@ -101,6 +101,8 @@ pub fn frame_methods() -> anyhow::Result<Vec<FrameMethod>> {
 pub struct FramesSettings<'a> {
     pub sizes: &'a [(usize, usize)],
     pub repeats: usize,
+    /// Each method's kernels timed pass by pass after its timed frames ([`FrameResult::profile`]).
+    pub profile: bool,
     pub scratch: &'a std::path::Path,
 }
 
@@ -115,12 +117,13 @@ pub fn frames_at(
     peer: Option<&crate::oidn::Oidn>,
     progress: &mut dyn FnMut(&str),
 ) -> anyhow::Result<FramesReport> {
-    let FramesSettings { sizes, repeats, scratch } = *settings;
+    let FramesSettings { sizes, repeats, profile, scratch } = *settings;
+    let rounds = frames::Rounds { repeats, profile, scratch };
     let scene = renders.first().expect("the bench scene has a render");
     let mut all = Vec::new();
     for &size in sizes {
         progress(&format!("whole frames {}x{}", size.0, size.1));
-        all.extend(frames::frames(gpu, renders, size, methods, repeats, peer, scratch)?);
+        all.extend(frames::frames(gpu, renders, size, methods, &rounds, peer)?);
     }
     Ok(FramesReport {
         device: gpu.describe(),

@@ -152,7 +152,38 @@ pub fn frames_report(r: &super::FramesReport) -> String {
         r.source,
         r.repeats * 2,
         frames_table(&r.frames)
-    )
+    ) + &profiles(&r.frames)
+}
+
+/// Where each profiled frame goes, kernel by kernel: its passes a frame,
+/// their time on the device's clock and their share of the frame's.
+fn profiles(frames: &[super::FrameResult]) -> String {
+    let mut t = String::new();
+    for f in frames {
+        let Some(kernels) = &f.profile else { continue };
+        let total: f64 = kernels.iter().map(|k| k.device_ms).sum();
+        t += &format!(
+            "\nprofile {} {}x{}: each kernel's passes a frame, on the device's clock (median of {} frames); the frame's passes {:.3} ms{}\n",
+            f.method,
+            f.width,
+            f.height,
+            super::PROFILED_FRAMES,
+            total,
+            f.device_ms.map_or(String::new(), |d| format!(" of its {d:.3} ms (the rest: copies and clears between passes)"))
+        );
+        let width = kernels.iter().map(|k| k.kernel.chars().count()).max().unwrap_or(0).max("kernel".len());
+        t += &format!("  {:<width$} {:>10} {:>10} {:>7}\n", "kernel", "dispatches", "ms", "share");
+        for k in kernels {
+            t += &format!(
+                "  {:<width$} {:>10} {:>10.3} {:>6.1}%\n",
+                k.kernel,
+                k.dispatches,
+                k.device_ms,
+                100.0 * k.device_ms / total.max(f64::MIN_POSITIVE)
+            );
+        }
+    }
+    t
 }
 
 /// Whole frames as a table: one row a method and size.

@@ -338,6 +338,10 @@ pub(crate) struct BenchArgs {
     /// pipeline stored with it (else `filter`'s default pipeline).
     #[arg(long = "filter")]
     pub(crate) filters: Vec<String>,
+    /// With --frames: also time each filter's kernels pass by pass on the
+    /// device's clock (three more frames each), and print where each frame goes.
+    #[arg(long)]
+    pub(crate) profile: bool,
 }
 
 #[derive(clap::Args)]

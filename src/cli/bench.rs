@@ -80,6 +80,7 @@ pub(crate) fn bench_frames(
     repeats: usize,
     filters: &[String],
     no_oidn: bool,
+    profile: bool,
     output: &Path,
 ) -> Result<()> {
     let methods = match filters {
@@ -103,7 +104,7 @@ pub(crate) fn bench_frames(
     let renders = bench_renders(env, &gpu, (256, 256), count, &request)?;
     let sizes: Vec<(usize, usize)> = sizes.iter().map(|&(w, h)| (w as usize, h as usize)).collect();
     let mut progress = |what: &str| eprintln!("          {what}");
-    let settings = filterjit::bench::FramesSettings { sizes: &sizes, repeats, scratch: &env.scratch };
+    let settings = filterjit::bench::FramesSettings { sizes: &sizes, repeats, profile, scratch: &env.scratch };
     let report = filterjit::bench::frames_at(&gpu, &renders, &methods, &settings, peer.as_ref(), &mut progress)?;
     print!("{}", filterjit::bench::frames_report(&report));
     filterjit::io::write_bytes_atomically(output, serde_json::to_string_pretty(&report)?.as_bytes())?;
@@ -126,9 +127,13 @@ pub(crate) fn bench_command(env: &Environment, args: BenchArgs) -> Result<()> {
         no_oidn,
         frames,
         filters,
+        profile,
     } = args;
     if !frames.is_empty() {
-        return bench_frames(env, &frames, repeats.max(1), &filters, no_oidn, &output);
+        return bench_frames(env, &frames, repeats.max(1), &filters, no_oidn, profile, &output);
+    }
+    if profile {
+        bail!("--profile times whole frames' kernels: give the sizes with --frames (e.g. --frames 1920x1080)");
     }
     if !filters.is_empty() {
         bail!("--filter names a filter whose whole frames are timed: give the sizes with --frames (e.g. --frames 1920x1080)");

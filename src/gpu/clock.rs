@@ -88,8 +88,10 @@ impl Gpu {
         stopwatch.start(&mut encoder);
         let recorded = record(&mut encoder)?;
         stopwatch.stop(&mut encoder);
+        self.resolve_profile(&mut encoder);
         self.queue().submit([encoder.finish()]);
         self.wait(during)?;
+        self.collect_profile()?;
         let wall = start.elapsed();
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during, message: error.to_string() });

@@ -267,8 +267,8 @@ impl Gpu {
                     role => buffers.pass_resource(role, level, carried).expect("inputs are uploaded before binding"),
                 });
                 {
-                    let mut pass = encoder
-                        .begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+                    let kernel = if atrous { format!("form: à-trous pass {level}") } else { "form: window".into() };
+                    let mut pass = self.compute_pass(&mut encoder, kernel);
                     pass.set_pipeline(&pipeline.pipeline);
                     pass.set_bind_group(0, &bind_group, &[]);
                     pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
@@ -307,8 +307,10 @@ impl Gpu {
         // The results' copy for reading back goes in the same submission: one wait less a call.
         encoder.copy_buffer_to_buffer(&out, 0, &staging, 0, pixels * 16);
         encoder.copy_buffer_to_buffer(&flags, 0, &staging, pixels * 16, pixels * 4);
+        self.resolve_profile(&mut encoder);
         self.queue().submit([encoder.finish()]);
         self.wait("filtering")?;
+        self.collect_profile()?;
         let time = Span { wall: start.elapsed(), device: stopwatch.read(self)? };
         for (part, recording, stopwatch) in parts {
             let span = Some(Span { wall: recording, device: stopwatch.read(self)? });
@@ -356,16 +358,19 @@ impl Gpu {
     /// error scope into a [`GpuError`], and read `staging` back.
     pub(super) fn finish_and_read(
         &self,
-        encoder: wgpu::CommandEncoder,
+        mut encoder: wgpu::CommandEncoder,
         scope: wgpu::ErrorScopeGuard,
         during: &'static str,
         staging: &wgpu::Buffer,
     ) -> Result<Vec<u8>, GpuError> {
+        self.resolve_profile(&mut encoder);
         self.queue().submit([encoder.finish()]);
         if let Some(error) = pollster::block_on(scope.pop()) {
             return Err(GpuError::Runtime { during, message: error.to_string() });
         }
-        self.read(staging)
+        let read = self.read(staging);
+        self.collect_profile()?;
+        read
     }
 
     /// Map a MAP_READ buffer and copy its contents out.

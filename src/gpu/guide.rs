@@ -69,7 +69,7 @@ impl Gpu {
                 Role::Flags => flags.as_entire_binding(),
                 other => unreachable!("the guide's kernel binds no {other:?}"),
             });
-            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let mut pass = self.compute_pass(encoder, "guide");
             pass.set_pipeline(&pipeline.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), band.min(height - row).div_ceil(WORKGROUP[1]), 1);

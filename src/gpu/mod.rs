@@ -11,6 +11,7 @@ mod host_memory;
 mod pixel_filter;
 mod planefit;
 mod prepass;
+mod profile;
 mod raw;
 mod sampled;
 mod temporal;
@@ -25,6 +26,7 @@ pub use buffers::SceneBuffers;
 pub use clock::Span;
 pub use filter::{Filtered, MAX_WEIGHTS_PER_DISPATCH};
 pub use fitness::{FitnessScene, Region, SceneScore};
+pub use profile::TimedPass;
 pub use raw::{RawBuffer, RawKernel};
 pub use temporal::TemporalState;
 pub use trace::{TraceBand, TraceInputs, TraceScene};
@@ -118,6 +120,8 @@ pub struct Gpu {
     gl_turns: Option<Mutex<()>>,
     /// Timestamps on the device's clock not in use ([`Gpu::stopwatch`]).
     stopwatches: Mutex<Vec<clock::Timestamps>>,
+    /// Each compute pass's time, where profiling is on ([`Gpu::set_profiling`]).
+    profile: Mutex<Option<profile::PassProfile>>,
 }
 
 /// Timings of getting a pipeline.
@@ -176,6 +180,7 @@ impl Gpu {
             kernel_checks: std::sync::atomic::AtomicBool::new(false),
             gl_turns,
             stopwatches: Mutex::new(Vec::new()),
+            profile: Mutex::new(None),
         })
     }
 

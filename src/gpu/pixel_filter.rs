@@ -43,7 +43,7 @@ impl Gpu {
             Role::Output => filtered.as_entire_binding(),
             other => unreachable!("pixelfilter has no {other:?} binding"),
         });
-        let mut pass = encoder.begin_compute_pass(&Default::default());
+        let mut pass = self.compute_pass(encoder, "pixelfilter");
         pass.set_pipeline(&kernel.pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
         pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);

@@ -113,7 +113,7 @@ impl Gpu {
             Role::Output => images.output.as_entire_binding(),
             other => unreachable!("planefit has no {other:?} binding"),
         });
-        let mut pass = encoder.begin_compute_pass(&Default::default());
+        let mut pass = self.compute_pass(encoder, "planefit");
         pass.set_pipeline(&kernel.pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
         pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), buffers.height.div_ceil(WORKGROUP[1]), 1);

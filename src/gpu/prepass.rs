@@ -109,7 +109,7 @@ impl Gpu {
                 .collect(),
         );
         {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let mut pass = self.compute_pass(encoder, "pre-pass");
             pass.set_pipeline(&kernel.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
@@ -178,7 +178,8 @@ impl Gpu {
                         .collect(),
                 );
                 {
-                    let mut pass = encoder.begin_compute_pass(&Default::default());
+                    let mut pass =
+                        self.compute_pass(encoder, format!("pre-pass: {keep:?} spread, {}", dispatch.describe()));
                     pass.set_pipeline(&spread.pipeline);
                     pass.set_bind_group(0, &bind_group, &[]);
                     // The total is one workgroup's work: the others would do nothing.

@@ -74,7 +74,7 @@ impl Gpu {
         let mut encoder = device.create_command_encoder(&Default::default());
         stopwatch.start(&mut encoder);
         {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let mut pass = self.compute_pass(&mut encoder, "raw kernel");
             pass.set_pipeline(&kernel.pipeline.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);

@@ -90,7 +90,7 @@ impl Gpu {
             Role::Output => wgpu::BindingResource::TextureView(&view),
             other => unreachable!("the blit has no {other:?} binding"),
         });
-        let mut pass = encoder.begin_compute_pass(&Default::default());
+        let mut pass = self.compute_pass(encoder, "blit to a texture");
         pass.set_pipeline(&pipeline.pipeline);
         pass.set_bind_group(0, &bind_group, &[]);
         pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);

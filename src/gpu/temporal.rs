@@ -158,7 +158,7 @@ impl Gpu {
         );
         let groups = (width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]));
         {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let mut pass = self.compute_pass(encoder, "temporal: reprojection and blend");
             pass.set_pipeline(&kernel.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);
@@ -181,7 +181,7 @@ impl Gpu {
             other => unreachable!("the temporal variance has no {other:?} binding"),
         });
         {
-            let mut pass = encoder.begin_compute_pass(&Default::default());
+            let mut pass = self.compute_pass(encoder, "temporal: variance prefilter");
             pass.set_pipeline(&prefilter.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(groups.0, groups.1, 1);

@@ -91,8 +91,7 @@ impl Gpu {
         let bind_group = self.bind_in_slot_order(&pipeline, resources.iter().map(|b| b.as_entire_binding()).collect());
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         {
-            let mut pass =
-                encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+            let mut pass = self.compute_pass(&mut encoder, "trace");
             pass.set_pipeline(&pipeline.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
             pass.dispatch_workgroups(width.div_ceil(8), rows.div_ceil(8), 1);

@@ -96,6 +96,17 @@ pub struct SpreadDispatch {
     pub target: SpreadTarget,
 }
 
+impl SpreadDispatch {
+    /// What the dispatch does, in a few words (a profile's name for it).
+    pub fn describe(&self) -> String {
+        match self.target {
+            SpreadTarget::Surface => "surface: directions and luminance".into(),
+            SpreadTarget::Total => "surface: total luminance (one workgroup)".into(),
+            SpreadTarget::Scratch(_) => format!("step {}", self.params.step),
+        }
+    }
+}
+
 /// Whether the `n`th dispatch of `sequence` finds `image` written by one
 /// before it. Where not (the dispatch that writes it, and the total in the
 /// one before that), a host binds a stand-in image there, which it never reads.
