@@ -163,13 +163,13 @@ fn profiles(frames: &[super::FrameResult]) -> String {
         let Some(kernels) = &f.profile else { continue };
         let total: f64 = kernels.iter().map(|k| k.device_ms).sum();
         t += &format!(
-            "\nprofile {} {}x{}: each kernel's passes a frame, on the device's clock (median of {} frames); the frame's passes {:.3} ms{}\n",
+            "\nprofile {} {}x{}: each kernel's passes and copies a frame, on the device's clock (median of {} frames): {:.3} ms{}\n",
             f.method,
             f.width,
             f.height,
             super::PROFILED_FRAMES,
             total,
-            f.device_ms.map_or(String::new(), |d| format!(" of its {d:.3} ms (the rest: copies and clears between passes)"))
+            f.device_ms.map_or(String::new(), |d| format!(" of the frame's {d:.3} ms (the rest: wgpu's clears of new images, and gaps)"))
         );
         let width = kernels.iter().map(|k| k.kernel.chars().count()).max().unwrap_or(0).max("kernel".len());
         t += &format!("  {:<width$} {:>10} {:>10} {:>7}\n", "kernel", "dispatches", "ms", "share");

@@ -3,8 +3,10 @@
 //! --frames … --profile`). A frame's stage times ([`super::Span`]) say which
 //! stage costs most; this says which dispatch inside it, so that GPU work is
 //! profiled rather than guessed. Each pass writes a timestamp as it begins and
-//! one as it ends (wgpu's `TIMESTAMP_QUERY`); the copies between passes are
-//! what a frame's time holds beyond the sum of its passes.
+//! one as it ends (wgpu's `TIMESTAMP_QUERY`), and so does each copy of an
+//! image into a texture where the device can write timestamps between
+//! commands; what a frame's time holds beyond them is the rest of its
+//! copies and wgpu's clears of images not yet written.
 
 use std::time::Duration;
 
@@ -105,6 +107,41 @@ impl Gpu {
                 end_of_pass_write_index: Some(2 * index + 1),
             }),
         })
+    }
+
+    /// Record commands other than a compute pass (a copy) with `record`,
+    /// timed as `kernel` where profiling is on and the device can write
+    /// timestamps between commands.
+    pub(super) fn profiled<T>(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        kernel: &str,
+        record: impl FnOnce(&mut wgpu::CommandEncoder) -> T,
+    ) -> T {
+        let slot = {
+            let mut profile = self.profile.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            match profile.as_mut() {
+                Some(p) if self.device.features().contains(super::clock::CLOCK_FEATURES) => {
+                    let index = p.pending.len() as u32;
+                    if index < CAPACITY {
+                        p.pending.push(kernel.to_string());
+                        Some((p.set.clone(), index))
+                    } else {
+                        p.untimed += 1;
+                        None
+                    }
+                }
+                _ => None,
+            }
+        };
+        if let Some((set, index)) = &slot {
+            encoder.write_timestamp(set, 2 * index);
+        }
+        let recorded = record(encoder);
+        if let Some((set, index)) = &slot {
+            encoder.write_timestamp(set, 2 * index + 1);
+        }
+        recorded
     }
 
     /// Before `encoder` is finished: resolve its passes' timestamps into a

@@ -65,18 +65,20 @@ impl Gpu {
             && source.usage().contains(wgpu::BufferUsages::COPY_SRC)
             && row_bytes.is_multiple_of(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT)
         {
-            encoder.copy_buffer_to_texture(
-                wgpu::TexelCopyBufferInfo {
-                    buffer: source,
-                    layout: wgpu::TexelCopyBufferLayout {
-                        offset: 0,
-                        bytes_per_row: Some(row_bytes),
-                        rows_per_image: Some(height),
+            self.profiled(encoder, "copy into a texture", |encoder| {
+                encoder.copy_buffer_to_texture(
+                    wgpu::TexelCopyBufferInfo {
+                        buffer: source,
+                        layout: wgpu::TexelCopyBufferLayout {
+                            offset: 0,
+                            bytes_per_row: Some(row_bytes),
+                            rows_per_image: Some(height),
+                        },
                     },
-                },
-                target.as_image_copy(),
-                wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
-            );
+                    target.as_image_copy(),
+                    wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+                )
+            });
             return Ok(());
         }
         let pipeline = self.blit_pipeline(element)?;
