@@ -579,7 +579,8 @@ fn bench_frames_profile_times_each_kernel_of_a_frame() {
         assert!(frame["profile"].is_null());
         return;
     }
-    let (copies, kernels): (Vec<(&str, u64)>, Vec<(&str, u64)>) = frame["profile"]
+    type Kernels<'a> = Vec<(&'a str, u64)>;
+    let (copies, kernels): (Kernels, Kernels) = frame["profile"]
         .as_array()
         .expect("a profile where the device has a clock")
         .iter()
