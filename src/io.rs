@@ -2,14 +2,15 @@
 
 use std::path::{Path, PathBuf};
 
-/// Why an output could not be written; `path` untouched in every case.
+/// Why an output could not be written; `path` untouched in every case. The
+/// system's reason is the error's source, which the edges print after it.
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
-    #[error("cannot create {}: {source}", dir.display())]
+    #[error("cannot create {}", dir.display())]
     CreateDir { dir: PathBuf, source: std::io::Error },
     #[error("writing {}: {message}", path.display())]
     Write { path: PathBuf, message: String },
-    #[error("cannot move {} to {}: {source}", from.display(), to.display())]
+    #[error("cannot move {} to {}", from.display(), to.display())]
     Rename { from: PathBuf, to: PathBuf, source: std::io::Error },
     #[error("encoding {}: {message}", path.display())]
     Encode { path: PathBuf, message: String },

@@ -601,6 +601,44 @@ fn bench_frames_profile_times_each_kernel_of_a_frame() {
     assert!(text(&refused.stderr).contains("--frames"), "{}", text(&refused.stderr));
 }
 
+/// A folder of renders whose names carry no frame numbers is not a
+/// sequence: `filter` filters each on its own (renders of two sizes, which a
+/// sequence's frames could not be) into the output folder, without a
+/// sequence's flicker; and `-o FOLDER` for one render writes NAME.exr into it.
+#[test]
+fn a_folder_of_unnumbered_renders_is_filtered_render_by_render() {
+    let dir = crate::common::temp_dir("cli", "folder-of-renders");
+    let renders = dir.join("renders");
+    for (scene, size) in [("cornell", "32x32"), ("glossy-floor", "40x24")] {
+        let made = render(scene, size, 2, 8, &renders.join(scene));
+        assert!(made.status.success(), "{}", text(&made.stderr));
+    }
+    let out = dir.join("out");
+    let run = filterjit(&["filter", renders.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    let (stdout, stderr) = (text(&run.stdout), text(&run.stderr));
+    assert!(run.status.success(), "{stdout}\n{stderr}");
+    assert!(stderr.contains("2 renders in renders, each on its own"), "{stderr}");
+    assert!(!stdout.contains("flicker") && !stdout.contains("sequence"), "{stdout}");
+    for name in ["cornell", "glossy-floor"] {
+        for ext in ["exr", "png"] {
+            assert!(out.join(format!("{name}.{ext}")).is_file(), "{name}.{ext} in {}", out.display());
+        }
+    }
+
+    let single = dir.join("single");
+    std::fs::create_dir_all(&single).unwrap();
+    let run = filterjit(&["filter", renders.join("cornell").to_str().unwrap(), "-o", single.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(single.join("cornell.exr").is_file() && single.join("cornell.png").is_file());
+
+    // A file where the folder's outputs would go is refused before any work.
+    let file = dir.join("taken");
+    std::fs::write(&file, b"").unwrap();
+    let run = filterjit(&["filter", renders.to_str().unwrap(), "-o", file.to_str().unwrap()]);
+    assert!(!run.status.success());
+    assert!(text(&run.stderr).contains("this is a file"), "{}", text(&run.stderr));
+}
+
 /// A flag the pipeline cannot honour is refused with why, not ignored:
 /// `--radius` sets a window's size, and an à-trous form has a fixed stencil.
 #[test]

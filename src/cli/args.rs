@@ -15,7 +15,7 @@ pub(crate) struct Cli {
 }
 
 /// How `filter` reads its scene.
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Clone, Debug)]
 pub(crate) struct ReadScene {
     /// Reference image, when not beside the noisy image.
     #[arg(long)]
@@ -95,9 +95,14 @@ pub(crate) enum Command {
         /// stored with the expression (a front member's `# radius:`), else 5].
         #[arg(long)]
         radius: Option<u32>,
-        /// A scene directory (noisy.exr, reference.exr, ...) or a noisy EXR file.
+        /// A scene directory (noisy.exr, reference.exr, ...) or a noisy EXR
+        /// file; or a folder of them: a sequence's frames where their names
+        /// are numbered (frame_0001, …), filtered in order with the state
+        /// carried, else renders of their own, each filtered alone.
         scene: PathBuf,
-        /// Output EXR; a PNG preview is written beside it.
+        /// Output EXR, or an existing folder to write NAME.exr into (NAME: the
+        /// render's file or folder name); a PNG preview is written beside it.
+        /// For a sequence, the folder its frames are written into.
         #[arg(short, long)]
         output: PathBuf,
         #[command(flatten)]

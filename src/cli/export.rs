@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 use filterjit::corpus;
 use filterjit::export::{StageName, Target, PORTABLE_SAMPLED_TEXTURES};
@@ -69,7 +69,7 @@ pub(super) fn export(
     let manifest = serde_json::to_string_pretty(&exported.manifest)? + "\n";
     files.push((manifest_path.clone(), manifest.into_bytes()));
     for (path, bytes) in &files {
-        filterjit::io::write_bytes_atomically(path, bytes).with_context(|| format!("writing {}", path.display()))?;
+        filterjit::io::write_bytes_atomically(path, bytes)?;
     }
     for (name, _) in &exported.stages {
         let stage = exported.manifest.stage(*name).expect("the manifest has every exported stage");

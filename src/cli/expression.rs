@@ -13,9 +13,7 @@ pub(crate) fn compile(
     let shape = jit::Shape::of(&pipeline.or(resolved.pipeline).unwrap_or_default());
     let kernel = jit::compile(&resolved.expr, jit::KernelSpec { shape, ..jit::KernelSpec::default() })?;
     match output {
-        Some(path) => filterjit::io::write_bytes_atomically(path, kernel.wgsl().as_bytes())
-            .map_err(anyhow::Error::from)
-            .with_context(|| format!("writing {}", path.display()))?,
+        Some(path) => filterjit::io::write_bytes_atomically(path, kernel.wgsl().as_bytes())?,
         None => print!("{}", kernel.wgsl()),
     }
     Ok(())

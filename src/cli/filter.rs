@@ -15,11 +15,70 @@ pub(crate) fn filter(
     pipeline: Option<filterjit::pipeline::FilterPipeline>,
 ) -> Result<()> {
     if scene::is_sequence(scene_path) {
+        let renders = scene::Sequence::find(scene_path).with_context(|| format!("reading {}", scene_path.display()))?;
+        if !renders.is_numbered() {
+            return filter_each(env, expr, radius, &renders, output, read, cpu_check, pipeline);
+        }
         if cpu_check {
             bail!("--cpu-check compares one render with the CPU reference; filter one frame of the sequence for it");
         }
         return sequence::filter_sequence(env, expr, radius, scene_path, output, read, pipeline);
     }
+    filter_one(env, expr, radius, scene_path, output, read, cpu_check, pipeline)
+}
+
+/// A folder of renders whose names carry no frame numbers (`tabletop/`,
+/// `corridor/`, …): each filtered on its own, as `filter FILE` filters it,
+/// into `output_dir/NAME.exr`.
+#[allow(clippy::too_many_arguments)]
+fn filter_each(
+    env: &Environment,
+    expr: Option<&str>,
+    radius: Option<u32>,
+    renders: &scene::Sequence,
+    output_dir: &Path,
+    read: ReadScene,
+    cpu_check: bool,
+    pipeline: Option<filterjit::pipeline::FilterPipeline>,
+) -> Result<()> {
+    if let Some(reference) = &read.reference {
+        bail!(
+            "--reference {}: the renders of folder {} are filtered one by one, each with the reference beside it",
+            reference.display(),
+            renders.name
+        );
+    }
+    if output_dir.exists() && !output_dir.is_dir() {
+        bail!("-o {}: a folder of renders is written into a folder, and this is a file", output_dir.display());
+    }
+    std::fs::create_dir_all(output_dir).with_context(|| format!("creating {}", output_dir.display()))?;
+    eprintln!(
+        "filter    {} renders in {}, each on its own (their names carry no frame numbers, so they are not a sequence's frames)",
+        renders.frames.len(),
+        renders.name
+    );
+    for render in &renders.frames {
+        eprintln!("\nrender    {}", render.path.display());
+        let read = ReadScene { reference: render.reference.clone().filter(|_| render.path.is_file()), ..read.clone() };
+        let output = output_dir.join(format!("{}.exr", render.name));
+        filter_one(env, expr, radius, &render.path, &output, read, cpu_check, pipeline)
+            .with_context(|| format!("filtering {}", render.path.display()))?;
+    }
+    Ok(())
+}
+
+/// One render filtered and written to `output` (or into it, where it is a folder).
+#[allow(clippy::too_many_arguments)]
+fn filter_one(
+    env: &Environment,
+    expr: Option<&str>,
+    radius: Option<u32>,
+    scene_path: &Path,
+    output: &Path,
+    read: ReadScene,
+    cpu_check: bool,
+    pipeline: Option<filterjit::pipeline::FilterPipeline>,
+) -> Result<()> {
     let choice = match expr {
         Some(expr) => Choice::asked(expr, pipeline, radius)?,
         None => {
@@ -29,6 +88,15 @@ pub(crate) fn filter(
         }
     };
     refuse_radius(radius, &choice.pipeline)?;
+    // `-o FOLDER` for one render, as `cp` reads it: the output goes inside, named after the render.
+    let named;
+    let output = if output.is_dir() {
+        let name = scene_path.file_stem().unwrap_or(scene_path.as_os_str()).to_string_lossy();
+        named = output.join(format!("{name}.exr"));
+        named.as_path()
+    } else {
+        output
+    };
     let ReadScene { reference, spp, absent, view_layer } = read;
     let request = Request { reference_path: reference, spp, absent, view_layer, ..choice.request() };
     let load_start = Instant::now();
@@ -62,12 +130,10 @@ pub(crate) fn filter(
     let warm = gpu.filter(&kernel, &mut buffers, &scene, radius)?;
     let rgb = warm.rgb();
 
-    filterjit::scene::exr_io::write_rgb(output, scene.width, scene.height, &rgb)
-        .with_context(|| format!("writing {}", output.display()))?;
+    // Their errors name the file.
+    filterjit::scene::exr_io::write_rgb(output, scene.width, scene.height, &rgb)?;
     let png = output.with_extension("png");
-    preview::write_png(&png, scene.width, scene.height, &rgb)
-        .map_err(anyhow::Error::from)
-        .with_context(|| format!("writing {}", png.display()))?;
+    preview::write_png(&png, scene.width, scene.height, &rgb)?;
 
     let megapixels = scene.pixels() as f64 / 1e6;
     println!(

@@ -132,11 +132,10 @@ pub(crate) fn filter_sequence(
         let filtered = done.filtered;
         let rgb = filtered.rgb();
         let exr = output.join(format!("{}.exr", frame.name));
-        scene::exr_io::write_rgb(&exr, width, height, &rgb).with_context(|| format!("writing {}", exr.display()))?;
+        // Their errors name the file.
+        scene::exr_io::write_rgb(&exr, width, height, &rgb)?;
         let png = exr.with_extension("png");
-        preview::write_png(&png, width, height, &rgb)
-            .map_err(anyhow::Error::from)
-            .with_context(|| format!("writing {}", png.display()))?;
+        preview::write_png(&png, width, height, &rgb)?;
 
         let reference = scene.reference.as_deref();
         let before = previous.as_ref().and_then(|(output, reference)| Some((output.as_slice(), reference.as_deref()?)));

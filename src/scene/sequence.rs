@@ -55,6 +55,13 @@ pub fn is_sequence(path: &Path) -> bool {
 }
 
 impl Sequence {
+    /// Whether any frame's name carries a number: a folder whose renders
+    /// are named without one (`tabletop/`, `corridor/`) holds renders of
+    /// their own, not frames of one sequence.
+    pub fn is_numbered(&self) -> bool {
+        self.frames.iter().any(|f| f.number.is_some())
+    }
+
     /// The frames of the sequence at `dir`, in order.
     pub fn find(dir: &Path) -> Result<Sequence, SceneError> {
         let io = |e| SceneError::io(dir, e);
