@@ -230,7 +230,7 @@ pub struct Description {
 
 #[derive(Debug, thiserror::Error)]
 pub enum DescriptionError {
-    #[error("{}: {source}", file.display())]
+    #[error("{}", file.display())]
     Io { file: PathBuf, source: std::io::Error },
     #[error("{}: {message}", file.display())]
     Syntax { file: PathBuf, message: String },

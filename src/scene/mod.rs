@@ -20,7 +20,7 @@ use import::{pick, Layout};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("{}: {source}", file.display())]
+    #[error("{}", file.display())]
     Io { file: PathBuf, source: std::io::Error },
     #[error("{}: not a readable EXR image: {message}", file.display())]
     Exr { file: PathBuf, message: String },
