@@ -222,7 +222,7 @@ mod tests {
             passes.iter().map(|p| p.kernel.as_str()).partition(|k| *k == "blit to a texture");
         assert!(!blits.is_empty(), "{passes:?}");
         let spread: Vec<String> =
-            (0..crate::pipeline::KEEP_PASSES).map(|k| format!("pre-pass: Even spread, step {}", 1 << k)).collect();
+            (0..crate::pipeline::KEEP_PASSES).map(|k| format!("pre-pass: keep spread, step {}", 1 << k)).collect();
         let expected: Vec<&str> = std::iter::once("pre-pass")
             .chain(spread.iter().map(String::as_str))
             .chain(["form: à-trous pass 0", "form: à-trous pass 1"])

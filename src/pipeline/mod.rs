@@ -131,6 +131,14 @@ pub enum Keep {
 }
 
 impl Keep {
+    /// The stage as a pipeline's text spells it.
+    pub fn text(self) -> &'static str {
+        match self {
+            Keep::Even => "keep",
+            Keep::Surface => "keep=surface",
+        }
+    }
+
     /// The passes of its spread; pass k has step 2^k.
     pub fn passes(self) -> u32 {
         match self {

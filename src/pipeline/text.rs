@@ -229,10 +229,8 @@ impl fmt::Display for FilterPipeline {
             if trim {
                 write!(f, "trim,")?;
             }
-            match keep {
-                None => {}
-                Some(Keep::Even) => write!(f, "keep,")?,
-                Some(Keep::Surface) => write!(f, "keep=surface,")?,
+            if let Some(keep) = keep {
+                write!(f, "{},", keep.text())?;
             }
         }
         if self.demodulate {
