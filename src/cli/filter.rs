@@ -3,45 +3,37 @@
 
 use super::*;
 
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn filter(
-    env: &Environment,
-    expr: Option<&str>,
-    radius: Option<u32>,
-    scene_path: &Path,
-    output: &Path,
-    read: ReadScene,
-    cpu_check: bool,
-    pipeline: Option<filterjit::pipeline::FilterPipeline>,
-) -> Result<()> {
+/// How the command line asks `filter` to filter: the same for every render
+/// of a folder.
+#[derive(Clone)]
+pub(crate) struct Asked<'a> {
+    pub(crate) expr: Option<&'a str>,
+    pub(crate) radius: Option<u32>,
+    pub(crate) read: ReadScene,
+    pub(crate) cpu_check: bool,
+    pub(crate) pipeline: Option<filterjit::pipeline::FilterPipeline>,
+}
+
+pub(crate) fn filter(env: &Environment, asked: Asked, scene_path: &Path, output: &Path) -> Result<()> {
     if scene::is_sequence(scene_path) {
         let renders = scene::Sequence::find(scene_path).with_context(|| format!("reading {}", scene_path.display()))?;
         if !renders.is_numbered() {
-            return filter_each(env, expr, radius, &renders, output, read, cpu_check, pipeline);
+            return filter_each(env, &asked, &renders, output);
         }
+        let Asked { expr, radius, read, cpu_check, pipeline } = asked;
         if cpu_check {
             bail!("--cpu-check compares one render with the CPU reference; filter one frame of the sequence for it");
         }
         return sequence::filter_sequence(env, expr, radius, scene_path, output, read, pipeline);
     }
-    filter_one(env, expr, radius, scene_path, output, read, cpu_check, pipeline)
+    filter_one(env, asked, scene_path, output)
 }
 
 /// A folder of renders whose names carry no frame numbers (`tabletop/`,
 /// `corridor/`, …): each filtered on its own, as `filter FILE` filters it,
 /// into `output_dir/NAME.exr`.
-#[allow(clippy::too_many_arguments)]
-fn filter_each(
-    env: &Environment,
-    expr: Option<&str>,
-    radius: Option<u32>,
-    renders: &scene::Sequence,
-    output_dir: &Path,
-    read: ReadScene,
-    cpu_check: bool,
-    pipeline: Option<filterjit::pipeline::FilterPipeline>,
-) -> Result<()> {
-    if let Some(reference) = &read.reference {
+fn filter_each(env: &Environment, asked: &Asked, renders: &scene::Sequence, output_dir: &Path) -> Result<()> {
+    if let Some(reference) = &asked.read.reference {
         bail!(
             "--reference {}: the renders of folder {} are filtered one by one, each with the reference beside it",
             reference.display(),
@@ -59,26 +51,19 @@ fn filter_each(
     );
     for render in &renders.frames {
         eprintln!("\nrender    {}", render.path.display());
-        let read = ReadScene { reference: render.reference.clone().filter(|_| render.path.is_file()), ..read.clone() };
+        // A dataset's folder finds its reference itself; a file's is the one the folder found.
+        let reference = render.reference.clone().filter(|_| render.path.is_file());
+        let asked = Asked { read: ReadScene { reference, ..asked.read.clone() }, ..asked.clone() };
         let output = output_dir.join(format!("{}.exr", render.name));
-        filter_one(env, expr, radius, &render.path, &output, read, cpu_check, pipeline)
+        filter_one(env, asked, &render.path, &output)
             .with_context(|| format!("filtering {}", render.path.display()))?;
     }
     Ok(())
 }
 
 /// One render filtered and written to `output` (or into it, where it is a folder).
-#[allow(clippy::too_many_arguments)]
-fn filter_one(
-    env: &Environment,
-    expr: Option<&str>,
-    radius: Option<u32>,
-    scene_path: &Path,
-    output: &Path,
-    read: ReadScene,
-    cpu_check: bool,
-    pipeline: Option<filterjit::pipeline::FilterPipeline>,
-) -> Result<()> {
+fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path) -> Result<()> {
+    let Asked { expr, radius, read, cpu_check, pipeline } = asked;
     let choice = match expr {
         Some(expr) => Choice::asked(expr, pipeline, radius)?,
         None => {

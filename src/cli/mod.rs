@@ -47,7 +47,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Check { expr, latex } => expression::check(&expr, latex),
         Command::Simplify { expr } => expression::simplify(&expr),
         Command::Filter { expr, radius, scene, output, read, cpu_check, pipeline } => {
-            filter(env, expr.as_deref(), radius, &scene, &output, read, cpu_check, pipeline)
+            filter(env, filter::Asked { expr: expr.as_deref(), radius, read, cpu_check, pipeline }, &scene, &output)
         }
         Command::Render { scene, spp, reference_spp, size, seed, output } => {
             render(env, &scene, spp, reference_spp, size, seed, output.as_deref())
