@@ -3,15 +3,16 @@
 use std::path::{Path, PathBuf};
 
 /// Why an output could not be written; `path` untouched in every case. The
-/// system's reason is the error's source, which the edges print after it.
+/// message holds the system's reason (`cause`, not a `source`: the edges
+/// print an error's sources after it, which would say it twice).
 #[derive(Debug, thiserror::Error)]
 pub enum WriteError {
-    #[error("cannot create {}", dir.display())]
-    CreateDir { dir: PathBuf, source: std::io::Error },
+    #[error("cannot create {}: {cause}", dir.display())]
+    CreateDir { dir: PathBuf, cause: std::io::Error },
     #[error("writing {}: {message}", path.display())]
     Write { path: PathBuf, message: String },
-    #[error("cannot move {} to {}", from.display(), to.display())]
-    Rename { from: PathBuf, to: PathBuf, source: std::io::Error },
+    #[error("cannot move {} to {}: {cause}", from.display(), to.display())]
+    Rename { from: PathBuf, to: PathBuf, cause: std::io::Error },
     #[error("encoding {}: {message}", path.display())]
     Encode { path: PathBuf, message: String },
 }
@@ -24,15 +25,15 @@ pub fn write_atomically<E: std::fmt::Display>(
 ) -> Result<(), WriteError> {
     let tmp = temporary_beside(path);
     if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|source| WriteError::CreateDir { dir: dir.to_path_buf(), source })?;
+        std::fs::create_dir_all(dir).map_err(|cause| WriteError::CreateDir { dir: dir.to_path_buf(), cause })?;
     }
     if let Err(e) = write(&tmp) {
         let _ = std::fs::remove_file(&tmp);
         return Err(WriteError::Write { path: path.to_path_buf(), message: e.to_string() });
     }
-    std::fs::rename(&tmp, path).map_err(|source| {
+    std::fs::rename(&tmp, path).map_err(|cause| {
         let _ = std::fs::remove_file(&tmp);
-        WriteError::Rename { from: tmp.clone(), to: path.to_path_buf(), source }
+        WriteError::Rename { from: tmp.clone(), to: path.to_path_buf(), cause }
     })
 }
 

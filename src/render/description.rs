@@ -230,8 +230,9 @@ pub struct Description {
 
 #[derive(Debug, thiserror::Error)]
 pub enum DescriptionError {
-    #[error("{}", file.display())]
-    Io { file: PathBuf, source: std::io::Error },
+    /// The system's reason in the message (`cause`, not a `source`, which the edges would print again).
+    #[error("{}: {cause}", file.display())]
+    Io { file: PathBuf, cause: std::io::Error },
     #[error("{}: {message}", file.display())]
     Syntax { file: PathBuf, message: String },
     #[error("{}:{line}: {message}", file.display())]
@@ -240,7 +241,7 @@ pub enum DescriptionError {
 
 impl Description {
     pub fn load(path: &Path) -> Result<Description, DescriptionError> {
-        let text = std::fs::read_to_string(path).map_err(|e| DescriptionError::Io { file: path.into(), source: e })?;
+        let text = std::fs::read_to_string(path).map_err(|e| DescriptionError::Io { file: path.into(), cause: e })?;
         let name = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into());
         Self::parse(&name, &text, path)
     }

@@ -97,7 +97,7 @@ pub fn describe(arg: &str) -> Result<Description, DescriptionError> {
         Some(d) => d,
         None => Err(DescriptionError::Io {
             file: path.into(),
-            source: std::io::Error::new(
+            cause: std::io::Error::new(
                 std::io::ErrorKind::NotFound,
                 format!(
                     "no such scene file, and no built-in scene of that name (built-in: {})",

@@ -20,8 +20,9 @@ use import::{pick, Layout};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
-    #[error("{}", file.display())]
-    Io { file: PathBuf, source: std::io::Error },
+    /// The system's reason in the message (`cause`, not a `source`, which the edges would print again).
+    #[error("{}: {cause}", file.display())]
+    Io { file: PathBuf, cause: std::io::Error },
     #[error("{}: not a readable EXR image: {message}", file.display())]
     Exr { file: PathBuf, message: String },
     #[error("{}: no channel `{channel}` (the file has: {})", file.display(), available.join(", "))]
@@ -67,8 +68,8 @@ pub enum SceneError {
 }
 
 impl SceneError {
-    pub(crate) fn io(file: &Path, source: std::io::Error) -> Self {
-        SceneError::Io { file: file.to_path_buf(), source }
+    pub(crate) fn io(file: &Path, cause: std::io::Error) -> Self {
+        SceneError::Io { file: file.to_path_buf(), cause }
     }
     pub(crate) fn exr(file: &Path, e: exr::error::Error) -> Self {
         SceneError::Exr { file: file.to_path_buf(), message: e.to_string() }
@@ -362,7 +363,7 @@ fn locate(path: &Path, request: &Request) -> Result<Files, SceneError> {
     } else {
         return Err(SceneError::Io {
             file: path.to_path_buf(),
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or directory"),
+            cause: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file or directory"),
         });
     };
     let beside = |file: &str| Some(dir.join(file)).filter(|p| p.is_file() && *p != noisy);
@@ -380,7 +381,7 @@ pub fn is_dataset_dir(dir: &Path) -> bool {
 
 /// The datasets among `dir`'s subfolders, in name order (for `--scenes FOLDER`).
 pub fn datasets_in(dir: &Path) -> Result<Vec<PathBuf>, SceneError> {
-    let io = |source| SceneError::Io { file: dir.to_path_buf(), source };
+    let io = |cause| SceneError::Io { file: dir.to_path_buf(), cause };
     let mut out = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io)? {
         let path = entry.map_err(io)?.path();
