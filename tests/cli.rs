@@ -527,20 +527,23 @@ fn bench_frames_times_whole_frames_at_each_size() {
     assert!(stdout.contains("96x64") && stdout.contains(&format!("@{temporal}")), "{stdout}");
 }
 
+/// `filterjit bench --repeats 1 --no-oidn -o JSON EXTRA…`, its cache in `dir`.
+fn quick_bench(dir: &std::path::Path, json: &std::path::Path, extra: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_filterjit"))
+        .args(["bench", "--repeats", "1", "--no-oidn", "-o", json.to_str().unwrap()])
+        .args(extra)
+        .env("FILTERJIT_CACHE", dir.join("cache"))
+        .output()
+        .unwrap()
+}
+
 /// `--filter` times the filters a user names instead of the default three,
 /// each in its stored pipeline; without `--frames` it is refused, not ignored.
 #[test]
 fn bench_frames_times_the_filters_it_is_given() {
     let dir = crate::common::temp_dir("cli", "bench-frames-given");
     let json = dir.join("bench.json");
-    let bench = |extra: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_filterjit"))
-            .args(["bench", "--repeats", "1", "--no-oidn", "-o", json.to_str().unwrap()])
-            .args(extra)
-            .env("FILTERJIT_CACHE", dir.join("cache"))
-            .output()
-            .unwrap()
-    };
+    let bench = |extra: &[&str]| quick_bench(&dir, &json, extra);
     let run = bench(&["--frames", "48x48", "--filter", "@evolvedAtrous3x3", "--filter", "exp(-distance2(color))"]);
     assert!(run.status.success(), "{}\n{}", text(&run.stdout), text(&run.stderr));
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
@@ -562,14 +565,7 @@ fn bench_frames_times_the_filters_it_is_given() {
 fn bench_frames_profile_times_each_kernel_of_a_frame() {
     let dir = crate::common::temp_dir("cli", "bench-frames-profile");
     let json = dir.join("bench.json");
-    let bench = |extra: &[&str]| {
-        Command::new(env!("CARGO_BIN_EXE_filterjit"))
-            .args(["bench", "--repeats", "1", "--no-oidn", "--profile", "-o", json.to_str().unwrap()])
-            .args(extra)
-            .env("FILTERJIT_CACHE", dir.join("cache"))
-            .output()
-            .unwrap()
-    };
+    let bench = |extra: &[&str]| quick_bench(&dir, &json, &[&["--profile"], extra].concat());
     let run = bench(&["--frames", "64x48", "--filter", "@evolvedAtrous3x3"]);
     assert!(run.status.success(), "{}\n{}", text(&run.stdout), text(&run.stderr));
     let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();

@@ -268,6 +268,14 @@ pub fn frames(
     let frame = &sequence[0];
     // A temporal filter's n-th frame (0: the one its kernels compile on).
     let nth_frame = |n: usize| &sequence[n % sequence.len()];
+    // What a method filters in timed round `round` (the profiled frames continue the count).
+    let frame_of = |method: &FrameMethod, round: usize| {
+        if method.pipeline.is_temporal() {
+            nth_frame(SETTLING_FRAMES + 1 + round)
+        } else {
+            frame
+        }
+    };
     let mpx = frame.pixels() as f64 / 1e6;
     let radius = 2;
     let reference = scene.reference.as_ref().expect("the bench scene has a reference");
@@ -300,7 +308,7 @@ pub fn frames(
         for (k, (method, kernel, state, _, _)) in prepared.iter_mut().enumerate() {
             // A frame as a renderer runs it: the pre-pass, the temporal stage, the
             // guide (where the weight reads it) and the passes in one submission, uploads excluded.
-            let frame = if method.pipeline.is_temporal() { nth_frame(SETTLING_FRAMES + 1 + round) } else { frame };
+            let frame = frame_of(method, round);
             let mut buffers = SceneBuffers::for_frame(gpu, frame, &method.pipeline)?;
             let whole = gpu.filter_frame(kernel, &mut buffers, frame, radius, state)?.time;
             times[k].push(ms(whole.wall));
@@ -323,8 +331,7 @@ pub fn frames(
         for (k, (method, kernel, state, _, _)) in prepared.iter_mut().enumerate() {
             let mut passes = Vec::new();
             for n in 0..PROFILED_FRAMES {
-                let round = repeats.max(1) * 2 + n;
-                let frame = if method.pipeline.is_temporal() { nth_frame(SETTLING_FRAMES + 1 + round) } else { frame };
+                let frame = frame_of(method, repeats.max(1) * 2 + n);
                 let mut buffers = SceneBuffers::for_frame(gpu, frame, &method.pipeline)?;
                 // Only the frame's own submission is profiled, not the uploads'.
                 gpu.set_profiling(true);

@@ -267,8 +267,11 @@ impl Gpu {
                     role => buffers.pass_resource(role, level, carried).expect("inputs are uploaded before binding"),
                 });
                 {
-                    let kernel = if atrous { format!("form: à-trous pass {level}") } else { "form: window".into() };
-                    let mut pass = self.compute_pass(&mut encoder, kernel);
+                    let mut pass = if atrous {
+                        self.compute_pass(&mut encoder, format_args!("form: à-trous pass {level}"))
+                    } else {
+                        self.compute_pass(&mut encoder, "form: window")
+                    };
                     pass.set_pipeline(&pipeline.pipeline);
                     pass.set_bind_group(0, &bind_group, &[]);
                     pass.dispatch_workgroups(buffers.width.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);

@@ -178,8 +178,8 @@ impl Gpu {
                         .collect(),
                 );
                 {
-                    let mut pass = self
-                        .compute_pass(encoder, format!("pre-pass: {} spread, {}", keep.text(), dispatch.describe()));
+                    let mut pass =
+                        self.compute_pass(encoder, format_args!("pre-pass: {} spread, {dispatch}", keep.text()));
                     pass.set_pipeline(&spread.pipeline);
                     pass.set_bind_group(0, &bind_group, &[]);
                     // The total is one workgroup's work: the others would do nothing.

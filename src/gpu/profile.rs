@@ -39,6 +39,20 @@ pub struct TimedPass {
     pub device: Option<Duration>,
 }
 
+impl PassProfile {
+    /// The next pair of timestamps for `kernel`, or none (counted as
+    /// untimed) where the submission has used them all.
+    fn slot(&mut self, kernel: impl std::fmt::Display) -> Option<u32> {
+        let index = self.pending.len() as u32;
+        if index >= CAPACITY {
+            self.untimed += 1;
+            return None;
+        }
+        self.pending.push(kernel.to_string());
+        Some(index)
+    }
+}
+
 impl Gpu {
     /// Time every compute pass from now on (`true`), or stop and drop what was
     /// collected (`false`). Without a device clock nothing is timed.
@@ -82,27 +96,20 @@ impl Gpu {
         profile.as_mut().map(|p| std::mem::take(&mut p.collected)).unwrap_or_default()
     }
 
-    /// Begin a compute pass of `kernel` in `encoder`: every pass filterjit
-    /// records starts here, timed where profiling is on.
+    /// Begin a compute pass of `kernel` in `encoder`: every pass of a
+    /// frame starts here, timed where profiling is on. `kernel` is written
+    /// out only then: a frame's passes allocate nothing for it.
     pub(super) fn compute_pass<'e>(
         &self,
         encoder: &'e mut wgpu::CommandEncoder,
-        kernel: impl Into<String>,
+        kernel: impl std::fmt::Display,
     ) -> wgpu::ComputePass<'e> {
         let mut profile = self.profile.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-        let Some(profile) = profile.as_mut() else {
-            return encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-        };
-        let index = profile.pending.len() as u32;
-        if index >= CAPACITY {
-            profile.untimed += 1;
-            return encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-        }
-        profile.pending.push(kernel.into());
+        let timed = profile.as_mut().and_then(|p| Some((p.slot(kernel)?, &p.set)));
         encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: None,
-            timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
-                query_set: &profile.set,
+            timestamp_writes: timed.map(|(index, set)| wgpu::ComputePassTimestampWrites {
+                query_set: set,
                 beginning_of_pass_write_index: Some(2 * index),
                 end_of_pass_write_index: Some(2 * index + 1),
             }),
@@ -122,14 +129,7 @@ impl Gpu {
             let mut profile = self.profile.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
             match profile.as_mut() {
                 Some(p) if self.device.features().contains(super::clock::CLOCK_FEATURES) => {
-                    let index = p.pending.len() as u32;
-                    if index < CAPACITY {
-                        p.pending.push(kernel.to_string());
-                        Some((p.set.clone(), index))
-                    } else {
-                        p.untimed += 1;
-                        None
-                    }
+                    p.slot(kernel).map(|index| (p.set.clone(), index))
                 }
                 _ => None,
             }

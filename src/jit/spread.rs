@@ -96,13 +96,13 @@ pub struct SpreadDispatch {
     pub target: SpreadTarget,
 }
 
-impl SpreadDispatch {
-    /// What the dispatch does, in a few words (a profile's name for it).
-    pub fn describe(&self) -> String {
+/// What the dispatch does, in a few words (a profile's name for it).
+impl std::fmt::Display for SpreadDispatch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self.target {
-            SpreadTarget::Surface => "surface: directions and luminance".into(),
-            SpreadTarget::Total => "surface: total luminance (one workgroup)".into(),
-            SpreadTarget::Scratch(_) => format!("step {}", self.params.step),
+            SpreadTarget::Surface => write!(f, "surface: directions and luminance"),
+            SpreadTarget::Total => write!(f, "surface: total luminance (one workgroup)"),
+            SpreadTarget::Scratch(_) => write!(f, "step {}", self.params.step),
         }
     }
 }
