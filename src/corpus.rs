@@ -51,8 +51,13 @@ pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
         return resolve_entry(shipped(), entry);
     }
     let Some((path, name)) = file_reference(reference) else {
+        if reference.contains(['/', '\\']) || reference.ends_with(".txt") || reference.ends_with(".json") {
+            let path = reference.rsplit_once(':').map_or(reference, |(path, _)| path);
+            bail!("@{reference}: no file {path} (from {})", std::env::current_dir()?.display());
+        }
         let names: Vec<String> = named().iter().map(|(n, _)| format!("@{n}")).collect();
-        bail!("no shipped expression `@{reference}`; there are: {}", names.join(", "))
+        let hint = closest_name(reference).map(|n| format!(" (did you mean `@{n}`?)")).unwrap_or_default();
+        bail!("no shipped expression `@{reference}`{hint}; there are: {}", names.join(", "))
     };
     let content = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
     let file = NamedFile::parse(&content).map_err(|e: NamedFileError| anyhow::anyhow!("{}: {e}", path.display()))?;
@@ -81,6 +86,18 @@ fn parse_checked(text: &str) -> anyhow::Result<crate::lang::Expr> {
 }
 
 /// `PATH` or `PATH:NAME` of an existing file of named expressions.
+/// The shipped name nearest `asked` in spelling, where it is near enough
+/// to be a slip (at most a third of its letters off, case aside).
+fn closest_name(asked: &str) -> Option<&'static str> {
+    let asked = asked.to_lowercase();
+    named()
+        .iter()
+        .map(|(n, _)| (strsim::levenshtein(&n.to_lowercase(), &asked), *n))
+        .filter(|(distance, n)| *distance <= (n.len() / 3).max(1))
+        .min()
+        .map(|(_, n)| n)
+}
+
 fn file_reference(reference: &str) -> Option<(std::path::PathBuf, Option<String>)> {
     let whole = std::path::PathBuf::from(reference);
     if whole.is_file() {
@@ -89,4 +106,20 @@ fn file_reference(reference: &str) -> Option<(std::path::PathBuf, Option<String>
     let (path, name) = reference.rsplit_once(':')?;
     let path = std::path::PathBuf::from(path);
     path.is_file().then(|| (path, Some(name.to_string())))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_misspelt_name_is_answered_with_the_nearest_and_a_path_with_the_missing_file() {
+        assert_eq!(closest_name("realtme"), Some("realtime"));
+        assert_eq!(closest_name("REALTIME"), Some("realtime"));
+        assert_eq!(closest_name("somethingElseEntirely"), None);
+        let err = resolve("@realtme").unwrap_err().to_string();
+        assert!(err.contains("no shipped expression `@realtme` (did you mean `@realtime`?)"), "{err}");
+        let err = resolve("@runs/evolve/hall_of_fame.txt:best").unwrap_err().to_string();
+        assert!(err.contains("no file runs/evolve/hall_of_fame.txt"), "{err}");
+    }
 }

@@ -257,6 +257,18 @@ fn export_writes_a_shader_and_its_manifest_and_names_bad_input() {
     assert!(filterjit(&["export", "@bilateral", "--target", "spirv", "-o", spv.to_str().unwrap()]).status.success());
     assert_eq!(&std::fs::read(&spv).unwrap()[..4], &0x0723_0203u32.to_le_bytes());
 
+    // Without --target the file's extension names the language; a file named
+    // for another language than --target asks for is refused, nothing written.
+    let glsl = dir.join("denoise.glsl");
+    let run = filterjit(&["export", "@bilateral", "-o", glsl.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(std::fs::read_to_string(&glsl).unwrap().contains("#version 450"), "GLSL, not WGSL");
+    let mismatch = dir.join("other.glsl");
+    let run = filterjit(&["export", "@bilateral", "--target", "hlsl", "-o", mismatch.to_str().unwrap()]);
+    assert!(!run.status.success());
+    assert!(text(&run.stderr).contains("extension names glsl and --target asks for hlsl"), "{}", text(&run.stderr));
+    assert!(!mismatch.exists());
+
     let bad = filterjit(&["export", "exp(-distance2(normal)", "-o", dir.join("bad.wgsl").to_str().unwrap()]);
     assert!(!bad.status.success());
     assert!(text(&bad.stderr).contains("1:23"), "names the position: {}", text(&bad.stderr));
@@ -627,12 +639,45 @@ fn a_folder_of_unnumbered_renders_is_filtered_render_by_render() {
     assert!(run.status.success(), "{}", text(&run.stderr));
     assert!(single.join("cornell.exr").is_file() && single.join("cornell.png").is_file());
 
+    // `-o NEW/` is a folder to make; `-o NAME.png` keeps the EXR beside the preview.
+    let new = format!("{}/", dir.join("new").display());
+    let run = filterjit(&["filter", renders.join("cornell").to_str().unwrap(), "-o", &new]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(dir.join("new/cornell.exr").is_file());
+    let png = dir.join("picture.png");
+    let run = filterjit(&["filter", renders.join("cornell").to_str().unwrap(), "-o", png.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert_eq!(&std::fs::read(dir.join("picture.exr")).unwrap()[..4], &[0x76, 0x2f, 0x31, 0x01], "an EXR");
+    assert_eq!(&std::fs::read(&png).unwrap()[..4], b"\x89PNG");
+
+    // Digits inside a name are not a frame number, and one render is no sequence.
+    let lone = dir.join("lone");
+    std::fs::create_dir_all(&lone).unwrap();
+    std::fs::copy(renders.join("cornell/noisy.exr"), lone.join("cornell_2spp.exr")).unwrap();
+    let run = filterjit(&["filter", lone.to_str().unwrap(), "-o", dir.join("lone-out").to_str().unwrap()]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(text(&run.stderr).contains("1 render in lone"), "{}", text(&run.stderr));
+    assert!(!text(&run.stdout).contains("flicker"), "{}", text(&run.stdout));
+    assert!(dir.join("lone-out/cornell_2spp.exr").is_file());
+
     // A file where the folder's outputs would go is refused before any work.
     let file = dir.join("taken");
     std::fs::write(&file, b"").unwrap();
     let run = filterjit(&["filter", renders.to_str().unwrap(), "-o", file.to_str().unwrap()]);
     assert!(!run.status.success());
     assert!(text(&run.stderr).contains("this is a file"), "{}", text(&run.stderr));
+}
+
+/// A size no device filters (a typo's) is refused before the tracer
+/// allocates its images, which would abort on memory.
+#[test]
+fn render_refuses_a_size_larger_than_the_device_filters() {
+    let dir = crate::common::temp_dir("cli", "render-size");
+    let run = render("cornell", "100000x100000", 1, 1, &dir.join("big"));
+    assert!(!run.status.success());
+    let said = text(&run.stderr);
+    assert!(said.contains("--size 100000x100000: larger than the") && said.contains("pixels a side"), "{said}");
+    assert!(!dir.join("big").exists(), "nothing written");
 }
 
 /// A flag the pipeline cannot honour is refused with why, not ignored:

@@ -71,9 +71,10 @@ pub(crate) enum Command {
         /// The frame size the budget is for, WIDTHxHEIGHT.
         #[arg(long, value_parser = parse_size)]
         size: Option<(u32, u32)>,
-        /// Shading language: WGSL from filterjit's templates, the others through naga's back ends.
-        #[arg(long, value_enum, default_value_t = filterjit::export::Target::Wgsl)]
-        target: filterjit::export::Target,
+        /// Shading language: WGSL from filterjit's templates, the others through naga's back ends
+        /// [default: the one -o's extension names (.wgsl, .comp or .glsl, .hlsl, .metal or .msl, .spv), else WGSL].
+        #[arg(long, value_enum)]
+        target: Option<filterjit::export::Target>,
         /// Texel format of the output storage texture.
         #[arg(long, value_enum, default_value_t = jit::OutputFormat::Rgba16float)]
         format: jit::OutputFormat,

@@ -11,6 +11,27 @@ use filterjit::export::{StageName, Target, PORTABLE_SAMPLED_TEXTURES};
 use filterjit::jit::OutputFormat;
 use filterjit::pipeline::FilterPipeline;
 
+/// The language to write: the one asked for, else the one `output`'s
+/// extension names, else WGSL. A file named for another language than the
+/// one asked for is refused: `denoise.glsl` holding WGSL misleads whoever loads it.
+fn target_for(asked: Option<Target>, output: &Path) -> Result<Target> {
+    let named = output.extension().and_then(|e| Target::for_extension(&e.to_string_lossy()));
+    match (asked, named) {
+        (Some(asked), Some(named)) if asked != named => {
+            let name =
+                |t: Target| clap::ValueEnum::to_possible_value(&t).map_or(String::new(), |v| v.get_name().into());
+            anyhow::bail!(
+                "-o {}: the file's extension names {} and --target asks for {}; name the file .{} or leave --target out",
+                output.display(),
+                name(named),
+                name(asked),
+                asked.extension()
+            )
+        }
+        (asked, named) => Ok(asked.or(named).unwrap_or(Target::Wgsl)),
+    }
+}
+
 /// What each stage's file is, as `export` reports it.
 fn describe(name: StageName, dispatches: usize) -> String {
     match name {
@@ -26,13 +47,14 @@ fn describe(name: StageName, dispatches: usize) -> String {
 
 pub(super) fn export(
     expr: &str,
-    target: Target,
+    target: Option<Target>,
     format: OutputFormat,
     output: &Path,
     pipeline: Option<FilterPipeline>,
     budget_ms: Option<f64>,
     size: Option<(u32, u32)>,
 ) -> Result<()> {
+    let target = target_for(target, output)?;
     let resolved = match budget_ms {
         None => corpus::resolve_with_pipeline(expr)?,
         Some(budget) => {

@@ -44,11 +44,13 @@ fn filter_each(env: &Environment, asked: &Asked, renders: &scene::Sequence, outp
         bail!("-o {}: a folder of renders is written into a folder, and this is a file", output_dir.display());
     }
     std::fs::create_dir_all(output_dir).with_context(|| format!("creating {}", output_dir.display()))?;
-    eprintln!(
-        "filter    {} renders in {}, each on its own (their names carry no frame numbers, so they are not a sequence's frames)",
-        renders.frames.len(),
-        renders.name
-    );
+    match renders.frames.len() {
+        1 => eprintln!("filter    1 render in {} (one render is not a sequence)", renders.name),
+        n => eprintln!(
+            "filter    {n} renders in {}, each on its own (their names end in no frame number, so they are not a sequence's frames)",
+            renders.name
+        ),
+    }
     for render in &renders.frames {
         eprintln!("\nrender    {}", render.path.display());
         // A dataset's folder finds its reference itself; a file's is the one the folder found.
@@ -73,11 +75,17 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
         }
     };
     refuse_radius(radius, &choice.pipeline)?;
-    // `-o FOLDER` for one render, as `cp` reads it: the output goes inside, named after the render.
+    // `-o FOLDER` for one render, as `cp` reads it: the output goes inside,
+    // named after the render (`-o NEW/` makes the folder). `-o NAME.png`:
+    // the EXR beside the PNG preview, not under its name.
     let named;
-    let output = if output.is_dir() {
+    let output = if output.is_dir() || output.as_os_str().to_string_lossy().ends_with(std::path::is_separator) {
+        std::fs::create_dir_all(output).with_context(|| format!("creating {}", output.display()))?;
         let name = scene_path.file_stem().unwrap_or(scene_path.as_os_str()).to_string_lossy();
         named = output.join(format!("{name}.exr"));
+        named.as_path()
+    } else if output.extension().is_some_and(|e| e.eq_ignore_ascii_case("png")) {
+        named = output.with_extension("exr");
         named.as_path()
     } else {
         output

@@ -26,6 +26,17 @@ pub(crate) fn render(
     let d = render::describe(scene)?;
     let settings = render::RenderSettings { width: size.0, height: size.1, spp, reference_spp, seed };
     let gpu = gpu::Gpu::open(&env.adapter)?;
+    // Refused before the tracer allocates its images (a typo's size would
+    // abort on memory): no larger than the device filters.
+    let side = gpu.max_image_side();
+    if size.0 > side || size.1 > side {
+        bail!(
+            "--size {}x{}: larger than the {side} pixels a side {} can filter; render at most {side}x{side}",
+            size.0,
+            size.1,
+            gpu.describe()
+        );
+    }
     let bar = sample_bar(&d.name);
     let mut progress = |done: u64, total: u64| {
         bar.set_length(total);

@@ -53,6 +53,19 @@ impl Target {
         }
     }
 
+    /// The target a shader file's extension names (`extension`'s, and
+    /// `glsl`, `msl`), case aside.
+    pub fn for_extension(extension: &str) -> Option<Target> {
+        Some(match extension.to_ascii_lowercase().as_str() {
+            "wgsl" => Target::Wgsl,
+            "comp" | "glsl" => Target::Glsl,
+            "hlsl" => Target::Hlsl,
+            "metal" | "msl" => Target::Msl,
+            "spv" => Target::Spirv,
+            _ => return None,
+        })
+    }
+
     fn language(self) -> &'static str {
         match self {
             Target::Wgsl => "WGSL",

@@ -55,11 +55,12 @@ pub fn is_sequence(path: &Path) -> bool {
 }
 
 impl Sequence {
-    /// Whether any frame's name carries a number: a folder whose renders
-    /// are named without one (`tabletop/`, `corridor/`) holds renders of
-    /// their own, not frames of one sequence.
+    /// Whether the folder holds frames of one sequence: two or more, and a
+    /// frame number at the end of their names. A folder whose renders are
+    /// named without one (`tabletop/`, `corridor_4spp.exr`), or that holds one
+    /// render, holds renders of their own.
     pub fn is_numbered(&self) -> bool {
-        self.frames.iter().any(|f| f.number.is_some())
+        self.frames.len() >= 2 && self.frames.iter().any(|f| f.number.is_some())
     }
 
     /// The frames of the sequence at `dir`, in order.
@@ -181,11 +182,11 @@ impl Sequence {
     }
 }
 
-/// The last run of digits in `name` (`frame_0012` → 12).
+/// The digits that end `name` (`frame_0012` → 12; `corridor_4spp` has none).
 fn number_in(name: &str) -> Option<u64> {
-    let end = name.rfind(|c: char| c.is_ascii_digit())? + 1;
-    let start = name[..end].rfind(|c: char| !c.is_ascii_digit()).map_or(0, |k| k + 1);
-    name[start..end].parse().ok()
+    // ASCII digits are one byte each, so the count is a char boundary.
+    let digits = name.bytes().rev().take_while(u8::is_ascii_digit).count();
+    name[name.len() - digits..].parse().ok()
 }
 
 #[cfg(test)]
@@ -198,5 +199,9 @@ mod tests {
         assert_eq!(number_in("shot3_frame9"), Some(9));
         assert_eq!(number_in("0007"), Some(7));
         assert_eq!(number_in("still"), None);
+        // Digits inside a name are not a frame number: a sample count, a version.
+        assert_eq!(number_in("corridor_4spp"), None);
+        assert_eq!(number_in("v2_still"), None);
+        assert_eq!(number_in("kadr·0003"), Some(3));
     }
 }
