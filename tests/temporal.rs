@@ -220,6 +220,14 @@ fn a_sequence_filters_end_to_end_with_no_flag() {
     // The sequence's line states what the issue asks of it.
     let line = stdout.lines().find(|l| l.starts_with("sequence  relMSE")).unwrap_or_else(|| panic!("{stdout}"));
     assert!(line.contains("flicker") && line.contains("light") && line.contains("ms a frame"), "{line}");
+
+    // One frame of it filtered alone is scored against its reference of the
+    // same name in `reference/` beside `noisy/`, as the sequence's frames are.
+    let single = out.with_file_name("frame_0002.exr");
+    let o = filterjit(&["filter", noisy.join("frame_0002.exr").to_str().unwrap(), "-o", single.to_str().unwrap()]);
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(stdout.lines().any(|l| l.trim_start().starts_with("filtered ")), "scored: {stdout}");
 }
 
 /// A copy of the committed frame `k` (from 1) at `file`, its channels as

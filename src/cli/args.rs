@@ -523,7 +523,8 @@ pub(crate) fn parse_terminal(text: &str) -> Result<String, String> {
 }
 
 pub(crate) fn parse_size(text: &str) -> Result<(u32, u32), String> {
-    let (w, h) = text.split_once('x').ok_or_else(|| format!("`{text}` is not WIDTHxHEIGHT"))?;
+    // `64x64`, `64X64` and `64×64` alike.
+    let (w, h) = text.split_once(['x', 'X', '×']).ok_or_else(|| format!("`{text}` is not WIDTHxHEIGHT"))?;
     let parse = |v: &str| v.trim().parse::<u32>().map_err(|_| format!("`{text}` is not WIDTHxHEIGHT"));
     let (w, h) = (parse(w)?, parse(h)?);
     if w == 0 || h == 0 {
@@ -546,5 +547,19 @@ impl std::str::FromStr for LightTolerance {
             Ok(t) if t.is_finite() && t > 0.0 => Ok(LightTolerance(Some(t))),
             _ => Err(format!("`{s}` is neither a positive tolerance (e.g. 0.05) nor `off`")),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_size;
+
+    #[test]
+    fn a_size_is_width_by_height_however_the_by_is_written() {
+        for text in ["64x48", "64X48", "64×48", "64 x 48"] {
+            assert_eq!(parse_size(text), Ok((64, 48)), "{text}");
+        }
+        assert!(parse_size("64").unwrap_err().contains("not WIDTHxHEIGHT"));
+        assert!(parse_size("0x4").unwrap_err().contains("at least 1x1"));
     }
 }

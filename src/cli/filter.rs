@@ -15,6 +15,9 @@ pub(crate) struct Asked<'a> {
 }
 
 pub(crate) fn filter(env: &Environment, asked: Asked, scene_path: &Path, output: &Path) -> Result<()> {
+    if !scene_path.exists() {
+        bail!("{}: no such file or folder", scene_path.display());
+    }
     if scene::is_sequence(scene_path) {
         let renders = scene::Sequence::find(scene_path).with_context(|| format!("reading {}", scene_path.display()))?;
         if !renders.is_numbered() {

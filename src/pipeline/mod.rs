@@ -629,7 +629,9 @@ mod tests {
             ("outliers=-1,window", "at least 0"),
             ("demodulate", "no form"),
             ("window,demodulate", "follow the form"),
-            ("blur,window", "unknown stage `blur`"),
+            ("blur,window", "unknown stage `blur`;"),
+            // The name is checked before the order, and a slip gets the nearest.
+            ("atrous=5,outlier=2", "unknown stage `outlier` (did you mean `outliers`?)"),
             ("demodulate,outliers=2,window", "first stage"),
             ("keep,window", "after outliers=K"),
             ("outliers=2,demodulate,keep,window", "right after"),

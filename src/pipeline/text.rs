@@ -19,6 +19,38 @@ pub struct PipelineError {
     pub message: String,
 }
 
+/// Every stage's name, in the order a pipeline writes them.
+const STAGE_NAMES: [&str; 13] = [
+    "outliers",
+    "trim",
+    "keep",
+    "demodulate",
+    "temporal",
+    "feedback",
+    "clamp",
+    "antilag",
+    "window",
+    "atrous",
+    "atrous3x3",
+    "planefit",
+    "pixelfilter",
+];
+
+/// The message for a stage name no stage has, with the nearest one where it is a slip.
+fn unknown_stage(name: &str) -> String {
+    let nearest = STAGE_NAMES
+        .iter()
+        .map(|n| (strsim::levenshtein(n, &name.to_lowercase()), *n))
+        .filter(|(distance, n)| *distance <= (n.len() / 3).max(1))
+        .min()
+        .map(|(_, n)| format!(" (did you mean `{n}`?)"))
+        .unwrap_or_default();
+    format!(
+        "unknown stage `{name}`{nearest}; the stages are outliers=K, trim, keep, keep=surface, demodulate, temporal=A, \
+         feedback=K, clamp=G, antilag=K, window, atrous=N, atrous3x3=N, planefit=R, pixelfilter=S"
+    )
+}
+
 impl FromStr for FilterPipeline {
     type Err = PipelineError;
 
@@ -33,6 +65,10 @@ impl FromStr for FilterPipeline {
                 Some((n, v)) => (n.trim(), Some(v.trim())),
                 None => (stage, None),
             };
+            // A name no stage has is named as such before any rule of order.
+            if !STAGE_NAMES.contains(&name) {
+                return Err(error(unknown_stage(name)));
+            }
             if form_seen && name != "planefit" && name != "pixelfilter" {
                 return Err(error(format!(
                     "`{stage}` comes after the form; only `planefit=R` and `pixelfilter=S` follow the form (window or atrous)"
@@ -84,24 +120,33 @@ impl FromStr for FilterPipeline {
                     pipeline.outliers = Some(Outliers { k, trim: false, keep: None });
                 }
                 ("trim", None) => match &mut pipeline.outliers {
-                    Some(outliers) if !outliers.trim && outliers.keep.is_none() && !pipeline.demodulate && pipeline.temporal.is_none() => {
+                    Some(outliers)
+                        if !outliers.trim
+                            && outliers.keep.is_none()
+                            && !pipeline.demodulate
+                            && pipeline.temporal.is_none() =>
+                    {
                         outliers.trim = true
                     }
                     Some(_) => return Err(error("`trim` comes once, right after `outliers=K`".into())),
-                    None => return Err(error("`trim` changes the rule of `outliers=K`: write it after outliers=K".into())),
+                    None => {
+                        return Err(error("`trim` changes the rule of `outliers=K`: write it after outliers=K".into()))
+                    }
                 },
                 ("keep", None | Some("surface")) => match &mut pipeline.outliers {
-                    Some(outliers) if outliers.keep.is_none() && !pipeline.demodulate && pipeline.temporal.is_none() => {
+                    Some(outliers)
+                        if outliers.keep.is_none() && !pipeline.demodulate && pipeline.temporal.is_none() =>
+                    {
                         outliers.keep = Some(if value.is_some() { Keep::Surface } else { Keep::Even })
                     }
                     Some(_) => return Err(error("`keep` comes once, right after `outliers=K` (and `trim`)".into())),
                     None => {
-                        return Err(error("`keep` puts back what `outliers=K` removes: write it after outliers=K".into()))
+                        return Err(error(
+                            "`keep` puts back what `outliers=K` removes: write it after outliers=K".into(),
+                        ))
                     }
                 },
-                ("keep", Some(v)) => {
-                    return Err(error(format!("keep={v}: write `keep` (evenly) or `keep=surface`")))
-                }
+                ("keep", Some(v)) => return Err(error(format!("keep={v}: write `keep` (evenly) or `keep=surface`"))),
                 ("temporal", Some(v)) => {
                     let alpha: f32 =
                         v.parse().map_err(|_| error(format!("temporal={v}: the blend's α_min must be a number")))?;
@@ -193,11 +238,7 @@ impl FromStr for FilterPipeline {
                 ("atrous" | "atrous3x3", None) => {
                     return Err(error(format!("`{name}` needs its number of passes: {name}=N")))
                 }
-                (other, _) => {
-                    return Err(error(format!(
-                        "unknown stage `{other}`; the stages are outliers=K, trim, keep, keep=surface, demodulate, temporal=A, feedback=K, clamp=G, antilag=K, window, atrous=N, atrous3x3=N, planefit=R, pixelfilter=S"
-                    )))
-                }
+                (other, _) => return Err(error(unknown_stage(other))),
             }
         }
         if !form_seen {

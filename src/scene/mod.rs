@@ -367,9 +367,21 @@ fn locate(path: &Path, request: &Request) -> Result<Files, SceneError> {
         });
     };
     let beside = |file: &str| Some(dir.join(file)).filter(|p| p.is_file() && *p != noisy);
+    // A frame file of a sequence (`noisy/frame_0005.exr`) has its reference
+    // of the same name where the sequence's are: in a `reference/` folder
+    // inside its folder or beside it (`Sequence::find`'s rule).
+    let in_reference_folder = || {
+        let file_name = path.file_name().filter(|_| path.is_file())?;
+        [dir.join("reference"), dir.with_file_name("reference")]
+            .into_iter()
+            .map(|folder| folder.join(file_name))
+            .find(|p| p.is_file())
+    };
     let reference = match &request.reference_path {
         Some(p) => Some(p.clone()),
-        None => beside(REFERENCE_FILE).or_else(|| beside(&format!("{name}_reference.exr"))),
+        None => {
+            beside(REFERENCE_FILE).or_else(|| beside(&format!("{name}_reference.exr"))).or_else(in_reference_folder)
+        }
     };
     Ok(Files { reference, variance: beside(VARIANCE_FILE), meta: beside(META_FILE), noisy, name })
 }
