@@ -47,6 +47,10 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
 /// (docs/JOURNAL.md, "Choosing the real-time filter").
 pub const SHIPPED_REALTIME: &str = "realtime";
 
+/// The shipped filter meant for real-time sequences: `@temporal` with four
+/// passes of the 3x3 stencil (docs/SEQUENCES.md, "The real-time sequence filter").
+pub const SHIPPED_REALTIME_TEMPORAL: &str = "realtimeTemporal";
+
 /// The shipped temporal filters a sequence gets when none is asked for,
 /// best first (docs/SEQUENCES.md, "Measured"); the first whose inputs the
 /// frames have is taken.

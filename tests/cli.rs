@@ -420,6 +420,20 @@ fn scene_stats_measure_the_light_s_tails() {
 /// the order `filter` tries them in without `--expr`.
 #[test]
 fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
+    // --brief: a line a filter, `filter`'s choices first, in its order.
+    let o = filterjit(&["list", "--brief"]);
+    assert!(o.status.success());
+    let brief = text(&o.stdout);
+    let lines: Vec<&str> = brief.lines().filter(|l| l.starts_with('@')).collect();
+    assert_eq!(lines.len(), filterjit::corpus::named().len(), "{brief}");
+    let first = filterjit::denoise::SHIPPED_BY_QUALITY[0];
+    assert!(lines[0].starts_with(&format!("@{first} ")) && lines[0].ends_with("render: filter's choice 1"), "{brief}");
+    let temporal = filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0];
+    assert!(lines
+        .iter()
+        .any(|l| l.starts_with(&format!("@{temporal} ")) && l.ends_with("sequence: filter's choice 1")));
+    assert!(lines.iter().any(|l| l.starts_with("@realtime ") && l.ends_with("--expr @realtime")), "{brief}");
+
     let o = filterjit(&["list"]);
     assert!(o.status.success());
     let stdout = text(&o.stdout);
@@ -650,6 +664,14 @@ fn a_folder_of_unnumbered_renders_is_filtered_render_by_render() {
     assert_eq!(&std::fs::read(dir.join("picture.exr")).unwrap()[..4], &[0x76, 0x2f, 0x31, 0x01], "an EXR");
     assert_eq!(&std::fs::read(&png).unwrap()[..4], b"\x89PNG");
 
+    // Nothing is written over the render being filtered, nor over a folder's renders.
+    let noisy = renders.join("cornell/noisy.exr");
+    let before = std::fs::read(&noisy).unwrap();
+    let run = filterjit(&["filter", renders.join("cornell").to_str().unwrap(), "-o", noisy.to_str().unwrap()]);
+    assert!(!run.status.success());
+    assert!(text(&run.stderr).contains("would replace the render being filtered"), "{}", text(&run.stderr));
+    assert_eq!(std::fs::read(&noisy).unwrap(), before, "the render is as it was");
+
     // Digits inside a name are not a frame number, and one render is no sequence.
     let lone = dir.join("lone");
     std::fs::create_dir_all(&lone).unwrap();
@@ -659,6 +681,9 @@ fn a_folder_of_unnumbered_renders_is_filtered_render_by_render() {
     assert!(text(&run.stderr).contains("1 render in lone"), "{}", text(&run.stderr));
     assert!(!text(&run.stdout).contains("flicker"), "{}", text(&run.stdout));
     assert!(dir.join("lone-out/cornell_2spp.exr").is_file());
+    let run = filterjit(&["filter", lone.to_str().unwrap(), "-o", lone.to_str().unwrap()]);
+    assert!(!run.status.success());
+    assert!(text(&run.stderr).contains("the renders are read from this folder"), "{}", text(&run.stderr));
 
     // A file where the folder's outputs would go is refused before any work.
     let file = dir.join("taken");

@@ -168,7 +168,11 @@ pub(crate) enum Command {
     },
     /// List the shipped filters: each one's pipeline, what it reads, where
     /// `filter` ranks it, its measured error on the public renders, its expression.
-    List,
+    List {
+        /// One line a filter, the ones `filter` chooses first: name, pipeline, when it is chosen.
+        #[arg(long)]
+        brief: bool,
+    },
     /// List the GPU adapters and say which one filterjit uses.
     Adapters,
 }

@@ -20,8 +20,20 @@ pub(crate) fn filter(env: &Environment, asked: Asked, scene_path: &Path, output:
     }
     if scene::is_sequence(scene_path) {
         let renders = scene::Sequence::find(scene_path).with_context(|| format!("reading {}", scene_path.display()))?;
+        // The filtered frames keep their names: written where they were read, they would replace them.
+        let read_from =
+            renders.frames.iter().filter(|f| f.path.is_file()).filter_map(|f| f.path.parent()).collect::<Vec<_>>();
+        if read_from.iter().any(|folder| same_file(folder, output)) {
+            bail!(
+                "-o {}: the renders are read from this folder, and the filtered ones, of the same names, would replace them; write them into another folder",
+                output.display()
+            );
+        }
         if !renders.is_numbered() {
             return filter_each(env, &asked, &renders, output);
+        }
+        if output.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr") || e.eq_ignore_ascii_case("png")) {
+            bail!("-o {}: a sequence's frames are written into a folder; name a folder", output.display());
         }
         let Asked { expr, radius, read, cpu_check, pipeline } = asked;
         if cpu_check {
@@ -93,6 +105,13 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
     } else {
         output
     };
+    let noisy = if scene_path.is_dir() { scene_path.join(scene::NOISY_FILE) } else { scene_path.to_path_buf() };
+    if same_file(&noisy, output) {
+        bail!(
+            "{}: the result would replace the render being filtered; write it to another file (-o)",
+            output.display()
+        );
+    }
     let ReadScene { reference, spp, absent, view_layer } = read;
     let request = Request { reference_path: reference, spp, absent, view_layer, ..choice.request() };
     let load_start = Instant::now();
@@ -230,4 +249,9 @@ pub(crate) fn refuse_radius(radius: Option<u32>, pipeline: &filterjit::pipeline:
         );
     }
     Ok(())
+}
+
+/// Whether `a` and `b` name the same existing file or folder.
+fn same_file(a: &Path, b: &Path) -> bool {
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }

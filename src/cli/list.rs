@@ -3,7 +3,10 @@
 use super::*;
 
 /// `list`: the shipped filters, each one's pipeline, what it reads and what it was measured to do.
-pub(crate) fn list() -> Result<()> {
+pub(crate) fn list(brief: bool) -> Result<()> {
+    if brief {
+        return list_brief();
+    }
     for s in filterjit::denoise::shipped()? {
         println!("@{}  pipeline {}", s.name, s.pipeline);
         println!("    reads     {}", s.reads.join(", "));
@@ -24,6 +27,37 @@ pub(crate) fn list() -> Result<()> {
             None => println!("    {}", s.text),
         }
     }
+    Ok(())
+}
+
+/// `list --brief`: a line a filter, those `filter` chooses first (in its
+/// order: for renders, then for sequences), then the rest as shipped.
+fn list_brief() -> Result<()> {
+    use filterjit::denoise::{SHIPPED_REALTIME, SHIPPED_REALTIME_TEMPORAL, SHIPPED_TEMPORAL_BY_QUALITY};
+    let shipped = filterjit::denoise::shipped()?;
+    let role = |s: &filterjit::denoise::Shipped| -> (usize, String) {
+        let temporal = SHIPPED_TEMPORAL_BY_QUALITY.iter().position(|n| *n == s.name);
+        match (s.rank, temporal, s.sparse_light_variant_of) {
+            (Some(rank), _, _) => (rank, format!("render: filter's choice {rank}")),
+            (_, Some(k), _) => (1000 + k, format!("sequence: filter's choice {}", k + 1)),
+            _ if s.name == SHIPPED_REALTIME => (1500, format!("render, real time: --expr @{SHIPPED_REALTIME}")),
+            _ if s.name == SHIPPED_REALTIME_TEMPORAL => {
+                (1501, format!("sequence, real time: --expr @{SHIPPED_REALTIME_TEMPORAL}"))
+            }
+            (_, _, Some(base)) => (2000, format!("render: @{base} where the light is sparse")),
+            _ => (3000, String::new()),
+        }
+    };
+    let mut rows: Vec<_> = shipped.iter().enumerate().map(|(k, s)| (role(s), k, s)).collect();
+    rows.sort_by_key(|((order, _), k, _)| (*order, *k));
+    let width = shipped.iter().map(|s| s.name.len() + 1).max().unwrap_or(0);
+    let pipeline_width = shipped.iter().map(|s| s.pipeline.to_string().len()).max().unwrap_or(0);
+    for ((_, role), _, s) in rows {
+        let name = format!("@{}", s.name);
+        let pipeline = s.pipeline.to_string();
+        println!("{}", format!("{name:<width$}  {pipeline:<pipeline_width$}  {role}").trim_end());
+    }
+    println!("(`filterjit list` gives each one's inputs, measured error and expression)");
     Ok(())
 }
 

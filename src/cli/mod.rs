@@ -58,7 +58,7 @@ pub(crate) fn run(cli: Cli) -> Result<()> {
         Command::Bench(args) => bench::bench_command(env, *args),
         Command::Scenes { stats: false, scenes, .. } if scenes.is_empty() => scenes::list_scenes(),
         Command::Scenes { size, spp, scenes, .. } => scene_stats(env, size, spp, scenes),
-        Command::List => list::list(),
+        Command::List { brief } => list::list(brief),
         Command::Adapters => list::adapters(env),
     }
 }

@@ -38,9 +38,18 @@ pub(crate) fn render(
         );
     }
     let bar = sample_bar(&d.name);
+    let start = Instant::now();
+    let mut said = 0;
     let mut progress = |done: u64, total: u64| {
         bar.set_length(total);
         bar.set_position(done);
+        // Where stderr is no terminal the bar draws nothing: a line at each
+        // tenth, so a render of minutes is not silent in a log.
+        let tenths = (done * 10).checked_div(total).unwrap_or(0);
+        if bar.is_hidden() && tenths > said {
+            said = tenths;
+            eprintln!("render    {} {}% ({:.0} s)", d.name, tenths * 10, start.elapsed().as_secs_f64());
+        }
     };
     let dir = match output {
         Some(dir) if d.animation.is_some() => {
