@@ -96,12 +96,13 @@ pub(crate) fn evolve_on(
     }
     if root {
         eprintln!(
-            "evolve    {} islands x {}, {} generations, max length {}, radius {}, pipeline {}, {}{}, {} per fitness kernel, on {}{}{}",
+            "evolve    {} islands x {}, {} generations, max length {}, {}pipeline {}, {}{}, {} per fitness kernel, on {}{}{}",
             settings.islands,
             settings.island_size,
             settings.generations,
             settings.max_length,
-            config.radius,
+            // An à-trous form's stencil is fixed: the radius sizes a window only.
+            if config.pipeline.is_atrous() { String::new() } else { format!("radius {}, ", config.radius) },
             config.pipeline,
             scene_sizes(&config),
             match config.fitness_tiles {
@@ -204,14 +205,29 @@ pub(crate) fn evolve_on(
         ),
         None => println!("fitness   {:.5} (training: {rule}), length {length}", summary.best.fitness.value),
     }
-    let baseline_names: Vec<String> = (0..summary.test_baselines.len()).map(|k| format!("baseline{}", k + 1)).collect();
+    // Each compared filter by the name it was asked for: a baseline whose
+    // scenes lack an input it reads is left out of the test, so the k-th
+    // result need not be the k-th asked for.
+    let baseline_names: Vec<String> = summary
+        .test_baselines
+        .iter()
+        .enumerate()
+        .map(|(k, b)| {
+            baselines
+                .iter()
+                .find(|asked| filterjit::corpus::resolve(asked).is_ok_and(|(_, e)| e.to_string() == b.expr))
+                .cloned()
+                .unwrap_or_else(|| format!("baseline{}", k + 1))
+        })
+        .collect();
+    let width = baseline_names.iter().map(|n| n.len()).max().unwrap_or(0).max(12);
     println!(
         "test      {:<16} {:>12} {:>12} {:>12}{}",
         "relMSE",
         "noisy",
         "seed",
         "best",
-        baseline_names.iter().map(|n| format!(" {n:>12}")).collect::<String>()
+        baseline_names.iter().map(|n| format!(" {n:>width$}")).collect::<String>()
     );
     for (k, name) in summary.test_scenes.iter().enumerate() {
         println!(
@@ -220,7 +236,7 @@ pub(crate) fn evolve_on(
             summary.test_noisy_relmse[k],
             summary.test_seed.relmse[k],
             summary.test_best.relmse[k],
-            summary.test_baselines.iter().map(|b| format!(" {:>12.5}", b.relmse[k])).collect::<String>()
+            summary.test_baselines.iter().map(|b| format!(" {:>width$.5}", b.relmse[k])).collect::<String>()
         );
     }
     println!(
@@ -229,10 +245,11 @@ pub(crate) fn evolve_on(
         "1",
         summary.test_seed.normalised,
         summary.test_best.normalised,
-        summary.test_baselines.iter().map(|b| format!(" {:>12.5}", b.normalised)).collect::<String>()
+        summary.test_baselines.iter().map(|b| format!(" {:>width$.5}", b.normalised)).collect::<String>()
     );
     // The light each output keeps: mean luminance over the reference's (1 keeps it).
     let light = |l: Option<f64>| l.map_or_else(|| format!(" {:>12}", "-"), |l| format!(" {l:>12.3}"));
+    let baseline_light = |l: Option<f64>| l.map_or_else(|| format!(" {:>width$}", "-"), |l| format!(" {l:>width$.3}"));
     let flag = |l: Option<f64>| l.is_some_and(|l| (l - 1.0).abs() > filterjit::metrics::LIGHT_TOLERANCE);
     for (k, name) in summary.test_scenes.iter().enumerate() {
         let row = [summary.test_noisy_light[k], summary.test_seed.light[k], summary.test_best.light[k]]
@@ -242,7 +259,7 @@ pub(crate) fn evolve_on(
         println!(
             "light     {:<16}{}{}",
             name,
-            row.iter().map(|l| light(*l)).collect::<String>(),
+            row.iter().enumerate().map(|(k, l)| if k < 3 { light(*l) } else { baseline_light(*l) }).collect::<String>(),
             if row[1..].iter().any(|l| flag(*l)) { "   changes the light by more than 3 %" } else { "" }
         );
     }
@@ -253,9 +270,15 @@ pub(crate) fn evolve_on(
     ]
     .into_iter()
     .chain(summary.test_baselines.iter().map(|b| ev::mean_light(&b.light)));
-    println!("          {:<16}{}   (mean luminance / the reference's)", "mean", means.map(light).collect::<String>());
+    println!(
+        "          {:<16}{}   (mean luminance / the reference's)",
+        "mean",
+        means.enumerate().map(|(k, l)| if k < 3 { light(l) } else { baseline_light(l) }).collect::<String>()
+    );
     for (name, b) in baseline_names.iter().zip(&summary.test_baselines) {
-        println!("          {name} = {}", b.expr);
+        if !name.starts_with('@') {
+            println!("          {name} = {}", b.expr);
+        }
     }
     let mut used: Vec<(&String, &usize)> = summary.feature_frequencies.iter().filter(|(_, n)| **n > 0).collect();
     used.sort_by(|a, b| b.1.cmp(a.1));
@@ -288,7 +311,7 @@ pub(crate) fn evolve_on(
     );
     // The best shipped filter, where the test compared it: how far the search got, and which search goes on from it.
     let best_shipped = filterjit::denoise::SHIPPED_BY_QUALITY[0];
-    let shipped_row = baselines.iter().position(|b| b.trim_start_matches('@') == best_shipped);
+    let shipped_row = baseline_names.iter().position(|b| b.trim_start_matches('@') == best_shipped);
     if let Some(b) = shipped_row.and_then(|k| summary.test_baselines.get(k)) {
         let best = summary.test_best.normalised;
         let verdict = match best < b.normalised {
