@@ -143,22 +143,43 @@ impl Choice {
 
     /// The first of `names` (shipped filters, best first) whose inputs `provided` has.
     fn best_of(names: &[&str], provided: &Provided) -> Result<Choice> {
-        let mut passed_over = Vec::new();
+        let mut passed_over: Vec<(&str, Vec<String>)> = Vec::new();
         for name in names {
             let choice = Choice::asked(&format!("@{name}"), None, None)?;
             let missing = choice.missing(provided);
             if missing.is_empty() {
-                let because = match passed_over.is_empty() {
-                    true => "the best shipped filter, and the render has every input it reads".to_string(),
-                    false => {
-                        format!("the best shipped filter whose inputs the render has ({})", passed_over.join("; "))
+                let because = match passed_over.as_slice() {
+                    [] => "the best shipped filter, and the render has every input it reads".to_string(),
+                    [(best, lacks)] => format!(
+                        "the best shipped filter whose inputs the render has (@{best}, the best, needs {})",
+                        lacks.join(", ")
+                    ),
+                    // One line, not one clause a filter passed over: what the better ones lack, together.
+                    [(best, lacks), ..] => {
+                        // Each input once, by its name (`texture (the albedo …)` is `texture`).
+                        let mut all: Vec<&str> = Vec::new();
+                        for input in passed_over.iter().flat_map(|(_, lacks)| lacks) {
+                            let name = input.split(' ').next().unwrap_or(input);
+                            if !all.contains(&name) {
+                                all.push(name);
+                            }
+                        }
+                        format!(
+                            "the best shipped filter whose inputs the render has: the {} better ones read what it lacks \
+                             ({}; @{best}, the best, needs {}); `filterjit list` gives each one's inputs",
+                            passed_over.len(),
+                            all.join(", "),
+                            lacks.join(", ")
+                        )
                     }
                 };
                 return Ok(Choice { chosen_because: Some(because), ..choice });
             }
-            passed_over.push(format!("@{name} needs {}", missing.join(", ")));
+            passed_over.push((name, missing));
         }
-        bail!("no shipped filter fits this render: {}", passed_over.join("; "))
+        let each: Vec<String> =
+            passed_over.iter().map(|(name, lacks)| format!("@{name} needs {}", lacks.join(", "))).collect();
+        bail!("no shipped filter fits this render: {}", each.join("; "))
     }
 
     /// This choice for a render whose noisy colour is `color`: a chosen
@@ -434,8 +455,9 @@ mod tests {
         let chosen = Choice::best_for(&no_position).unwrap();
         assert!(!chosen.expr.features().contains(&WorldPosition), "{:?}", chosen.name);
         let because = chosen.chosen_because.unwrap();
-        assert!(because.contains("@evolvedAtrous64Plane needs worldPosition"), "{because}");
-        assert!(because.contains("@evolvedAtrous128Keep needs"), "{because}");
+        assert!(because.contains("@evolvedAtrous64Plane, the best, needs worldPosition"), "{because}");
+        // The filters passed over are summed up in one clause, each input named once.
+        assert!(because.contains("better ones read what it lacks (worldPosition;"), "{because}");
 
         // `keep=surface` reads the normal even where the weight does not:
         // its needs say so, and so does what it asks a render for.

@@ -641,6 +641,14 @@ fn a_folder_of_unnumbered_renders_is_filtered_render_by_render() {
     assert!(run.status.success(), "{stdout}\n{stderr}");
     assert!(stderr.contains("2 renders in renders, each on its own"), "{stderr}");
     assert!(!stdout.contains("flicker") && !stdout.contains("sequence"), "{stdout}");
+    // A line a render at the end: the filter, the noisy and the filtered relMSE, the light.
+    for name in ["cornell", "glossy-floor"] {
+        let line =
+            stdout.lines().find(|l| l.split_whitespace().next() == Some(name)).unwrap_or_else(|| panic!("{stdout}"));
+        let figures: Vec<f64> = line.split_whitespace().skip(2).map(|v| v.parse().unwrap()).collect();
+        assert!(figures.len() == 3 && figures[1] < figures[0], "{line}");
+    }
+    assert!(stdout.contains("wrote     2 renders into"), "{stdout}");
     for name in ["cornell", "glossy-floor"] {
         for ext in ["exr", "png"] {
             assert!(out.join(format!("{name}.{ext}")).is_file(), "{name}.{ext} in {}", out.display());

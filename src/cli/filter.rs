@@ -41,7 +41,7 @@ pub(crate) fn filter(env: &Environment, asked: Asked, scene_path: &Path, output:
         }
         return sequence::filter_sequence(env, expr, radius, scene_path, output, read, pipeline);
     }
-    filter_one(env, asked, scene_path, output)
+    filter_one(env, asked, scene_path, output).map(|_| ())
 }
 
 /// A folder of renders whose names carry no frame numbers (`tabletop/`,
@@ -66,20 +66,42 @@ fn filter_each(env: &Environment, asked: &Asked, renders: &scene::Sequence, outp
             renders.name
         ),
     }
+    let mut done = Vec::new();
     for render in &renders.frames {
         eprintln!("\nrender    {}", render.path.display());
         // A dataset's folder finds its reference itself; a file's is the one the folder found.
         let reference = render.reference.clone().filter(|_| render.path.is_file());
         let asked = Asked { read: ReadScene { reference, ..asked.read.clone() }, ..asked.clone() };
         let output = output_dir.join(format!("{}.exr", render.name));
-        filter_one(env, asked, &render.path, &output)
+        let filtered = filter_one(env, asked, &render.path, &output)
             .with_context(|| format!("filtering {}", render.path.display()))?;
+        done.push((render.name.as_str(), filtered));
     }
+    // The folder at a glance, after each render's own figures.
+    println!("\nrenders   {:<24} {:<26} {:>12} {:>12} {:>8}", "", "filter", "noisy relMSE", "relMSE", "light");
+    for (name, filtered) in &done {
+        let (noisy, relmse, light) = match filtered.scored {
+            Some((noisy, filtered, light)) => {
+                (format!("{noisy:.5}"), format!("{filtered:.5}"), light.map_or("-".into(), |l| format!("{l:.4}")))
+            }
+            None => ("-".into(), "-".into(), "no reference".into()),
+        };
+        println!("          {name:<24} {:<26} {noisy:>12} {relmse:>12} {light:>8}", filtered.filter);
+    }
+    println!("wrote     {} renders into {} (NAME.exr and NAME.png each)", done.len(), output_dir.display());
     Ok(())
 }
 
+/// What `filter_one` did, for a folder's summary.
+struct Filtered {
+    /// The filter, as `Choice::describe` names it.
+    filter: String,
+    /// relMSE of the noisy input and of the result, and the result's light, where there is a reference.
+    scored: Option<(f64, f64, Option<f64>)>,
+}
+
 /// One render filtered and written to `output` (or into it, where it is a folder).
-fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path) -> Result<()> {
+fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path) -> Result<Filtered> {
     let Asked { expr, radius, read, cpu_check, pipeline } = asked;
     let choice = match expr {
         Some(expr) => Choice::asked(expr, pipeline, radius)?,
@@ -197,10 +219,13 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
             semantics::flag::describe(warm.all_flags()).join("; ")
         );
     }
+    let filter_name = choice.describe();
+    let mut scored = None;
     match &scene.reference {
         Some(reference) => {
             let noisy = metrics::errors(&scene.color, reference, scene.spp);
             let filtered = metrics::errors(&rgb, reference, scene.spp);
+            scored = Some((noisy.relmse, filtered.relmse, filtered.light));
             let flip =
                 |image: &[[f32; 3]]| filterjit::flip::hdr_flip(reference, image, scene.width, scene.height).mean();
             println!(
@@ -223,7 +248,7 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
         println!("cpu       max relative difference GPU f32 vs CPU f64: {worst:.3e}");
     }
     println!("wrote     {} and {}", output.display(), png.display());
-    Ok(())
+    Ok(Filtered { filter: filter_name, scored })
 }
 
 pub(crate) fn print_errors(label: &str, e: &Errors, flip: f64) {

@@ -110,7 +110,7 @@ pub(crate) fn filter_sequence(
     println!("device    {}", gpu.describe());
     println!(
         "frame     {:<14} {:>10} {:>10} {:>8} {:>9} {:>9} {:>10} {:>9} {:>9}",
-        "", "relMSE", "noisy", "light", "HDR-FLIP", "flicker", "temporal", "ms", "on device"
+        "", "relMSE", "noisy", "light", "HDR-FLIP", "flicker", "temporal", "wall ms", "device ms"
     );
     let mut figures = Vec::new();
     let mut scores = Vec::new();
@@ -237,14 +237,17 @@ pub(crate) fn filter_sequence(
 fn print_summary(figures: &SequenceFigures) {
     let s = &figures.summary;
     let f = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.5}"));
+    // The settled frames' figures, where the sequence reaches them.
+    let settled = |v: Option<f64>| match figures.frames.len() > SETTLED_FROM {
+        true => format!(" (frames {}–{}: {})", SETTLED_FROM + 1, figures.frames.len(), f(v)),
+        false => String::new(),
+    };
     println!(
-        "sequence  relMSE {} (frames {}–{}: {}) | flicker {} ({}) | temporal relMSE {} | HDR-FLIP {} | light {}–{} | {:.1} ms a frame",
+        "sequence  relMSE {}{} | flicker {}{} | temporal relMSE {} | HDR-FLIP {} | light {}–{} | {:.1} ms a frame",
         f(s.relmse),
-        SETTLED_FROM + 1,
-        figures.frames.len(),
-        f(s.relmse_settled),
+        settled(s.relmse_settled),
         f(s.flicker),
-        f(s.flicker_settled),
+        settled(s.flicker_settled),
         f(s.temporal_relmse),
         f(s.hdr_flip),
         s.light_min.map_or("-".into(), |l| format!("{l:.3}")),
