@@ -82,10 +82,16 @@ fn resolve_entry(file: &NamedFile, entry: &Entry) -> anyhow::Result<Resolved> {
 }
 
 fn parse_checked(text: &str) -> anyhow::Result<crate::lang::Expr> {
-    crate::lang::parse_expr(text).context("invalid expression")
+    crate::lang::parse_expr(text).with_context(|| {
+        // A shipped filter's name written without its `@` reads as an unknown name.
+        let word = text.trim();
+        match closest_name(word).filter(|_| word.chars().all(|c| c.is_ascii_alphanumeric())) {
+            Some(name) => format!("invalid expression (a shipped filter is written with an @: `@{name}`)"),
+            None => "invalid expression".to_string(),
+        }
+    })
 }
 
-/// `PATH` or `PATH:NAME` of an existing file of named expressions.
 /// The shipped name nearest `asked` in spelling, where it is near enough
 /// to be a slip (at most a third of its letters off, case aside).
 fn closest_name(asked: &str) -> Option<&'static str> {
@@ -98,6 +104,7 @@ fn closest_name(asked: &str) -> Option<&'static str> {
         .map(|(_, n)| n)
 }
 
+/// `PATH` or `PATH:NAME` of an existing file of named expressions.
 fn file_reference(reference: &str) -> Option<(std::path::PathBuf, Option<String>)> {
     let whole = std::path::PathBuf::from(reference);
     if whole.is_file() {
@@ -119,6 +126,8 @@ mod tests {
         assert_eq!(closest_name("somethingElseEntirely"), None);
         let err = resolve("@realtme").unwrap_err().to_string();
         assert!(err.contains("no shipped expression `@realtme` (did you mean `@realtime`?)"), "{err}");
+        let err = resolve("realtime").unwrap_err().to_string();
+        assert!(err.contains("a shipped filter is written with an @: `@realtime`"), "{err}");
         let err = resolve("@runs/evolve/hall_of_fame.txt:best").unwrap_err().to_string();
         assert!(err.contains("no file runs/evolve/hall_of_fame.txt"), "{err}");
     }
