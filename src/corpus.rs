@@ -92,16 +92,9 @@ fn parse_checked(text: &str) -> anyhow::Result<crate::lang::Expr> {
     })
 }
 
-/// The shipped name nearest `asked` in spelling, where it is near enough
-/// to be a slip (at most a third of its letters off, case aside).
+/// The shipped name nearest `asked` in spelling, where it is a slip.
 fn closest_name(asked: &str) -> Option<&'static str> {
-    let asked = asked.to_lowercase();
-    named()
-        .iter()
-        .map(|(n, _)| (strsim::levenshtein(&n.to_lowercase(), &asked), *n))
-        .filter(|(distance, n)| *distance <= (n.len() / 3).max(1))
-        .min()
-        .map(|(_, n)| n)
+    crate::spelling::nearest(asked, named().into_iter().map(|(n, _)| n))
 }
 
 /// `PATH` or `PATH:NAME` of an existing file of named expressions.

@@ -32,6 +32,7 @@ pub mod rng;
 pub mod scene;
 pub mod semantics;
 pub mod simplify;
+pub mod spelling;
 pub mod tune;
 
 pub use jit::{compile, ValidatedKernel};

@@ -166,6 +166,9 @@ pub(crate) fn evolve_on(
     // (a resumed run must have the same settings, so these are the checkpoint's).
     let rule = config.fitness.describe();
     let generations = settings.generations;
+    // Each baseline as asked for, resolved once: the run compares them, and the table names them.
+    let resolved: Vec<(&String, filterjit::corpus::Resolved)> =
+        baselines.iter().map(|b| Ok((b, filterjit::corpus::resolve_with_pipeline(b)?))).collect::<Result<_>>()?;
     let summary = ev::run_with(
         &gpu,
         ev::RunOptions {
@@ -177,13 +180,7 @@ pub(crate) fn evolve_on(
             stop_after: None,
             on_report: &mut on_report,
             on_render: &mut on_render,
-            baselines: baselines
-                .iter()
-                .map(|b| {
-                    let resolved = filterjit::corpus::resolve_with_pipeline(b)?;
-                    Ok((resolved.expr, resolved.pipeline))
-                })
-                .collect::<Result<_>>()?,
+            baselines: resolved.iter().map(|(_, r)| (r.expr.clone(), r.pipeline)).collect(),
             tiles: args.tiles,
             fusion: args.fuse,
             cache: env.cache.clone(),
@@ -213,11 +210,10 @@ pub(crate) fn evolve_on(
         .iter()
         .enumerate()
         .map(|(k, b)| {
-            baselines
+            resolved
                 .iter()
-                .find(|asked| filterjit::corpus::resolve(asked).is_ok_and(|(_, e)| e.to_string() == b.expr))
-                .cloned()
-                .unwrap_or_else(|| format!("baseline{}", k + 1))
+                .find(|(_, r)| r.expr.to_string() == b.expr)
+                .map_or_else(|| format!("baseline{}", k + 1), |(asked, _)| asked.to_string())
         })
         .collect();
     let width = baseline_names.iter().map(|n| n.len()).max().unwrap_or(0).max(12);
@@ -248,8 +244,10 @@ pub(crate) fn evolve_on(
         summary.test_baselines.iter().map(|b| format!(" {:>width$.5}", b.normalised)).collect::<String>()
     );
     // The light each output keeps: mean luminance over the reference's (1 keeps it).
-    let light = |l: Option<f64>| l.map_or_else(|| format!(" {:>12}", "-"), |l| format!(" {l:>12.3}"));
-    let baseline_light = |l: Option<f64>| l.map_or_else(|| format!(" {:>width$}", "-"), |l| format!(" {l:>width$.3}"));
+    // noisy, seed and best are 12 wide, the baselines as wide as their names.
+    let widths: Vec<usize> =
+        [12; 3].into_iter().chain(std::iter::repeat(width)).take(3 + baseline_names.len()).collect();
+    let light = |l: Option<f64>, w: usize| l.map_or_else(|| format!(" {:>w$}", "-"), |l| format!(" {l:>w$.3}"));
     let flag = |l: Option<f64>| l.is_some_and(|l| (l - 1.0).abs() > filterjit::metrics::LIGHT_TOLERANCE);
     for (k, name) in summary.test_scenes.iter().enumerate() {
         let row = [summary.test_noisy_light[k], summary.test_seed.light[k], summary.test_best.light[k]]
@@ -259,7 +257,7 @@ pub(crate) fn evolve_on(
         println!(
             "light     {:<16}{}{}",
             name,
-            row.iter().enumerate().map(|(k, l)| if k < 3 { light(*l) } else { baseline_light(*l) }).collect::<String>(),
+            row.iter().zip(&widths).map(|(l, w)| light(*l, *w)).collect::<String>(),
             if row[1..].iter().any(|l| flag(*l)) { "   changes the light by more than 3 %" } else { "" }
         );
     }
@@ -273,7 +271,7 @@ pub(crate) fn evolve_on(
     println!(
         "          {:<16}{}   (mean luminance / the reference's)",
         "mean",
-        means.enumerate().map(|(k, l)| if k < 3 { light(l) } else { baseline_light(l) }).collect::<String>()
+        means.zip(&widths).map(|(l, w)| light(l, *w)).collect::<String>()
     );
     for (name, b) in baseline_names.iter().zip(&summary.test_baselines) {
         if !name.starts_with('@') {

@@ -20,10 +20,10 @@ pub(crate) fn filter(env: &Environment, asked: Asked, scene_path: &Path, output:
     }
     if scene::is_sequence(scene_path) {
         let renders = scene::Sequence::find(scene_path).with_context(|| format!("reading {}", scene_path.display()))?;
-        // The filtered frames keep their names: written where they were read, they would replace them.
-        let read_from =
-            renders.frames.iter().filter(|f| f.path.is_file()).filter_map(|f| f.path.parent()).collect::<Vec<_>>();
-        if read_from.iter().any(|folder| same_file(folder, output)) {
+        // The filtered frames keep their names: written where they were read
+        // (the one folder `Sequence::find` lists), they would replace them.
+        let read_from = renders.frames.iter().find(|f| f.path.is_file()).and_then(|f| f.path.parent());
+        if read_from.is_some_and(|folder| same_file(folder, output)) {
             bail!(
                 "-o {}: the renders are read from this folder, and the filtered ones, of the same names, would replace them; write them into another folder",
                 output.display()

@@ -35,24 +35,26 @@ pub(crate) fn list(brief: bool) -> Result<()> {
 fn list_brief() -> Result<()> {
     use filterjit::denoise::{SHIPPED_REALTIME, SHIPPED_REALTIME_TEMPORAL, SHIPPED_TEMPORAL_BY_QUALITY};
     let shipped = filterjit::denoise::shipped()?;
-    let role = |s: &filterjit::denoise::Shipped| -> (usize, String) {
+    // A filter's role and its place: the group its role falls in, then its rank there.
+    let role = |s: &filterjit::denoise::Shipped| -> ((u8, usize), String) {
         let temporal = SHIPPED_TEMPORAL_BY_QUALITY.iter().position(|n| *n == s.name);
         match (s.rank, temporal, s.sparse_light_variant_of) {
-            (Some(rank), _, _) => (rank, format!("render: filter's choice {rank}")),
-            (_, Some(k), _) => (1000 + k, format!("sequence: filter's choice {}", k + 1)),
-            _ if s.name == SHIPPED_REALTIME => (1500, format!("render, real time: --expr @{SHIPPED_REALTIME}")),
+            (Some(rank), _, _) => ((0, rank), format!("render: filter's choice {rank}")),
+            (_, Some(k), _) => ((1, k), format!("sequence: filter's choice {}", k + 1)),
+            _ if s.name == SHIPPED_REALTIME => ((2, 0), format!("render, real time: --expr @{SHIPPED_REALTIME}")),
             _ if s.name == SHIPPED_REALTIME_TEMPORAL => {
-                (1501, format!("sequence, real time: --expr @{SHIPPED_REALTIME_TEMPORAL}"))
+                ((2, 1), format!("sequence, real time: --expr @{SHIPPED_REALTIME_TEMPORAL}"))
             }
-            (_, _, Some(base)) => (2000, format!("render: @{base} where the light is sparse")),
-            _ => (3000, String::new()),
+            (_, _, Some(base)) => ((3, 0), format!("render: @{base} where the light is sparse")),
+            _ => ((4, 0), String::new()),
         }
     };
-    let mut rows: Vec<_> = shipped.iter().enumerate().map(|(k, s)| (role(s), k, s)).collect();
-    rows.sort_by_key(|((order, _), k, _)| (*order, *k));
+    // A stable sort: within a group of equal places, the shipped file's order.
+    let mut rows: Vec<_> = shipped.iter().map(|s| (role(s), s)).collect();
+    rows.sort_by_key(|((place, _), _)| *place);
     let width = shipped.iter().map(|s| s.name.len() + 1).max().unwrap_or(0);
     let pipeline_width = shipped.iter().map(|s| s.pipeline.to_string().len()).max().unwrap_or(0);
-    for ((_, role), _, s) in rows {
+    for ((_, role), s) in rows {
         let name = format!("@{}", s.name);
         let pipeline = s.pipeline.to_string();
         println!("{}", format!("{name:<width$}  {pipeline:<pipeline_width$}  {role}").trim_end());

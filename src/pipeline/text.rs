@@ -38,13 +38,8 @@ const STAGE_NAMES: [&str; 13] = [
 
 /// The message for a stage name no stage has, with the nearest one where it is a slip.
 fn unknown_stage(name: &str) -> String {
-    let nearest = STAGE_NAMES
-        .iter()
-        .map(|n| (strsim::levenshtein(n, &name.to_lowercase()), *n))
-        .filter(|(distance, n)| *distance <= (n.len() / 3).max(1))
-        .min()
-        .map(|(_, n)| format!(" (did you mean `{n}`?)"))
-        .unwrap_or_default();
+    let nearest =
+        crate::spelling::nearest(name, STAGE_NAMES).map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
     format!(
         "unknown stage `{name}`{nearest}; the stages are outliers=K, trim, keep, keep=surface, demodulate, temporal=A, \
          feedback=K, clamp=G, antilag=K, window, atrous=N, atrous3x3=N, planefit=R, pixelfilter=S"

@@ -368,14 +368,10 @@ fn locate(path: &Path, request: &Request) -> Result<Files, SceneError> {
     };
     let beside = |file: &str| Some(dir.join(file)).filter(|p| p.is_file() && *p != noisy);
     // A frame file of a sequence (`noisy/frame_0005.exr`) has its reference
-    // of the same name where the sequence's are: in a `reference/` folder
-    // inside its folder or beside it (`Sequence::find`'s rule).
+    // of the same name where the sequence's are.
     let in_reference_folder = || {
         let file_name = path.file_name().filter(|_| path.is_file())?;
-        [dir.join("reference"), dir.with_file_name("reference")]
-            .into_iter()
-            .map(|folder| folder.join(file_name))
-            .find(|p| p.is_file())
+        sequence::reference_folders(&dir).into_iter().map(|folder| folder.join(file_name)).find(|p| p.is_file())
     };
     let reference = match &request.reference_path {
         Some(p) => Some(p.clone()),

@@ -73,8 +73,7 @@ impl Sequence {
             sequence.name = name;
             return Ok(sequence);
         }
-        // References: a `reference/` folder inside, else one beside.
-        let references = [dir.join("reference"), dir.with_file_name("reference")].into_iter().find(|r| r.is_dir());
+        let references = reference_folders(dir).into_iter().find(|r| r.is_dir());
         let mut frames = Vec::new();
         for entry in std::fs::read_dir(dir).map_err(io)? {
             let path = entry.map_err(io)?.path();
@@ -180,6 +179,12 @@ impl Sequence {
         scene.name = frame.name.clone();
         Ok(scene)
     }
+}
+
+/// Where the references of the frames in `dir` are: a `reference/` folder
+/// inside it, else one beside it (`noisy/` and `reference/`).
+pub(super) fn reference_folders(dir: &Path) -> [PathBuf; 2] {
+    [dir.join("reference"), dir.with_file_name("reference")]
 }
 
 /// The digits that end `name` (`frame_0012` → 12; `corridor_4spp` has none).
