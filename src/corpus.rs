@@ -51,8 +51,8 @@ pub fn resolve_with_pipeline(arg: &str) -> anyhow::Result<Resolved> {
         return resolve_entry(shipped(), entry);
     }
     let Some((path, name)) = file_reference(reference) else {
-        if reference.contains(['/', '\\']) || reference.ends_with(".txt") || reference.ends_with(".json") {
-            let path = reference.rsplit_once(':').map_or(reference, |(path, _)| path);
+        let path = reference.rsplit_once(':').map_or(reference, |(path, _)| path);
+        if reference.contains(['/', '\\']) || path.ends_with(".txt") || path.ends_with(".json") {
             bail!("@{reference}: no file {path} (from {})", std::env::current_dir()?.display());
         }
         let names: Vec<String> = named().iter().map(|(n, _)| format!("@{n}")).collect();
@@ -123,5 +123,8 @@ mod tests {
         assert!(err.contains("a shipped filter is written with an @: `@realtime`"), "{err}");
         let err = resolve("@runs/evolve/hall_of_fame.txt:best").unwrap_err().to_string();
         assert!(err.contains("no file runs/evolve/hall_of_fame.txt"), "{err}");
+        // A file named with an entry, in the folder it is run from.
+        let err = resolve("@nope.txt:best").unwrap_err().to_string();
+        assert!(err.contains("no file nope.txt"), "{err}");
     }
 }

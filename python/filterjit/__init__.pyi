@@ -18,6 +18,8 @@ def denoise(
     pipeline: Optional[str] = ...,
     radius: Optional[int] = ...,
     point_sampled: bool = ...,
+    motion: Optional[npt.NDArray[np.float32]] = ...,
+    surface_normal: Optional[npt.NDArray[np.float32]] = ...,
 ) -> npt.NDArray[np.float32]: ...
 class Denoiser:
     def __init__(
@@ -38,6 +40,7 @@ class Denoiser:
         motion: Optional[npt.NDArray[np.float32]] = ...,
         variance: Optional[npt.NDArray[np.float32]] = ...,
         spp: Optional[int] = ...,
+        surface_normal: Optional[npt.NDArray[np.float32]] = ...,
     ) -> npt.NDArray[np.float32]: ...
     def reset(self) -> None: ...
     @property

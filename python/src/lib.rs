@@ -56,7 +56,17 @@ struct Image {
     height: usize,
     width: usize,
     channels: usize,
+    /// The array's shape as given, for messages.
+    shape: Vec<usize>,
     values: Vec<f32>,
+}
+
+/// A shape as Python prints it: `(64, 64, 3)`, `(64,)`.
+fn shape_text(shape: &[usize]) -> String {
+    match shape {
+        [one] => format!("({one},)"),
+        _ => format!("({})", shape.iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")),
+    }
 }
 
 impl Image {
@@ -79,12 +89,13 @@ impl Image {
             [h, w, c] => (h, w, c),
             _ => {
                 return Err(PyValueError::new_err(format!(
-                    "`{name}` has shape {shape:?}; images are (height, width, channels) or (height, width)"
+                    "`{name}` has shape {}; images are (height, width, channels) or (height, width)",
+                    shape_text(&shape)
                 )))
             }
         };
-        if height == 0 || width == 0 {
-            return Err(PyValueError::new_err(format!("`{name}` is empty (shape {shape:?})")));
+        if height == 0 || width == 0 || channels == 0 {
+            return Err(PyValueError::new_err(format!("`{name}` is empty (shape {})", shape_text(&shape))));
         }
         let readonly = typed.readonly();
         let values: Vec<f32> = readonly.as_array().iter().copied().collect();
@@ -96,29 +107,42 @@ impl Image {
                 values[k]
             )));
         }
-        Ok(Image { height, width, channels, values })
+        Ok(Image { height, width, channels, shape, values })
     }
 
-    /// Refuses this image unless it is `size` with one of `channels`.
-    fn check(&self, name: &str, size: (usize, usize), channels: &[usize]) -> PyResult<()> {
+    /// Refuses this image unless it is `size` (the size of the argument
+    /// `like`) with one of `channels`, saying what it must be and, where the
+    /// shape tells, how to get there.
+    fn check(&self, name: &str, (size, like): ((usize, usize), &str), channels: &[usize]) -> PyResult<()> {
         if (self.height, self.width) == size && channels.contains(&self.channels) {
             return Ok(());
         }
-        let wanted: Vec<String> = channels.iter().map(|c| format!("({}, {}, {c})", size.0, size.1)).collect();
+        // An image sized by itself (the colour) is held to its channels alone.
+        let (h, w) = if name == like {
+            ("height".to_string(), "width".to_string())
+        } else {
+            (size.0.to_string(), size.1.to_string())
+        };
+        let wanted: Vec<String> =
+            channels.iter().map(|&c| if c == 1 { format!("({h}, {w})") } else { format!("({h}, {w}, {c})") }).collect();
+        let whose = if name == like { String::new() } else { format!(" (the height and width of `{like}`)") };
+        let hint = if channels.contains(&3) && self.channels == 4 {
+            format!("; drop the alpha channel with `{name}[..., :3]`")
+        } else if self.shape.len() == 3 && channels.contains(&self.shape[0]) && !channels.contains(&self.shape[2]) {
+            format!("; its channels come first: move them last with `{name}.transpose(1, 2, 0)`")
+        } else {
+            String::new()
+        };
         Err(PyValueError::new_err(format!(
-            "`{name}` has shape ({}, {}, {}), but `color` is ({}, {}, 3): `{name}` must be {}",
-            self.height,
-            self.width,
-            self.channels,
-            size.0,
-            size.1,
-            wanted.join(" or ")
+            "`{name}` must be {}{whose}, not {}{hint}",
+            wanted.join(" or "),
+            shape_text(&self.shape)
         )))
     }
 
     /// This image as RGB pixels, checked to be `size` with one of `channels`
     /// (1 channel fills the first component, as a depth channel is stored).
-    fn pixels(&self, name: &str, size: (usize, usize), channels: &[usize]) -> PyResult<Vec<[f32; 3]>> {
+    fn pixels(&self, name: &str, size: ((usize, usize), &str), channels: &[usize]) -> PyResult<Vec<[f32; 3]>> {
         self.check(name, size, channels)?;
         Ok(self
             .values
@@ -142,11 +166,41 @@ impl Image {
 fn rgb(name: &str, array: &Bound<'_, PyAny>) -> PyResult<(usize, usize, Vec<[f32; 3]>)> {
     let image = Image::read(name, array)?;
     let size = (image.height, image.width);
-    Ok((size.0, size.1, image.pixels(name, size, &[3])?))
+    Ok((size.0, size.1, image.pixels(name, (size, name), &[3])?))
 }
 
 fn parse_pipeline(pipeline: Option<&str>) -> PyResult<Option<FilterPipeline>> {
     pipeline.map(|p| p.parse::<FilterPipeline>().map_err(value)).transpose()
+}
+
+/// A count argument (`spp`, `radius`) taken as any Python int and refused,
+/// by name, where it is negative or too large.
+fn count(name: &str, value: Option<i64>) -> PyResult<Option<u32>> {
+    value
+        .map(|v| {
+            u32::try_from(v)
+                .map_err(|_| PyValueError::new_err(format!("`{name}` must be from 0 to {}, not {v}", u32::MAX)))
+        })
+        .transpose()
+}
+
+/// The keyword arguments a frame gave, as a caller wrote them.
+fn given_names(given: &Provided) -> String {
+    let mut names: Vec<&str> = INPUTS
+        .iter()
+        .filter(|(_, feature)| match feature {
+            Some(feature) => given.features.contains(feature),
+            None => given.variances.contains(&ScalarVar::ColorVariance),
+        })
+        .map(|(name, _)| *name)
+        .collect();
+    if given.motion {
+        names.push("motion");
+    }
+    match names.is_empty() {
+        true => "colour alone".to_string(),
+        false => format!("colour, {}", names.join(", ")),
+    }
 }
 
 /// Denoise a render on the GPU and return the filtered colour.
@@ -172,6 +226,9 @@ fn parse_pipeline(pipeline: Option<&str>) -> PyResult<Option<FilterPipeline>> {
 ///     pixel filter: the filter then ends with that filter
 ///     (``pixelfilter=0.4``) unless ``pipeline`` is given, as ``filterjit
 ///     filter`` does by the header.
+/// :param motion, surface_normal: accepted and not read (one image has no
+///     history), so that a sequence's frame passes whole; :class:`Denoiser`
+///     reads them.
 /// :returns: float32 array of shape (H, W, 3).
 /// :raises TypeError: an input is not a float32 numpy array.
 /// :raises ValueError: a shape differs from ``color``'s, a value is not
@@ -182,7 +239,8 @@ fn parse_pipeline(pipeline: Option<&str>) -> PyResult<Option<FilterPipeline>> {
 /// The GIL is released while the GPU works.
 #[pyfunction]
 #[pyo3(signature = (color, *, albedo=None, normal=None, position=None, depth=None, variance=None,
-                    spp=None, filter=None, pipeline=None, radius=None, point_sampled=false))]
+                    spp=None, filter=None, pipeline=None, radius=None, point_sampled=false, motion=None,
+                    surface_normal=None))]
 #[allow(clippy::too_many_arguments)]
 fn denoise<'py>(
     py: Python<'py>,
@@ -192,13 +250,18 @@ fn denoise<'py>(
     position: Option<&Bound<'py, PyAny>>,
     depth: Option<&Bound<'py, PyAny>>,
     variance: Option<&Bound<'py, PyAny>>,
-    spp: Option<u32>,
+    spp: Option<i64>,
     filter: Option<&str>,
     pipeline: Option<&str>,
-    radius: Option<u32>,
+    radius: Option<i64>,
     point_sampled: bool,
+    motion: Option<&Bound<'py, PyAny>>,
+    surface_normal: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let (images, given) = arrays(color, [albedo, normal, position, depth, variance], None, spp)?;
+    let (spp, radius) = (count("spp", spp)?, count("radius", radius)?);
+    // One image has no history: a sequence's frame passed whole brings what only the history reads.
+    let _ = (motion, surface_normal);
+    let (images, given) = arrays(color, [albedo, normal, position, depth, variance], MotionArguments::default(), spp)?;
     let pipeline = parse_pipeline(pipeline)?;
     let choice = Choice::asked_or_best(filter, pipeline, radius, &given).map_err(value)?;
     check_given(&choice, &given)?;
@@ -219,15 +282,24 @@ fn image_array<'py>(py: Python<'py>, color: &[[f32; 4]], height: usize, width: u
     Ok(PyArray1::from_vec(py, flat).reshape([height, width, 3])?.into_any())
 }
 
+/// A frame's motion arguments: its vectors (float32 (H, W, 2), Blender's
+/// Vector pass X and Y: where the surface was the frame before minus where
+/// it is, in pixels, y up), and the primary hit's normal for the history's
+/// surface test where it is not the `normal` given (Blender's Normal pass
+/// beside its Denoising Normal, which follows mirrors to what they show).
+#[derive(Default)]
+struct MotionArguments<'a, 'py> {
+    vectors: Option<&'a Bound<'py, PyAny>>,
+    surface_normal: Option<&'a Bound<'py, PyAny>>,
+}
+
 /// The arrays of a call as a render's raw images, and what they provide:
-/// the colour, the images of `INPUTS` in its order, and a frame's motion
-/// vectors (float32 (H, W, 2), Blender's Vector pass X and Y: where the
-/// surface was the frame before minus where it is, in pixels, y up), which
-/// need the raw normal and depth beside them.
+/// the colour, the images of `INPUTS` in its order, and a frame's motion,
+/// whose vectors need the raw normal and depth beside them.
 fn arrays(
     color: &Bound<'_, PyAny>,
     inputs: [Option<&Bound<'_, PyAny>>; 5],
-    motion: Option<&Bound<'_, PyAny>>,
+    motion: MotionArguments<'_, '_>,
     spp: Option<u32>,
 ) -> PyResult<(Images, Provided)> {
     let (height, width, color) = rgb("color", color)?;
@@ -239,32 +311,41 @@ fn arrays(
         let image = Image::read(name, array)?;
         match feature {
             Some(feature) => {
-                features.insert(*feature, image.pixels(name, size, &[feature.dimension()])?);
+                features.insert(*feature, image.pixels(name, (size, "color"), &[feature.dimension()])?);
             }
             None => {
-                image.check(name, size, &[1, 3])?;
+                image.check(name, (size, "color"), &[1, 3])?;
                 variances.insert(ScalarVar::ColorVariance, image.channel_mean());
             }
         }
     }
-    let motion = match motion {
+    let surface_normal = match motion.surface_normal {
+        Some(array) => Some(Image::read("surface_normal", array)?.pixels("surface_normal", (size, "color"), &[3])?),
+        None => None,
+    };
+    let motion = match motion.vectors {
         None => None,
         Some(array) => {
             let image = Image::read("motion", array)?;
-            image.check("motion", size, &[2])?;
+            image.check("motion", (size, "color"), &[2])?;
             let vectors = image.values.chunks_exact(2).map(|v| [v[0], -v[1]]).collect();
-            // The surface test reads the normal and depth as given; without them the filter's needs say so.
-            match (features.get(&Feature::Normal), features.get(&Feature::Depth)) {
-                (Some(normal), Some(depth)) => Some(Motion {
-                    vectors,
-                    surface: normal.iter().zip(depth).map(|(n, z)| Motion::surface_of(*n, z[0])).collect(),
-                    albedo: match features.get(&Feature::Texture) {
-                        Some(albedo) => albedo.iter().copied().map(Motion::albedo_of).collect(),
-                        None => vec![[0.0; 4]; width * height],
-                    },
-                }),
-                _ => None,
-            }
+            // The surface test reads the surface normal (else the normal) and the depth as given.
+            let (Some(normal), Some(depth)) =
+                (surface_normal.as_ref().or(features.get(&Feature::Normal)), features.get(&Feature::Depth))
+            else {
+                return Err(PyValueError::new_err(
+                    "`motion` needs `normal` and `depth` beside it: the temporal stage tests each pixel's history \
+                     against the surface it was on (pass normal= and depth=)",
+                ));
+            };
+            Some(Motion {
+                vectors,
+                surface: normal.iter().zip(depth).map(|(n, z)| Motion::surface_of(*n, z[0])).collect(),
+                albedo: match features.get(&Feature::Texture) {
+                    Some(albedo) => albedo.iter().copied().map(Motion::albedo_of).collect(),
+                    None => vec![[0.0; 4]; width * height],
+                },
+            })
         }
     };
     let provided: BTreeSet<Feature> = features.keys().copied().collect();
@@ -292,7 +373,7 @@ fn check_given(choice: &Choice, given: &Provided) -> PyResult<()> {
     if missing.is_empty() {
         return Ok(());
     }
-    let arguments: Vec<String> = missing.iter().map(|m| argument_for(m)).collect();
+    let arguments: Vec<String> = missing.iter().map(|m| argument_for(m, given.sequence)).collect();
     Err(PyValueError::new_err(format!(
         "filter {} (pipeline {}) reads {}, which the call does not give: {}",
         choice.describe(),
@@ -319,7 +400,8 @@ fn check_given(choice: &Choice, given: &Provided) -> PyResult<()> {
 ///     as ``filterjit filter`` does for such frames.
 ///
 /// Every frame gives the same inputs as the first. A frame of another size
-/// than the one before starts a new history, as :meth:`reset` does.
+/// than the one before starts a new history (as after :meth:`reset`,
+/// ``frames`` counts from 1 again).
 #[pyclass(module = "filterjit")]
 struct Denoiser {
     filter: Option<String>,
@@ -335,8 +417,13 @@ struct Denoiser {
 impl Denoiser {
     #[new]
     #[pyo3(signature = (filter=None, pipeline=None, radius=None, point_sampled=false))]
-    fn new(filter: Option<String>, pipeline: Option<&str>, radius: Option<u32>, point_sampled: bool) -> PyResult<Self> {
+    fn new(filter: Option<String>, pipeline: Option<&str>, radius: Option<i64>, point_sampled: bool) -> PyResult<Self> {
         let pipeline = parse_pipeline(pipeline)?;
+        let radius = count("radius", radius)?;
+        // A filter that does not resolve is refused here, not at the first frame.
+        if let Some(filter) = &filter {
+            resolve(filter)?;
+        }
         Ok(Denoiser { filter, pipeline, radius, point_sampled, chosen: None, state: TemporalState::new() })
     }
 
@@ -347,9 +434,14 @@ impl Denoiser {
     ///     Blender's Vector pass X and Y (where each pixel's surface was in
     ///     the frame before minus where it is, in pixels, y up). A temporal
     ///     filter reads them with the normal and depth.
+    /// :param surface_normal: the primary hit's normal, (H, W, 3), where
+    ///     ``normal`` is another (Blender: its Normal pass, where ``normal``
+    ///     is the Denoising Normal, which follows mirrors to what they show):
+    ///     the history's surface test reads it, as ``filterjit filter``
+    ///     reads a Cycles frame's Normal pass. By default ``normal``.
     /// :raises ValueError: as :func:`denoise`; or a frame gives other inputs than the first.
     #[pyo3(signature = (color, *, albedo=None, normal=None, position=None, depth=None, motion=None,
-                        variance=None, spp=None))]
+                        variance=None, spp=None, surface_normal=None))]
     #[allow(clippy::too_many_arguments)]
     fn denoise<'py>(
         &mut self,
@@ -361,8 +453,11 @@ impl Denoiser {
         depth: Option<&Bound<'py, PyAny>>,
         motion: Option<&Bound<'py, PyAny>>,
         variance: Option<&Bound<'py, PyAny>>,
-        spp: Option<u32>,
+        spp: Option<i64>,
+        surface_normal: Option<&Bound<'py, PyAny>>,
     ) -> PyResult<Bound<'py, PyAny>> {
+        let spp = count("spp", spp)?;
+        let motion = MotionArguments { vectors: motion, surface_normal };
         let (images, mut given) = arrays(color, [albedo, normal, position, depth, variance], motion, spp)?;
         given.sequence = true;
         if self.chosen.is_none() {
@@ -375,9 +470,12 @@ impl Denoiser {
         }
         let (choice, kernel, first) = self.chosen.as_ref().expect("chosen at the first frame");
         if *first != given {
-            return Err(PyValueError::new_err(
-                "this frame gives other inputs than the sequence's first: give every frame the same arrays",
-            ));
+            return Err(PyValueError::new_err(format!(
+                "this frame gives other inputs than the sequence's first ({}; the first: {}): give every frame the \
+                 same arrays, or call reset() first (a new shot may give others)",
+                given_names(&given),
+                given_names(first)
+            )));
         }
         let request = scene::Request { reference: false, ..choice.request() };
         let (height, width) = (images.height, images.width);
@@ -389,9 +487,12 @@ impl Denoiser {
         image_array(py, &frame.filtered.color, height, width)
     }
 
-    /// Forget the history: the next frame starts a sequence (a cut, a new shot).
+    /// Forget the history and the filter taken for it: the next frame
+    /// starts a sequence (a cut, a new shot), and may give other inputs than
+    /// the frames before (the filter is taken again for them).
     fn reset(&mut self) {
         self.state.reset();
+        self.chosen = None;
     }
 
     /// Frames blended into the history since the sequence started or was reset.
@@ -400,10 +501,11 @@ impl Denoiser {
         self.state.frames()
     }
 
-    /// The filter taken (``"@svgf"``, or the expression), once a frame has been denoised.
+    /// The filter taken (``"@svgf"``, or the expression) once a frame has
+    /// been denoised; before, the one given, or ``None`` (taken at the first frame).
     #[getter]
     fn filter(&self) -> Option<String> {
-        self.chosen.as_ref().map(|(choice, ..)| choice.describe())
+        self.chosen.as_ref().map(|(choice, ..)| choice.describe()).or_else(|| self.filter.clone())
     }
 
     /// Its pipeline, once a frame has been denoised.
@@ -413,9 +515,18 @@ impl Denoiser {
     }
 }
 
-/// How a caller gives the input a filter reads (`Choice::missing`'s names).
-fn argument_for(input: &str) -> String {
+/// How a caller gives the input a filter reads (`Choice::missing`'s names),
+/// to `Denoiser.denoise` (`sequence`) or to `denoise`.
+fn argument_for(input: &str, sequence: bool) -> String {
     let name = input.split_whitespace().next().unwrap_or(input);
+    if name == "motion" {
+        return if sequence {
+            "pass motion= (with normal= and depth=)".to_string()
+        } else {
+            "a temporal filter runs on a sequence: use filterjit.Denoiser, whose denoise takes motion= frame by frame"
+                .to_string()
+        };
+    }
     let argument = INPUTS.iter().find(|(_, f)| f.map(Feature::name) == Some(name));
     match (argument, name == ScalarVar::ColorVariance.name()) {
         (Some((argument, _)), _) => format!("pass {argument}="),
@@ -453,6 +564,9 @@ fn kernel(choice: &Choice) -> PyResult<Arc<ValidatedKernel>> {
 /// instead, where it has one (``filterjit list``).
 #[pyfunction]
 fn choose(inputs: &Bound<'_, PyAny>) -> PyResult<(String, String, String)> {
+    if inputs.is_instance_of::<pyo3::types::PyString>() {
+        return Err(PyTypeError::new_err("`inputs` is a list of names such as ['albedo', 'normal'], not a string"));
+    }
     let mut features = BTreeSet::new();
     let mut variances = BTreeSet::new();
     for input in inputs.try_iter()? {
@@ -573,7 +687,7 @@ fn export<'py>(
 #[pyfunction]
 fn relmse(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f64> {
     let (h, w, image) = rgb("image", image)?;
-    let reference = Image::read("reference", reference)?.pixels("reference", (h, w), &[3])?;
+    let reference = Image::read("reference", reference)?.pixels("reference", ((h, w), "image"), &[3])?;
     Ok(filterjit::metrics::errors(&image, &reference, None).relmse)
 }
 
@@ -583,7 +697,7 @@ fn relmse(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f6
 #[pyfunction]
 fn light(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<Option<f64>> {
     let (h, w, image) = rgb("image", image)?;
-    let reference = Image::read("reference", reference)?.pixels("reference", (h, w), &[3])?;
+    let reference = Image::read("reference", reference)?.pixels("reference", ((h, w), "image"), &[3])?;
     Ok(filterjit::metrics::light(&image, &reference))
 }
 
@@ -592,7 +706,7 @@ fn light(image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<Opt
 #[pyfunction]
 fn flip(py: Python<'_>, image: &Bound<'_, PyAny>, reference: &Bound<'_, PyAny>) -> PyResult<f64> {
     let (h, w, image) = rgb("image", image)?;
-    let reference = Image::read("reference", reference)?.pixels("reference", (h, w), &[3])?;
+    let reference = Image::read("reference", reference)?.pixels("reference", ((h, w), "image"), &[3])?;
     Ok(py.detach(|| filterjit::flip::hdr_flip(&reference, &image, w, h).mean()))
 }
 
@@ -615,6 +729,8 @@ fn _filterjit(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(light, m)?)?;
     m.add_function(wrap_pyfunction!(device_name, m)?)?;
     m.add_class::<Denoiser>()?;
-    m.add("SHIPPED_BY_QUALITY", filterjit::denoise::SHIPPED_BY_QUALITY.to_vec())?;
+    // As `filter=` takes them: `@name`.
+    let shipped: Vec<String> = filterjit::denoise::SHIPPED_BY_QUALITY.iter().map(|n| format!("@{n}")).collect();
+    m.add("SHIPPED_BY_QUALITY", shipped)?;
     Ok(())
 }

@@ -118,12 +118,12 @@ def test_oidn_side_by_side(render):
 
 def test_the_default_filter_follows_the_inputs_given(render):
     name, pipeline, _ = filterjit.choose(list(inputs(render)))
-    assert name == "@" + filterjit.SHIPPED_BY_QUALITY[0], name
+    assert name == filterjit.SHIPPED_BY_QUALITY[0], name
     # The best reads no depth: without it, still the best.
-    assert filterjit.choose(list(inputs(render, "depth")))[0] == "@" + filterjit.SHIPPED_BY_QUALITY[0]
+    assert filterjit.choose(list(inputs(render, "depth")))[0] == filterjit.SHIPPED_BY_QUALITY[0]
     # It reads the position: without it, the next best that reads none, and why.
     name, _, why = filterjit.choose(list(inputs(render, "position")))
-    assert "needs worldPosition" in why and name != "@" + filterjit.SHIPPED_BY_QUALITY[0], (name, why)
+    assert "needs worldPosition" in why and name != filterjit.SHIPPED_BY_QUALITY[0], (name, why)
     assert filterjit.choose([]) [0] == "@bilateral"
     # What choose names is what denoise runs: the same pixels as asking for it by name.
     without = inputs(render, "position")
@@ -139,7 +139,7 @@ def test_where_the_median_pixel_is_black_denoise_takes_the_sparse_light_variant(
     y, x = np.mgrid[0:SIZE, 0:SIZE]
     sparse = np.where(((7 * x + 13 * y) % 10 == 0)[..., None], render["color"] * 10, 0).astype(np.float32)
     given = inputs(render)
-    default = "@" + filterjit.SHIPPED_BY_QUALITY[0]
+    default = filterjit.SHIPPED_BY_QUALITY[0]
     variant = default + "Sparse"
     chosen = filterjit.denoise(sparse, **given)
     assert np.array_equal(chosen, filterjit.denoise(sparse, **given, filter=variant))
@@ -189,7 +189,7 @@ def test_python_and_the_command_line_give_the_same_pixels(render, tmp_path, filt
     differ = np.argwhere(from_cli != from_python)
     assert differ.size == 0, f"{len(differ)} values differ, first at {differ[0]}: cli {from_cli[tuple(differ[0])]}, python {from_python[tuple(differ[0])]}"
     if filter is None:
-        assert "filter    @" + filterjit.SHIPPED_BY_QUALITY[0] in run.stderr, run.stderr
+        assert "filter    " + filterjit.SHIPPED_BY_QUALITY[0] in run.stderr, run.stderr
 
 
 def test_bad_input_raises_clear_exceptions(render):
@@ -198,10 +198,19 @@ def test_bad_input_raises_clear_exceptions(render):
         filterjit.denoise(color.astype(np.float64))
     with pytest.raises(TypeError, match=r"`albedo` must be a numpy array"):
         filterjit.denoise(color, albedo=[[0.0]])
-    with pytest.raises(ValueError, match=r"`normal` has shape \(32, 64, 3\), but `color` is \(64, 64, 3\)"):
+    with pytest.raises(ValueError, match=r"`normal` must be \(64, 64, 3\) \(the height and width of `color`\), not \(32, 64, 3\)"):
         filterjit.denoise(color, normal=render["normal"][:32])
-    with pytest.raises(ValueError, match=r"`color` has shape \[64, 64, 3, 1\]"):
+    with pytest.raises(ValueError, match=r"`color` has shape \(64, 64, 3, 1\)"):
         filterjit.denoise(color[..., None])
+    # The shapes a newcomer's arrays come in: RGBA, and channels first.
+    with pytest.raises(ValueError, match=r"`color` must be \(height, width, 3\), not \(64, 64, 4\); drop the alpha channel"):
+        filterjit.denoise(np.concatenate([color, color[..., :1]], axis=2))
+    with pytest.raises(ValueError, match=r"`color` must be \(height, width, 3\), not \(3, 64, 64\).*transpose\(1, 2, 0\)"):
+        filterjit.denoise(np.ascontiguousarray(color.transpose(2, 0, 1)))
+    with pytest.raises(ValueError, match=r"`radius` must be from 0 to 4294967295, not -1"):
+        filterjit.denoise(color, radius=-1)
+    with pytest.raises(ValueError, match=r"use filterjit.Denoiser"):
+        filterjit.denoise(color, **inputs(render), filter="@temporal")
     bad = color.copy()
     bad[5, 9, 2] = np.nan
     with pytest.raises(ValueError, match=r"`color` has a non-finite value \(NaN\) at row 5, column 9, channel 2"):
@@ -219,6 +228,16 @@ def test_bad_input_raises_clear_exceptions(render):
         filterjit.denoise(color, albedo=render["albedo"], filter="exp(-distance2(worldPosition))")
     with pytest.raises(ValueError, match=r"unknown input `alebdo`"):
         filterjit.choose(["alebdo"])
+    with pytest.raises(TypeError, match=r"a list of names"):
+        filterjit.choose("albedo")
+    with pytest.raises(ValueError, match=r"no file nope.txt"):
+        filterjit.denoise(color, filter="@nope.txt:best")
+    # A wrong filter is refused where the denoiser is made, not at its first frame.
+    with pytest.raises(ValueError, match=r"did you mean `@temporal`"):
+        filterjit.Denoiser(filter="@temporl")
+    # The shipped names are written as `filter=` takes them.
+    assert all(name.startswith("@") for name in filterjit.SHIPPED_BY_QUALITY)
+    assert filterjit.denoise(color, **inputs(render), filter=filterjit.SHIPPED_BY_QUALITY[0]).shape == color.shape
 
 
 def test_expressions_check_simplify_compile_and_export():
@@ -249,7 +268,7 @@ def test_metrics_follow_the_command_lines_definitions():
     assert filterjit.flip(same, same) == 0.0
     assert filterjit.light(0.5 * same, same) == pytest.approx(0.5)
     assert filterjit.light(same, 0 * same) is None
-    with pytest.raises(ValueError, match=r"`reference` has shape"):
+    with pytest.raises(ValueError, match=r"`reference` must be \(1, 2, 3\) \(the height and width of `image`\)"):
         filterjit.relmse(image, same)
 
 
@@ -337,3 +356,93 @@ def test_a_denoiser_refuses_a_frame_with_other_inputs(sequence):
     bad = dict(sequence[1]["inputs"], motion=np.zeros((SIZE, SIZE, 3), np.float32))
     with pytest.raises(ValueError, match="motion"):
         denoiser.denoise(**bad)
+
+
+def test_a_denoiser_starts_over_on_a_cut_a_new_size_or_new_inputs(sequence):
+    denoiser = filterjit.Denoiser()
+    for frame in sequence[:2]:
+        denoiser.denoise(**frame["inputs"])
+    assert denoiser.frames == 2
+    # A frame of another size (a resized window) starts a new history.
+    half = {k: np.ascontiguousarray(v[::2, ::2]) for k, v in sequence[2]["inputs"].items()}
+    half["motion"] = half["motion"] / 2
+    out = denoiser.denoise(**half)
+    assert out.shape == (SIZE // 2, SIZE // 2, 3) and np.isfinite(out).all()
+    assert denoiser.frames == 1, "a new size is a new sequence"
+    # After reset, a new shot may give other inputs: the filter is taken again for them.
+    still = {k: v for k, v in sequence[3]["inputs"].items() if k != "motion"}
+    with pytest.raises(ValueError, match=r"other inputs than the sequence's first \(colour, albedo.*reset\(\)"):
+        denoiser.denoise(**still)
+    denoiser.reset()
+    assert denoiser.filter is None and denoiser.frames == 0
+    denoiser.denoise(**still)
+    # Without motion vectors the best filter for one image runs: nothing is blended into a history.
+    assert denoiser.filter == filterjit.SHIPPED_BY_QUALITY[0] and denoiser.frames == 0
+    # Motion vectors are tested against the surface: without normal and depth they are refused.
+    bare = {k: sequence[0]["inputs"][k] for k in ("color", "albedo", "motion")}
+    with pytest.raises(ValueError, match=r"`motion` needs `normal` and `depth`"):
+        filterjit.Denoiser().denoise(**bare)
+    with pytest.raises(ValueError, match=r"`spp` must be from 0"):
+        filterjit.Denoiser().denoise(**sequence[0]["inputs"], spp=-4)
+
+
+def cycles_frame(mi, path):
+    """A Blender Cycles multilayer frame (tests/data/cycles-seq) as `Denoiser.denoise`
+    takes it: the Denoising passes as the inputs, the Vector pass as motion, and the
+    Normal pass (the primary hit's) for the history's surface test."""
+    bitmap = mi.Bitmap(str(path))
+    names = [bitmap.struct_()[k].name for k in range(bitmap.channel_count())]
+    pixels = np.array(bitmap, copy=False)
+
+    def layer(name, components):
+        return np.ascontiguousarray(pixels[..., [names.index(f"ViewLayer.{name}.{c}") for c in components]], np.float32)
+
+    return {
+        "color": layer("Combined", "RGB"),
+        "albedo": layer("Denoising Albedo", "RGB"),
+        "normal": layer("Denoising Normal", "XYZ"),
+        "position": layer("Position", "XYZ"),
+        "depth": layer("Depth", "Z"),
+        "motion": layer("Vector", "XY"),
+        "surface_normal": layer("Normal", "XYZ"),
+    }
+
+
+def test_a_denoiser_gives_the_command_lines_pixels_on_cycles_frames(tmp_path):
+    mi = mitsuba()
+    binary = cli()
+    noisy = ROOT / "tests" / "data" / "cycles-seq" / "noisy"
+    out = tmp_path / "out"
+    run = subprocess.run([str(binary), "filter", str(noisy), "-o", f"{out}/"], capture_output=True, text=True,
+                         env={**os.environ, "NODEVICE_SELECT": "1"})
+    assert run.returncode == 0, run.stderr
+    # The frames' header says one sample: `filter` ends with the pixel filter, as point_sampled says here.
+    denoiser = filterjit.Denoiser(point_sampled=True)
+    frames = sorted(noisy.glob("frame_*.exr"))
+    assert len(frames) >= 3
+    for k, frame in enumerate(frames):
+        from_python = denoiser.denoise(**cycles_frame(mi, frame))
+        from_cli = np.array(mi.Bitmap(str(out / frame.name)), dtype=np.float32)[..., :3]
+        differ = np.argwhere(from_cli != from_python)
+        assert differ.size == 0, f"frame {frame.name}: {len(differ)} values differ, first at {differ[0]}"
+        assert denoiser.frames == k + 1
+    assert denoiser.filter == "@temporal" and denoiser.pipeline.endswith("pixelfilter=0.4")
+    # Without the primary hit's normal the surface test reads the Denoising Normal, which
+    # follows mirrors: other pixels from the second frame on.
+    plain = filterjit.Denoiser(point_sampled=True)
+    given = [{k: v for k, v in cycles_frame(mi, f).items() if k != "surface_normal"} for f in frames[:2]]
+    plain.denoise(**given[0])
+    second = np.array(mi.Bitmap(str(out / frames[1].name)), dtype=np.float32)[..., :3]
+    assert not np.array_equal(plain.denoise(**given[1]), second)
+
+
+def test_the_python_pages_cycles_snippet_runs_as_written(monkeypatch, capsys):
+    try:
+        import OpenEXR  # noqa: F401
+    except ImportError as e:  # pragma: no cover - depends on the machine
+        require(False, f"the OpenEXR package is not installed ({e})")
+    page = (ROOT / "docs" / "PYTHON.md").read_text()
+    snippet = page.split("## Frames from Blender Cycles")[1].split("```python\n")[1].split("```")[0]
+    monkeypatch.chdir(ROOT)
+    exec(compile(snippet, "docs/PYTHON.md", "exec"), {})
+    assert capsys.readouterr().out.split() == ["@temporal", "3", "(64,", "64,", "3)"]

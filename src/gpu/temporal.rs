@@ -221,6 +221,9 @@ impl Recorded {
     /// Make what this frame recorded `state`'s history, once its submission is done.
     pub(super) fn commit(self, state: &mut TemporalState, width: u32, height: u32) {
         let color = self.color.expect("the fed-back pass is among the form's passes (`most_feedback`)");
+        // A frame of another size than the history's started a new one.
+        let continued = state.history_for(width, height).is_some();
+        state.frames = if continued { state.frames + 1 } else { 1 };
         state.kept = Some(Kept {
             width,
             height,
@@ -230,6 +233,5 @@ impl Recorded {
             albedo: self.albedo,
             modulation: self.modulation,
         });
-        state.frames += 1;
     }
 }
