@@ -26,6 +26,13 @@ use crate::scene::{Holds, Needs, Request};
 /// (docs/JOURNAL.md, "Fitness that charges the light").
 pub const SHIPPED_BY_QUALITY: &[&str] = &[
     "evolvedAtrous64Plane",
+    // The default's weight with the depth for the position, then with
+    // neither: every filter after them but `evolvedAtrous64ColorOnly` and
+    // `bilateral` reads the position, so where a render lacks it these are
+    // what it gets, wherever they stand (docs/JOURNAL.md, "Renders without
+    // world positions").
+    "evolvedAtrous64PlaneDepth",
+    "evolvedAtrous64PlaneNoPosition",
     "evolvedAtrous64Surface",
     "evolvedAtrous64Trim",
     "evolvedAtrous128Trim",
@@ -39,6 +46,7 @@ pub const SHIPPED_BY_QUALITY: &[&str] = &[
     "evolvedAtrous3x3",
     "svgfAtrous",
     "crossBilateralTuned",
+    "evolvedAtrous64ColorOnly",
     "bilateral",
 ];
 
@@ -65,6 +73,8 @@ pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["temporal", "svgf"];
 /// (docs/JOURNAL.md, "A wider reach where the light is sparse").
 pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] = &[
     ("evolvedAtrous64Plane", "evolvedAtrous64PlaneSparse"),
+    ("evolvedAtrous64PlaneDepth", "evolvedAtrous64PlaneDepthSparse"),
+    ("evolvedAtrous64PlaneNoPosition", "evolvedAtrous64PlaneNoPositionSparse"),
     ("evolvedAtrous64Surface", "evolvedAtrous64SurfaceSparse"),
     ("evolvedAtrous64Trim", "evolvedAtrous64TrimSparse"),
 ];
@@ -426,8 +436,12 @@ mod tests {
         for name in SHIPPED_BY_QUALITY {
             assert!(corpus::lookup(name).is_some(), "@{name} is shipped");
         }
-        let last = Choice::best_for(&provided(&[], &[])).unwrap();
-        assert_eq!(last.name.as_deref(), Some(*SHIPPED_BY_QUALITY.last().unwrap()));
+        // Any render has what the last reads; one of colour alone gets the better of the two that read no more.
+        let last = Choice::asked(&format!("@{}", SHIPPED_BY_QUALITY.last().unwrap()), None, None).unwrap();
+        assert!(last.missing(&provided(&[], &[])).is_empty());
+        let colour = Choice::best_for(&provided(&[], &[])).unwrap();
+        assert_eq!(colour.name.as_deref(), Some("evolvedAtrous64ColorOnly"));
+        assert!(!colour.pipeline.demodulate, "no albedo to divide by: {}", colour.pipeline);
     }
 
     #[test]
@@ -450,14 +464,21 @@ mod tests {
         let no_depth = provided(&[Texture, Normal, WorldPosition], &[ScalarVar::ColorVariance]);
         assert_eq!(Choice::best_for(&no_depth).unwrap().name.as_deref(), Some("evolvedAtrous64Plane"));
 
-        // Without a position, the best that reads none; the message says what was passed over.
+        // Without a position, the default's weight with the depth in its place; the message says what was passed over.
         let no_position = provided(&[Texture, Normal, Depth], &[ScalarVar::ColorVariance]);
         let chosen = Choice::best_for(&no_position).unwrap();
+        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64PlaneDepth"));
         assert!(!chosen.expr.features().contains(&WorldPosition), "{:?}", chosen.name);
         let because = chosen.chosen_because.unwrap();
         assert!(because.contains("@evolvedAtrous64Plane, the best, needs worldPosition"), "{because}");
-        // The filters passed over are summed up in one clause, each input named once.
-        assert!(because.contains("better ones read what it lacks (worldPosition;"), "{because}");
+        // Without the depth too (OIDN's inputs), the one with neither; the filters passed over
+        // are summed up in one clause, each input named once.
+        let oidn_inputs = provided(&[Texture, Normal], &[]);
+        let chosen = Choice::best_for(&oidn_inputs).unwrap();
+        assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64PlaneNoPosition"));
+        assert_eq!(chosen.pipeline.to_string(), "outliers=2.5,trim,keep=surface,demodulate,atrous=3,planefit=3");
+        let because = chosen.chosen_because.unwrap();
+        assert!(because.contains("the 2 better ones read what it lacks (worldPosition, depth;"), "{because}");
 
         // `keep=surface` reads the normal even where the weight does not:
         // its needs say so, and so does what it asks a render for.

@@ -269,6 +269,25 @@ fn export_writes_a_shader_and_its_manifest_and_names_bad_input() {
     assert!(text(&run.stderr).contains("extension names glsl and --target asks for hlsl"), "{}", text(&run.stderr));
     assert!(!mismatch.exists());
 
+    // A window form's manifest states the radius `filter` takes (an engine sets params.radius to it).
+    assert_eq!(manifest["radius"], filterjit::denoise::DEFAULT_RADIUS);
+    // An extension that names no language, or a folder, is refused before anything is written.
+    let unknown = dir.join("denoise.foo");
+    let run = filterjit(&["export", "@bilateral", "-o", unknown.to_str().unwrap()]);
+    assert!(!run.status.success() && text(&run.stderr).contains("names no shader language"), "{}", text(&run.stderr));
+    assert!(!unknown.exists());
+    let run = filterjit(&["export", "@bilateral", "-o", dir.to_str().unwrap()]);
+    assert!(
+        !run.status.success() && text(&run.stderr).contains("a folder; name the shader's file"),
+        "{}",
+        text(&run.stderr)
+    );
+    // A temporal filter's export says when `filter` adds the pixel filter, and how to export it so.
+    let temporal = dir.join("temporal.wgsl");
+    let run = filterjit(&["export", "@realtimeTemporal", "-o", temporal.to_str().unwrap()]);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    assert!(text(&run.stdout).contains(",pixelfilter=0.4"), "{}", text(&run.stdout));
+
     let bad = filterjit(&["export", "exp(-distance2(normal)", "-o", dir.join("bad.wgsl").to_str().unwrap()]);
     assert!(!bad.status.success());
     assert!(text(&bad.stderr).contains("1:23"), "names the position: {}", text(&bad.stderr));
@@ -445,25 +464,37 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
         let rest = &stdout[start + 1..];
         rest[..rest.find("\n@").unwrap_or(rest.len())].to_string()
     };
+    // A filter's rank is its place in `filter`'s order.
+    let choice = |name: &str| {
+        let rank = filterjit::denoise::SHIPPED_BY_QUALITY.iter().position(|n| *n == name).unwrap() + 1;
+        format!("default   {rank}. choice")
+    };
     let kept = block("evolvedAtrous3x3Keep");
     assert!(kept.contains("reads     color, normal, worldPosition, colorVariance, albedo"), "{kept}");
-    assert!(kept.contains("default   9. choice"), "{kept}");
+    assert!(kept.contains(&choice("evolvedAtrous3x3Keep")), "{kept}");
     assert!(kept.contains("measured  relMSE") && kept.contains("x OIDN"), "its error on the public renders: {kept}");
     let plane = block("evolvedAtrous64Plane");
-    assert!(!plane.contains("colorVariance") && plane.contains("default   1. choice"), "{plane}");
+    assert!(!plane.contains("colorVariance") && plane.contains(&choice("evolvedAtrous64Plane")), "{plane}");
     assert!(plane.contains("pipeline outliers=2.5,trim,keep=surface,demodulate,atrous=3,planefit=3"), "{plane}");
     let surface = block("evolvedAtrous64Surface");
-    assert!(!surface.contains("colorVariance") && surface.contains("default   2. choice"), "{surface}");
+    assert!(!surface.contains("colorVariance") && surface.contains(&choice("evolvedAtrous64Surface")), "{surface}");
     assert!(surface.contains("pipeline outliers=2.5,trim,keep=surface,"), "{surface}");
     assert!(surface.contains("weight    @evolvedAtrous64Trim's"), "{surface}");
     let trimmed = block("evolvedAtrous64Trim");
-    assert!(!trimmed.contains("colorVariance") && trimmed.contains("default   3. choice"), "{trimmed}");
+    assert!(!trimmed.contains("colorVariance") && trimmed.contains(&choice("evolvedAtrous64Trim")), "{trimmed}");
     assert!(trimmed.contains("pipeline outliers=2.5,trim,keep,"), "{trimmed}");
     let free = block("evolvedAtrous128Keep");
-    assert!(!free.contains("colorVariance") && free.contains("default   8. choice"), "{free}");
+    assert!(!free.contains("colorVariance") && free.contains(&choice("evolvedAtrous128Keep")), "{free}");
     // Written `evolvedAtrous128Keep = @evolvedAtrous128` in the shipped file: the weight is named, not repeated.
     assert!(free.contains("weight    @evolvedAtrous128's") && !free.contains("exp("), "{free}");
     assert!(trimmed.contains("    exp(-("), "an entry of its own shows its expression: {trimmed}");
+    // Where a render lacks the position, the default's weight without it comes next.
+    let depth = block("evolvedAtrous64PlaneDepth");
+    assert!(
+        depth.contains("reads     color, depth, normal, texture, albedo")
+            && depth.contains(&choice("evolvedAtrous64PlaneDepth")),
+        "{depth}"
+    );
 }
 
 /// `filter` without `--expr` reads the render's light: where its median

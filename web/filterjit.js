@@ -227,6 +227,7 @@ export class Filter {
     const carried = this.manifest.carries ?? "colorVariance";
     let variance = carried;
     const passes = this.manifest.passes;
+    // A window form's radius is in its manifest (`filterjit export` writes it); à-trous passes read none.
     const radius = frame.radius ?? this.manifest.radius ?? 0;
     for (let k = 0; k < passes; k++) {
       const out = `image${k % 2}`;

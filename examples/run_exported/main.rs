@@ -39,15 +39,24 @@ fn main() -> Result<(), String> {
         None => 0,
     };
     let (shader, input, radius, out) = match args.as_slice() {
-        [shader, input, out] => (shader, input, 5, out),
-        [shader, input, radius, out] => (shader, input, radius.parse().map_err(|_| "RADIUS is a number")?, out),
+        [shader, input, out] => (shader, input, None, out),
+        [shader, input, radius, out] => (shader, input, Some(radius.parse().map_err(|_| "RADIUS is a number")?), out),
         _ => return Err("usage: run_exported SHADER.wgsl SCENE|SEQ_DIR [RADIUS] OUT.png|OUT_DIR".into()),
     };
-    let wgsl = std::fs::read_to_string(shader).map_err(|e| format!("{shader}: {e}"))?;
     let manifest_path = format!("{shader}.json");
     let manifest: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&manifest_path).map_err(|e| format!("{manifest_path}: {e}"))?)
             .map_err(|e| format!("{manifest_path}: {e}"))?;
+    // wgpu takes WGSL; another language's export is for another host.
+    if manifest["target"] != "wgsl" {
+        return Err(format!(
+            "{shader}: exported for {} ({}); this host runs WGSL (export with -o NAME.wgsl)",
+            manifest["target"], manifest["language"]
+        ));
+    }
+    let wgsl = std::fs::read_to_string(shader).map_err(|e| format!("{shader}: {e}"))?;
+    // A window form's radius: the one given, else the manifest's (what `filter` takes); à-trous forms read none.
+    let radius = radius.or(manifest["radius"].as_u64().map(|r| r as u32)).unwrap_or(0);
 
     // The other stages' shaders (the pre-pass's, the spread's…), where the pipeline has them, are files beside the form's.
     let mut stages = HashMap::new();

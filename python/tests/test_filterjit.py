@@ -123,8 +123,10 @@ def test_the_default_filter_follows_the_inputs_given(render):
     assert filterjit.choose(list(inputs(render, "depth")))[0] == filterjit.SHIPPED_BY_QUALITY[0]
     # It reads the position: without it, the next best that reads none, and why.
     name, _, why = filterjit.choose(list(inputs(render, "position")))
-    assert "needs worldPosition" in why and name != filterjit.SHIPPED_BY_QUALITY[0], (name, why)
-    assert filterjit.choose([]) [0] == "@bilateral"
+    assert "needs worldPosition" in why and name == "@evolvedAtrous64PlaneDepth", (name, why)
+    # OIDN's inputs alone (colour, albedo, normal): the default's weight without the position.
+    assert filterjit.choose(["albedo", "normal"])[0] == "@evolvedAtrous64PlaneNoPosition"
+    assert filterjit.choose([])[0] == "@evolvedAtrous64ColorOnly"
     # What choose names is what denoise runs: the same pixels as asking for it by name.
     without = inputs(render, "position")
     chosen = filterjit.denoise(render["color"], **without)

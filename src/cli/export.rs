@@ -12,10 +12,27 @@ use filterjit::jit::OutputFormat;
 use filterjit::pipeline::FilterPipeline;
 
 /// The language to write: the one asked for, else the one `output`'s
-/// extension names, else WGSL. A file named for another language than the
-/// one asked for is refused: `denoise.glsl` holding WGSL misleads whoever loads it.
+/// extension names. A file named for another language than the one asked
+/// for is refused (`denoise.glsl` holding WGSL misleads whoever loads it),
+/// and so is one whose extension names none without `--target`, and a folder.
 fn target_for(asked: Option<Target>, output: &Path) -> Result<Target> {
+    if output.is_dir() || output.as_os_str().to_string_lossy().ends_with(['/', '\\']) {
+        anyhow::bail!(
+            "-o {}: a folder; name the shader's file (for example {})",
+            output.display(),
+            output.join("filter.wgsl").display()
+        )
+    }
     let named = output.extension().and_then(|e| Target::for_extension(&e.to_string_lossy()));
+    if asked.is_none() && named.is_none() {
+        let extensions: Vec<String> =
+            <Target as clap::ValueEnum>::value_variants().iter().map(|t| format!(".{}", t.extension())).collect();
+        anyhow::bail!(
+            "-o {}: the file's extension names no shader language; name it {} (or .glsl, .msl), or give --target",
+            output.display(),
+            extensions.join(", ")
+        )
+    }
     match (asked, named) {
         (Some(asked), Some(named)) if asked != named => {
             let name =
@@ -28,7 +45,7 @@ fn target_for(asked: Option<Target>, output: &Path) -> Result<Target> {
                 asked.extension()
             )
         }
-        (asked, named) => Ok(asked.or(named).unwrap_or(Target::Wgsl)),
+        (asked, named) => Ok(asked.or(named).expect("one of them, checked above")),
     }
 }
 
@@ -79,7 +96,9 @@ pub(super) fn export(
         }
     };
     let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
-    let mut exported = filterjit::export::export_filter(&resolved.expr, &pipeline, resolved.radius, target, format)?;
+    // A window form's radius is what `filter` takes: the stored one, else its default.
+    let radius = resolved.radius.or((!pipeline.is_atrous()).then_some(filterjit::denoise::DEFAULT_RADIUS));
+    let mut exported = filterjit::export::export_filter(&resolved.expr, &pipeline, radius, target, format)?;
     let manifest_path = manifest_path(output);
     let mut files = vec![(output.to_path_buf(), exported.code.to_bytes())];
     for (name, code) in &exported.stages {
@@ -106,6 +125,17 @@ pub(super) fn export(
     if !exported.manifest.history.is_empty() {
         let kept: Vec<&str> = exported.manifest.history.iter().map(|k| k.image.as_str()).collect();
         println!("sequence  keep {} from frame to frame (the manifest's `history`)", kept.join(", "));
+        if pipeline.pixel_filter.is_none() {
+            let point_sampled =
+                FilterPipeline { pixel_filter: Some(filterjit::pipeline::PixelFilter::POINT_SAMPLED), ..pipeline };
+            println!(
+                "note      `filter` ends the frames of a renderer that samples each pixel at one point (Cycles at 1 \
+                 sample) with the pixel filter; export such a sequence's filter with --pipeline {point_sampled}"
+            );
+        }
+    }
+    if let Some(radius) = exported.manifest.radius.filter(|_| !pipeline.is_atrous()) {
+        println!("radius    {radius}: set params.radius to it (the window's (2r+1)^2 taps)");
     }
     println!(
         "wrote {} ({}) and its manifest {}",

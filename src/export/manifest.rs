@@ -32,8 +32,9 @@ pub struct Manifest {
     /// Sampled textures the shader binds; more than WebGPU's guaranteed 16
     /// per stage ([`PORTABLE_SAMPLED_TEXTURES`]) needs a device that allows them.
     pub sampled_textures: usize,
-    /// The window radius the filter was scored with (set `params.radius` to
-    /// it), where the expression came with one (a front member).
+    /// The window radius to set `params.radius` to: the one the filter was
+    /// stored or scored with, else `filter`'s default for a window form
+    /// (`filterjit export` fills it); absent where the form reads none.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub radius: Option<u32>,
     /// The filter pipeline (docs/SEMANTICS.md, "The pipeline") this shader is the form of.
