@@ -62,7 +62,7 @@ pub const SHIPPED_REALTIME_TEMPORAL: &str = "realtimeTemporal";
 /// The shipped temporal filters a sequence gets when none is asked for,
 /// best first (docs/SEQUENCES.md, "Measured"); the first whose inputs the
 /// frames have is taken.
-pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["temporal", "svgf"];
+pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["temporal", "temporalDepth", "svgf"];
 
 /// Shipped filters with a variant for renders whose light is sparse, and
 /// that variant: the same inputs, the weight's pixel term widened from pass
@@ -479,6 +479,14 @@ mod tests {
         assert_eq!(chosen.pipeline.to_string(), "outliers=2.5,trim,keep=surface,demodulate,atrous=3,planefit=3");
         let because = chosen.chosen_because.unwrap();
         assert!(because.contains("the 2 better ones read what it lacks (worldPosition, depth;"), "{because}");
+
+        // A sequence's frames with motion but no position (a real-time G-buffer): @temporal with the depth.
+        let frames = |features: &[Feature]| Provided { motion: true, sequence: true, ..provided(features, &[]) };
+        let g_buffer = Choice::best_temporal_for(&frames(&[Texture, Normal, Depth])).unwrap();
+        assert_eq!(g_buffer.name.as_deref(), Some("temporalDepth"));
+        assert!(g_buffer.pipeline.is_temporal() && g_buffer.missing(&frames(&[Texture, Normal, Depth])).is_empty());
+        let full = Choice::best_temporal_for(&frames(&[Texture, Normal, Depth, WorldPosition])).unwrap();
+        assert_eq!(full.name.as_deref(), Some(SHIPPED_TEMPORAL_BY_QUALITY[0]));
 
         // `keep=surface` reads the normal even where the weight does not:
         // its needs say so, and so does what it asks a render for.
