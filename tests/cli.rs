@@ -287,6 +287,13 @@ fn export_writes_a_shader_and_its_manifest_and_names_bad_input() {
     let run = filterjit(&["export", "@realtimeTemporal", "-o", temporal.to_str().unwrap()]);
     assert!(run.status.success(), "{}", text(&run.stderr));
     assert!(text(&run.stdout).contains(",pixelfilter=0.4"), "{}", text(&run.stdout));
+    // The manifest lists the images the engine supplies, each with what it must hold.
+    let manifest: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("temporal.wgsl.json")).unwrap()).unwrap();
+    let inputs: Vec<&str> =
+        manifest["inputs"].as_array().unwrap().iter().map(|i| i["image"].as_str().unwrap()).collect();
+    assert_eq!(inputs, ["color", "albedo", "worldPosition", "normal", "geometry", "motion"]);
+    assert!(manifest["inputs"].as_array().unwrap().iter().all(|i| !i["content"].as_str().unwrap().is_empty()));
 
     let bad = filterjit(&["export", "exp(-distance2(normal)", "-o", dir.join("bad.wgsl").to_str().unwrap()]);
     assert!(!bad.status.success());

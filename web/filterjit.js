@@ -19,7 +19,7 @@
 // order; `reset()` starts a new sequence.
 
 /** The manifest layout this module reads (filterjit's `export::MANIFEST_VERSION`). */
-export const MANIFEST_VERSION = 6;
+export const MANIFEST_VERSION = 7;
 
 /** The shaders a manifest may have besides the form's, in the order they run. */
 const STAGES = ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit", "pixelfilter"];
@@ -114,18 +114,9 @@ export class Filter {
     this.frames = 0;
   }
 
-  /** Every image the caller provides, by role: `color`, `albedo` where the pipeline demodulates, and the features. */
+  /** Every image the caller provides, by the name its bindings read it by (the manifest's `inputs`). */
   get inputs() {
-    const roles = new Set(["color"]);
-    if (this.manifest.prepass && (this.manifest.prepass.uniform_values.stages & 2) !== 0) roles.add("albedo");
-    for (const b of this.manifest.bindings) if (b.scale_index !== undefined) roles.add(b.role);
-    // `keep=surface`'s spread and `planefit` read the normal whether or not the weight does.
-    for (const b of [...(this.manifest.spread?.bindings ?? []), ...(this.manifest.planefit?.bindings ?? [])]) {
-      if (b.role === "normal") roles.add("normal");
-    }
-    // The temporal stage reads the frame's surface, albedo and motion vectors.
-    if (this.manifest.temporal) for (const role of ["geometry", "albedo", "motion"]) roles.add(role);
-    return [...roles];
+    return this.manifest.inputs.map((input) => input.image);
   }
 
   /**

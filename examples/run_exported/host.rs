@@ -19,7 +19,7 @@ use std::collections::HashMap;
 use serde_json::Value;
 
 /// The layout of the manifest this host reads (filterjit's `export::MANIFEST_VERSION`).
-const MANIFEST_VERSION: u64 = 6;
+const MANIFEST_VERSION: u64 = 7;
 
 /// The stages besides the form's that run before it, in order.
 const BEFORE_THE_FORM: [&str; 4] = ["spread", "temporal", "temporal_variance", "guide"];

@@ -98,6 +98,19 @@ pub struct Manifest {
     pub history: Vec<Kept>,
     /// What runs in which order and which image each binding is, in words.
     pub order: Vec<String>,
+    /// The images the engine supplies every frame, by the name every
+    /// binding that reads one uses; every other image a binding names is
+    /// made by a stage or kept from the frame before (`history`).
+    pub inputs: Vec<Supplied>,
+}
+
+/// An image the engine supplies every frame (`Manifest::inputs`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Supplied {
+    /// The name the bindings read it by (`color`, `albedo`, `normal`, `geometry`, `motion`…).
+    pub image: String,
+    /// What it must hold.
+    pub content: String,
 }
 
 /// A shader of the pipeline besides the form's (the pre-pass, the spread).
@@ -152,8 +165,8 @@ pub struct Kept {
 /// `guide` stage, and the form's `guide` binding, which changes by pass; 4:
 /// the `planefit` stage after the form; 5: the temporal stage, its
 /// `history`, `carries` and a stage's `first_frame`; 6: the `pixelfilter`
-/// stage, last).
-pub const MANIFEST_VERSION: u32 = 6;
+/// stage, last; 7: `inputs`, the images the engine supplies).
+pub const MANIFEST_VERSION: u32 = 7;
 
 /// Sampled textures per shader stage every WebGPU device allows.
 pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;

@@ -207,6 +207,7 @@ pub fn export_pipeline(
         }
     }
     manifest.order = order(&manifest, pipeline);
+    manifest.inputs = stages::inputs(&manifest, pipeline);
     let with_header = |code: Code| match code {
         Code::Text(text) if target != Target::Wgsl => Code::Text(header(&manifest, &text)),
         other => other,

@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 use super::bindings::{bindings, Stages};
 use super::translate::translate;
 use super::{
-    Code, ExportError, Kept, Manifest, Stage, StageDispatch, StageName, Target, Uniform, MANIFEST_VERSION,
-    NORMALISATION, SEMANTICS,
+    Binding, Code, ExportError, Kept, Manifest, Stage, StageDispatch, StageName, Supplied, Target, Uniform,
+    MANIFEST_VERSION, NORMALISATION, SEMANTICS,
 };
 use crate::jit::interface::BindingInterface;
 use crate::jit::{self, KernelKind, OutputFormat, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
@@ -433,5 +433,41 @@ pub(super) fn manifest(
         carries: interface.carried_variance().map(|v| v.name().to_string()),
         history: Vec::new(),
         order: Vec::new(),
+        inputs: Vec::new(),
     }
+}
+
+/// The images the engine supplies every frame (`Manifest::inputs`), once
+/// every stage is placed: the noisy colour; the raw albedo where the
+/// pre-pass demodulates or the temporal stage reads it; every feature and
+/// variance the form normalises; the normal `keep=surface`'s spread and
+/// `planefit` read; the temporal stage's geometry and motion. What each must
+/// hold is what the first binding that reads it says.
+pub(super) fn inputs(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<Supplied> {
+    let stages = StageName::ALL.iter().filter_map(|name| manifest.stage(*name));
+    let every: Vec<&Binding> = stages.flat_map(|stage| stage.bindings.iter()).chain(manifest.bindings.iter()).collect();
+    let mut names = vec!["color".to_string()];
+    if pipeline.demodulate || manifest.temporal.is_some() {
+        names.push("albedo".into());
+    }
+    names.extend(manifest.bindings.iter().filter(|b| b.scale_index.is_some()).map(|b| b.role.clone()));
+    let surface = [&manifest.spread, &manifest.planefit].into_iter().flatten();
+    if surface.flat_map(|stage| stage.bindings.iter()).any(|b| b.role == "normal") {
+        names.push("normal".into());
+    }
+    if manifest.temporal.is_some() {
+        names.extend(["geometry".into(), "motion".into()]);
+    }
+    let mut seen = std::collections::BTreeSet::new();
+    names
+        .into_iter()
+        .filter(|name| seen.insert(name.clone()))
+        .map(|image| {
+            let content = match image.as_str() {
+                "color" => "the noisy colour, linear RGB (HDR, not normalised; alpha passed through)".to_string(),
+                _ => every.iter().find(|b| b.role == image).map(|b| b.content.clone()).unwrap_or_default(),
+            };
+            Supplied { image, content }
+        })
+        .collect()
 }
