@@ -118,14 +118,12 @@ impl Image {
             return Ok(());
         }
         // An image sized by itself (the colour) is held to its channels alone.
-        let (h, w) = if name == like {
-            ("height".to_string(), "width".to_string())
-        } else {
-            (size.0.to_string(), size.1.to_string())
+        let ((h, w), whose) = match name == like {
+            true => (("height".to_string(), "width".to_string()), String::new()),
+            false => ((size.0.to_string(), size.1.to_string()), format!(" (the height and width of `{like}`)")),
         };
         let wanted: Vec<String> =
             channels.iter().map(|&c| if c == 1 { format!("({h}, {w})") } else { format!("({h}, {w}, {c})") }).collect();
-        let whose = if name == like { String::new() } else { format!(" (the height and width of `{like}`)") };
         let hint = if channels.contains(&3) && self.channels == 4 {
             format!("; drop the alpha channel with `{name}[..., :3]`")
         } else if self.shape.len() == 3 && channels.contains(&self.shape[0]) && !channels.contains(&self.shape[2]) {
@@ -338,14 +336,7 @@ fn arrays(
                      against the surface it was on (pass normal= and depth=)",
                 ));
             };
-            Some(Motion {
-                vectors,
-                surface: normal.iter().zip(depth).map(|(n, z)| Motion::surface_of(*n, z[0])).collect(),
-                albedo: match features.get(&Feature::Texture) {
-                    Some(albedo) => albedo.iter().copied().map(Motion::albedo_of).collect(),
-                    None => vec![[0.0; 4]; width * height],
-                },
-            })
+            Some(Motion::new(vectors, normal, depth, features.get(&Feature::Texture).map(Vec::as_slice)))
         }
     };
     let provided: BTreeSet<Feature> = features.keys().copied().collect();

@@ -96,9 +96,7 @@ pub(super) fn export(
         }
     };
     let pipeline = pipeline.or(resolved.pipeline).unwrap_or_default();
-    // A window form's radius is what `filter` takes: the stored one, else its default.
-    let radius = resolved.radius.or((!pipeline.is_atrous()).then_some(filterjit::denoise::DEFAULT_RADIUS));
-    let mut exported = filterjit::export::export_filter(&resolved.expr, &pipeline, radius, target, format)?;
+    let mut exported = filterjit::export::export_filter(&resolved.expr, &pipeline, resolved.radius, target, format)?;
     let manifest_path = manifest_path(output);
     let mut files = vec![(output.to_path_buf(), exported.code.to_bytes())];
     for (name, code) in &exported.stages {
@@ -134,7 +132,7 @@ pub(super) fn export(
             );
         }
     }
-    if let Some(radius) = exported.manifest.radius.filter(|_| !pipeline.is_atrous()) {
+    if let Some(radius) = exported.manifest.radius {
         println!("radius    {radius}: set params.radius to it (the window's (2r+1)^2 taps)");
     }
     println!(

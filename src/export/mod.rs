@@ -171,8 +171,9 @@ pub fn export(expr: &Expr, target: Target, format: OutputFormat) -> Result<Expor
 }
 
 /// A stored filter as an engine gets it: the cheapest equivalent weight
-/// (`simplify`: the same weights), its whole pipeline exported, and the window
-/// radius it was stored with in the manifest.
+/// (`simplify`: the same weights), its whole pipeline exported, and, for a
+/// window form, the radius `filter` takes in the manifest: the one it was
+/// stored with, else the default (an à-trous form reads none).
 pub fn export_filter(
     expr: &Expr,
     pipeline: &FilterPipeline,
@@ -181,7 +182,7 @@ pub fn export_filter(
     format: OutputFormat,
 ) -> Result<Exported, ExportError> {
     let mut exported = export_pipeline(&crate::simplify::simplify(expr), pipeline, target, format)?;
-    exported.manifest.radius = radius;
+    exported.manifest.radius = (!pipeline.is_atrous()).then(|| radius.unwrap_or(crate::denoise::DEFAULT_RADIUS));
     Ok(exported)
 }
 

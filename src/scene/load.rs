@@ -61,15 +61,9 @@ fn decode(path: &Path, request: &Request) -> Result<Images, SceneError> {
             let (normal, depth) = (gathered(normal), gathered(depth));
             let mut depth: Vec<[f32; 3]> = depth;
             layout.clean(Feature::Depth, &mut depth);
-            let albedo = match albedo {
-                Some(range) => gathered(range).into_iter().map(Motion::albedo_of).collect(),
-                None => vec![[0.0; 4]; pixels],
-            };
-            Some(Motion {
-                vectors: gathered(vectors).iter().map(|v| [v[0], -v[1]]).collect(),
-                surface: normal.iter().zip(&depth).map(|(n, z)| Motion::surface_of(*n, z[0])).collect(),
-                albedo,
-            })
+            let albedo = albedo.as_ref().map(gathered);
+            let vectors = gathered(vectors).iter().map(|v| [v[0], -v[1]]).collect();
+            Some(Motion::new(vectors, &normal, &depth, albedo.as_deref()))
         }
         _ => None,
     };

@@ -214,6 +214,19 @@ pub struct Motion {
 }
 
 impl Motion {
+    /// A frame's motion from its vectors (x right, y down) and its raw
+    /// normals, depths (the first component) and albedo (none: 0).
+    pub fn new(vectors: Vec<[f32; 2]>, normal: &[[f32; 3]], depth: &[[f32; 3]], albedo: Option<&[[f32; 3]]>) -> Self {
+        Motion {
+            vectors,
+            surface: normal.iter().zip(depth).map(|(n, z)| Self::surface_of(*n, z[0])).collect(),
+            albedo: match albedo {
+                Some(albedo) => albedo.iter().copied().map(Self::albedo_of).collect(),
+                None => vec![[0.0; 4]; normal.len()],
+            },
+        }
+    }
+
     /// The surface of a pixel from its raw normal and depth.
     pub fn surface_of(normal: [f32; 3], depth: f32) -> [f32; 4] {
         let d = crate::pipeline::direction(normal.map(f64::from));
