@@ -208,7 +208,17 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
             (false, true) => "prepared",
             (false, false) => "color",
         };
-        assert_eq!(manifest["filters"], filters, "{text}: the image the form's first pass filters");
+        let passes: Vec<&serde_json::Value> =
+            manifest["frame"].as_array().unwrap().iter().filter(|s| s["dispatch"]["shader"] == "form").collect();
+        assert_eq!(
+            passes.len() as u32,
+            exported.manifest.passes,
+            "{text}: the frame dispatches the form `passes` times"
+        );
+        assert_eq!(
+            passes[0]["dispatch"]["images"]["color"], filters,
+            "{text}: the image the form's first pass filters"
+        );
         let shaders = shaders_of(&exported);
         assert_eq!(
             exported.stage(StageName::PlaneFit).is_some(),
@@ -401,14 +411,26 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
         let exported = export_pipeline(&expr, &pipeline, Target::Wgsl, OutputFormat::Rgba32float).unwrap();
         let manifest = serde_json::to_value(&exported.manifest).unwrap();
         assert!(exported.stage(StageName::Temporal).is_some() && exported.stage(StageName::TemporalVariance).is_some());
-        assert_eq!(manifest["filters"], "blend", "{text}: the form filters the blend");
-        assert_eq!(manifest["temporal"]["first_frame"]["history"], 0.0, "{text}");
+        let steps = manifest["frame"].as_array().unwrap();
+        let dispatches_of = |shader: &str| -> Vec<usize> {
+            (0..steps.len()).filter(|&n| steps[n]["dispatch"]["shader"] == shader).collect()
+        };
+        let passes = dispatches_of("form");
+        assert_eq!(steps[passes[0]]["dispatch"]["images"]["color"], "blend", "{text}: the form filters the blend");
+        let temporal = &steps[dispatches_of("temporal")[0]]["dispatch"];
+        assert_eq!(
+            (temporal["values"]["history"].as_u64(), temporal["first_frame"]["history"].as_u64()),
+            (Some(1), Some(0)),
+            "{text}: `history` is a u32, 0 on a first frame"
+        );
         let feedback = pipeline.temporal.unwrap().feedback;
-        let fed_back = &manifest["history"][0];
-        assert_eq!(fed_back["image"], "history");
+        let fed_back = steps.iter().position(|s| s["keep"]["into"] == "history").expect("the history kept");
         match feedback {
-            0 => assert_eq!((fed_back["from"].as_str(), fed_back.get("after_pass")), (Some("blend"), None)),
-            k => assert_eq!(fed_back["after_pass"], k as u64 - 1, "{text}: kept right after the pass fed back"),
+            0 => assert!(
+                steps[fed_back]["keep"]["from"] == "blend" && steps[fed_back..].iter().all(|s| s.get("keep").is_some()),
+                "{text}: the blend kept at the end of the frame"
+            ),
+            k => assert_eq!(fed_back, passes[k as usize - 1] + 1, "{text}: kept right after the pass fed back"),
         }
         let shaders = shaders_of(&exported);
         let kernel =

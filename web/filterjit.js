@@ -7,22 +7,20 @@
 //   const filter = await loadFilter(device, "denoise.wgsl.json");
 //   const output = filter.run({ width, height, textures: { color, albedo, normal } });
 //
-// Per frame, as the manifest's `order` says: the pre-pass once (where the
-// pipeline has one), the spread's dispatches (where it keeps what the outlier
-// clamp removed), the temporal stage's two (where the pipeline has
-// `temporal=A`: the blend with the history, then its variance), the guide's
-// (where the weight reads `guide`), then the form's shader `passes` times,
-// its colour and carried variance ping-ponged between textures, then
-// planefit's (where the pipeline has `planefit`), then the pixel filter's
-// (where it has `pixelfilter`). A temporal filter keeps the
-// manifest's `history` from one `run` to the next: frames of a sequence in
-// order; `reset()` starts a new sequence.
+// Per frame it runs the manifest's `frame`, step by step: each dispatch of
+// a shader with the image each binding binds, each copy a sequence keeps for
+// the next frame. Which stage runs when is filterjit's to say, not this
+// module's. A temporal filter keeps what the `keep` steps copy from one
+// `run` to the next: frames of a sequence in order; `reset()` starts a new
+// sequence.
 
 /** The manifest layout this module reads (filterjit's `export::MANIFEST_VERSION`). */
-export const MANIFEST_VERSION = 7;
+export const MANIFEST_VERSION = 8;
 
-/** The shaders a manifest may have besides the form's, in the order they run. */
-const STAGES = ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit", "pixelfilter"];
+/** The shaders a manifest's frame dispatches besides the form's (the manifest's own), by their keys in it. */
+const stagesOf = (manifest) => [
+  ...new Set((manifest.frame ?? []).filter((step) => step.dispatch && step.dispatch.shader !== "form").map((step) => step.dispatch.shader)),
+];
 
 const WRITTEN = GPUTextureUsage.STORAGE_BINDING | GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_SRC;
 
@@ -48,15 +46,13 @@ export async function loadFilter(device, manifestUrl) {
   const manifest = JSON.parse(await text(manifestUrl));
   const beside = (file) => new URL(file, new URL(manifestUrl, location.href)).href;
   const shaders = { form: await text(String(manifestUrl).replace(/\.json$/, "")) };
-  for (const stage of STAGES) {
-    if (manifest[stage]) shaders[stage] = await text(beside(manifest[stage].file));
-  }
+  for (const stage of stagesOf(manifest)) shaders[stage] = await text(beside(manifest[stage].file));
   return createFilter(device, manifest, shaders);
 }
 
 /**
  * Build the filter's pipelines from its manifest and shader texts
- * (`{ form, prepass, spread, guide, planefit }`, the last four where the manifest has them).
+ * (`{ form, prepass, spread, … }`: the form's, and every other shader the manifest's `frame` dispatches, by its key).
  * Compilation messages are collected in `filter.messages`.
  */
 export async function createFilter(device, manifest, shaders) {
@@ -80,7 +76,7 @@ export class Filter {
     this.stages = {};
     this.messages = [];
     const needs = [["form", manifest]];
-    for (const name of STAGES) if (manifest[name]) needs.push([name, manifest[name]]);
+    for (const name of stagesOf(manifest)) needs.push([name, manifest[name]]);
     const compiled = [];
     for (const [name, stage] of needs) {
       const code = shaders[name];
@@ -138,113 +134,71 @@ export class Filter {
         throw new FilterError(`the filter reads \`${role}\` and no texture was given for it (inputs: ${this.inputs.join(", ")})`);
       }
     }
-    // Not read unless the pipeline demodulates; any texture will do.
-    if (!images.has("albedo")) images.set("albedo", images.get("color"));
-    const target = (name, format) => {
-      const texture = this.texture(name, format, width, height);
-      sources.set(name, texture);
-      images.set(name, texture.createView());
-    };
     // What the frame before kept; a sequence's first frame (or one of another size) binds
-    // stand-ins, which the blend does not read.
-    const history = this.manifest.history ?? [];
+    // stand-ins, which the blend does not read. Every other image is made once per size.
     const first = this.frames === 0 || this.keptSize !== `${width}x${height}`;
-    for (const { image } of history) {
-      const kept = first ? this.texture("unread", "rgba32float", width, height) : this.kept.get(image);
-      images.set(image, kept.createView());
-    }
-    const keep = (pass) => {
-      for (const k of history.filter((k) => k.after_pass === pass)) {
-        const source = sources.get(k.from);
-        if (!source) throw new FilterError(`the history keeps \`${k.from}\`, which no stage wrote and no texture was given for`);
-        const key = `${k.image}/${source.format}`;
-        let into = this.kept.get(key);
-        if (into?.width !== width || into?.height !== height) {
-          into?.destroy();
-          into = this.device.createTexture({
-            label: `filterjit kept ${k.image}`,
-            size: [width, height],
-            format: source.format,
-            usage: GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_DST,
-          });
-          this.kept.set(key, into);
-        }
-        this.kept.set(k.image, into);
-        encoder.copyTextureToTexture({ texture: source }, { texture: into }, [width, height]);
+    for (const image of this.manifest.images) {
+      if (image.kept_from !== undefined) {
+        const kept = first ? this.texture("unread", "rgba32float", width, height) : this.kept.get(image.name);
+        images.set(image.name, kept.createView());
+      } else {
+        const texture = this.texture(image.name, image.format, width, height);
+        sources.set(image.name, texture);
+        images.set(image.name, texture.createView());
       }
-    };
+    }
     const workgroups = [Math.ceil(width / this.workgroup[0]), Math.ceil(height / this.workgroup[1])];
     let dispatches = 0;
-    const dispatch = (name, values, roles) => {
-      const { stage, layout, pipeline } = this.stages[name];
-      const uniform = this.uniform(dispatches++, stage, frame, values);
+    // The frame, step by step, as the manifest's `frame` says.
+    for (const step of this.manifest.frame) {
+      if (step.keep) {
+        this.keep(encoder, sources, step.keep, width, height);
+        continue;
+      }
+      const { shader, values, first_frame, images: bound } = step.dispatch;
+      const { stage, layout, pipeline } = this.stages[shader];
+      // A sequence's first frame replaces some values (the temporal stage's `history`); a
+      // window form's radius may be the caller's.
+      const radius = shader === "form" && frame.radius !== undefined ? { radius: frame.radius } : {};
+      const uniform = this.uniform(dispatches++, stage, frame, { ...values, ...(first ? first_frame : {}), ...radius });
       const entries = stage.bindings.map((b) => {
         if (b.kind === "uniform") return { binding: b.binding, resource: { buffer: uniform } };
-        const image = roles[b.role] ?? b.image ?? b.role;
-        const view = images.get(image);
-        if (!view) throw new FilterError(`${name}: binding ${b.binding} (\`${b.role}\`) needs the image \`${image}\`, which no stage wrote`);
+        const view = images.get(bound[b.role]);
+        if (!view) throw new FilterError(`${shader}: binding ${b.binding} (\`${b.role}\`) needs the image \`${bound[b.role]}\`, which nothing made`);
         return { binding: b.binding, resource: view };
       });
-      const pass = encoder.beginComputePass({ label: `filterjit ${name}` });
+      const pass = encoder.beginComputePass({ label: `filterjit ${shader}` });
       pass.setPipeline(pipeline);
       pass.setBindGroup(0, this.device.createBindGroup({ layout, entries }));
       pass.dispatchWorkgroups(workgroups[0], workgroups[1], 1);
       pass.end();
-    };
-    const storage = (stage) => stage.bindings.filter((b) => b.kind === "storage_texture");
-
-    const prepass = this.manifest.prepass;
-    if (prepass) {
-      for (const b of storage(prepass)) target(b.role, b.format);
-      dispatch("prepass", prepass.uniform_values, {});
     }
-    // A stage dispatch by dispatch: each names the image every role binds (the spread's ping-pong
-    // between two textures, each dispatch writing the one it does not read); its uniform takes the
-    // stage's values, then its own. Whether the manifest has it.
-    const sequence = (name) => {
-      const stage = this.manifest[name];
-      if (!stage) return false;
-      // A sequence's first frame replaces some values (the temporal stage's `history`).
-      const values = { ...stage.uniform_values, ...(first ? stage.first_frame : {}) };
-      for (const step of stage.sequence) {
-        for (const b of storage(stage)) target(step.images[b.role] ?? b.role, b.format);
-        dispatch(name, { ...values, ...step.uniform_values }, step.images);
-      }
-      return true;
-    };
-    for (const name of ["spread", "temporal", "temporal_variance", "guide"]) sequence(name);
-    let colour = this.manifest.filters;
-    // The variance the passes carry, where the weight reads one: pass 0 binds the frame's.
-    const carried = this.manifest.carries ?? "colorVariance";
-    let variance = carried;
-    const passes = this.manifest.passes;
-    // A window form's radius is in its manifest (`filterjit export` writes it); à-trous passes read none.
-    const radius = frame.radius ?? this.manifest.radius ?? 0;
-    for (let k = 0; k < passes; k++) {
-      const out = `image${k % 2}`;
-      const varianceOut = `variance${k % 2}`;
-      for (const b of storage(this.manifest)) target(b.role === "output" ? out : varianceOut, b.format);
-      const values = { radius, step: 2 ** k, level: k, last: k + 1 === passes ? 1 : 0 };
-      // The guide is the guide stage's in pass 0, the pass's own colour after.
-      const guided = k === 0 ? "guide" : colour;
-      dispatch("form", values, { color: colour, output: out, [carried]: variance, variance_out: varianceOut, guide: guided });
-      // The pass the temporal stage feeds back, kept before a later pass writes its texture again.
-      keep(k);
-      colour = out;
-      variance = varianceOut;
-    }
-    // `planefit` after the form: `filtered` is the last pass's output; it writes the frame.
-    images.set("filtered", images.get(colour));
-    if (sequence("planefit")) colour = "fitted";
-    // `pixelfilter`, last: it reads `fitted` or `filtered` (as its manifest names) and writes the frame.
-    if (sequence("pixelfilter")) colour = "pixelfiltered";
-    keep(undefined);
-    if (history.length > 0) {
+    if (this.manifest.frame.some((step) => step.keep)) {
       this.frames = first ? 1 : this.frames + 1;
       this.keptSize = `${width}x${height}`;
     }
     if (own) this.device.queue.submit([encoder.finish()]);
-    return this.texture(colour, this.manifest.output_format, width, height);
+    return sources.get(this.manifest.output);
+  }
+
+  /** Record a `keep` step: copy `from` into the texture the next frame binds as `into`. */
+  keep(encoder, sources, { from, into }, width, height) {
+    const source = sources.get(from);
+    if (!source) throw new FilterError(`the history keeps \`${from}\`, which nothing made and no texture was given for`);
+    const key = `${into}/${source.format}`;
+    let texture = this.kept.get(key);
+    if (texture?.width !== width || texture?.height !== height) {
+      texture?.destroy();
+      texture = this.device.createTexture({
+        label: `filterjit kept ${into}`,
+        size: [width, height],
+        format: source.format,
+        usage: GPUTextureUsage.TEXTURE_BINDING | GPUTextureUsage.COPY_DST,
+      });
+      this.kept.set(key, texture);
+    }
+    this.kept.set(into, texture);
+    encoder.copyTextureToTexture({ texture: source }, { texture }, [width, height]);
   }
 
   /**

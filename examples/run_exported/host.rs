@@ -3,26 +3,17 @@
 //! Nothing here uses filterjit; this is what an engine's integration does.
 //! (`tests/export.rs` runs this same file against `filterjit filter`.)
 //!
-//! Per frame, as the manifest's `order` says: the pre-pass shader once (where
-//! the pipeline has one), the spread shader's `sequence` (where it keeps what
-//! the clamp removed), the temporal stage's two shaders (where the pipeline
-//! has `temporal=A`: the blend with the history, then its variance), the
-//! guide shader (where the weight reads `guide`), then the form's shader
-//! `passes` times (à-trous: pass k with step 2^k, colour and carried
-//! variance ping-ponged between textures), then the planefit shader (where
-//! the pipeline has `planefit`), then the pixel filter's (where it has
-//! `pixelfilter`). A sequence keeps the manifest's `history`
-//! from frame to frame ([`Sequence`]).
+//! Per frame it runs the manifest's `frame`, step by step: each dispatch
+//! of a shader with the image each binding binds, each copy a sequence keeps
+//! for the next frame ([`Sequence`]). Which stage runs when is the
+//! manifest's to say, not this host's.
 
 use std::collections::HashMap;
 
 use serde_json::Value;
 
 /// The layout of the manifest this host reads (filterjit's `export::MANIFEST_VERSION`).
-const MANIFEST_VERSION: u64 = 7;
-
-/// The stages besides the form's that run before it, in order.
-const BEFORE_THE_FORM: [&str; 4] = ["spread", "temporal", "temporal_variance", "guide"];
+const MANIFEST_VERSION: u64 = 8;
 
 /// One frame of an engine's G-buffer, as plain arrays (row-major, top row first).
 pub struct Frame {
@@ -46,7 +37,7 @@ pub struct Shaders {
 }
 
 /// What a sequence keeps on the device from one frame for the next: the
-/// images the manifest's `history` names. A new one (or [`Sequence::reset`])
+/// images the manifest's `keep` steps copy. A new one (or [`Sequence::reset`])
 /// starts a sequence; a frame of another size starts one too.
 #[derive(Default)]
 pub struct Sequence {
@@ -181,7 +172,9 @@ fn texel_format(binding: &Value) -> Result<wgpu::TextureFormat, String> {
         Some("rgba16float") => Ok(wgpu::TextureFormat::Rgba16Float),
         Some("rgba32float") => Ok(wgpu::TextureFormat::Rgba32Float),
         Some("r32float") => Ok(wgpu::TextureFormat::R32Float),
-        other => Err(format!("unknown texel format {other:?} of `{}`", binding["role"])),
+        other => {
+            Err(format!("unknown texel format {other:?} of `{}`", binding.get("role").unwrap_or(&binding["name"])))
+        }
     }
 }
 
@@ -318,52 +311,6 @@ fn record(
     Ok(())
 }
 
-/// Record the dispatches of the manifest's stage `name` (where it has one) as
-/// its `sequence` says: each names the image every role binds, and its
-/// uniform takes the stage's values, then its own. `filtered` is the image
-/// the name `filtered` stands for (the form's last output). Whether it ran.
-#[allow(clippy::too_many_arguments)]
-fn run_stage(
-    images: &mut Images<'_>,
-    encoder: &mut wgpu::CommandEncoder,
-    manifest: &Value,
-    name: &str,
-    shader: Option<&str>,
-    workgroup: [u32; 2],
-    frame: &Frame,
-    filtered: Option<&str>,
-    first: bool,
-) -> Result<bool, String> {
-    let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { return Ok(false) };
-    let wgsl = shader.ok_or(format!("the manifest has a {name} stage, and no {name} shader was given"))?;
-    let none = Value::Object(Default::default());
-    // A sequence's first frame replaces some of the stage's values (the temporal stage's `history`).
-    let first_frame = if first { stage.get("first_frame").unwrap_or(&none) } else { &none };
-    for step in array(stage, "sequence")? {
-        let mut dispatch = Dispatch { values: HashMap::new(), images: HashMap::new() };
-        for values in [field(stage, "uniform_values")?, first_frame, field(step, "uniform_values")?] {
-            for (name, value) in values.as_object().ok_or("uniform_values")? {
-                dispatch.values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
-            }
-        }
-        for (role, image) in field(step, "images")?.as_object().ok_or("images")? {
-            let image = image.as_str().ok_or("an image name")?;
-            let image = match (image, filtered) {
-                ("filtered", Some(last)) => last,
-                _ => image,
-            };
-            dispatch.images.insert(role.as_str(), image.to_string());
-        }
-        // What it writes is a fresh texture (`target` replaces by name).
-        for b in array(stage, "bindings")?.iter().filter(|b| b["kind"] == "storage_texture") {
-            let role = b["role"].as_str().ok_or("binding role")?;
-            images.target(dispatch.images.get(role).map(String::as_str).unwrap_or(role), texel_format(b)?);
-        }
-        record(images, encoder, wgsl, stage, workgroup, frame, &dispatch)?;
-    }
-    Ok(true)
-}
-
 /// Filter `frame` with the exported `shaders` described by `manifest`, as
 /// a frame of its own; returns the filtered frame's texels as f32 RGBA.
 pub fn filter(
@@ -378,7 +325,7 @@ pub fn filter(
 }
 
 /// Filter `frame`, the next of `sequence`: the temporal stage blends it
-/// with what the frames before left; what the manifest's `history` names is
+/// with what the frames before left; what the manifest's `keep` steps copy is
 /// kept for the next.
 pub fn filter_frame(
     device: &wgpu::Device,
@@ -410,125 +357,61 @@ pub fn filter_frame(
         images.upload(role, texels);
     }
     // What the frame before kept; on a sequence's first frame, textures the blend does not read.
+    // Every other image the pipeline makes is a texture of its format.
     let first = sequence.frames == 0 || sequence.size != (width, height);
-    let history = manifest.get("history").and_then(Value::as_array).cloned().unwrap_or_default();
-    for kept in &history {
-        let image = field(kept, "image")?.as_str().ok_or("a kept image's name")?;
-        match sequence.kept.get(image).filter(|_| !first) {
-            Some(texture) => images.insert(image, texture.clone()),
-            None => images.upload(image, &vec![[0.0; 4]; (width * height) as usize]),
+    for image in array(manifest, "images")? {
+        let name = field(image, "name")?.as_str().ok_or("an image's name")?;
+        if image.get("kept_from").is_some() {
+            match sequence.kept.get(name).filter(|_| !first) {
+                Some(texture) => images.insert(name, texture.clone()),
+                None => images.upload(name, &vec![[0.0; 4]; (width * height) as usize]),
+            }
+        } else {
+            images.target(name, texel_format(image)?);
         }
     }
-    let mut kept = HashMap::new();
-    let keep_after = |pass: Option<u64>| {
-        history.iter().filter(move |k| k.get("after_pass").and_then(Value::as_u64) == pass).map(|k| {
-            (k["from"].as_str().unwrap_or_default().to_string(), k["image"].as_str().unwrap_or_default().to_string())
-        })
-    };
-    let stage_shader = |name: &str| shaders.stages.get(name).map(String::as_str);
     let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
     let mut encoder = device.create_command_encoder(&Default::default());
-
-    // The pre-pass, once: it writes the colour the form filters and the modulation.
-    if let Some(stage) = manifest.get("prepass").filter(|p| !p.is_null()) {
-        let wgsl = stage_shader("prepass").ok_or("the manifest has a pre-pass, and no pre-pass shader was given")?;
-        // Everything it writes (`prepared`, `modulation`, what the outlier rule measured) is read later by role.
-        for b in array(stage, "bindings")?.iter().filter(|b| b["kind"] == "storage_texture") {
-            images.target(b["role"].as_str().ok_or("binding role")?, texel_format(b)?);
+    // The frame, step by step, as the manifest's `frame` says.
+    let mut kept = HashMap::new();
+    let none = Value::Object(Default::default());
+    for step in array(manifest, "frame")? {
+        if let Some(keep) = step.get("keep") {
+            let name = |key| field(keep, key).and_then(|v| v.as_str().ok_or(format!("a keep step's `{key}`")));
+            images.keep(&mut encoder, name("from")?, name("into")?, &mut kept)?;
+            continue;
         }
-        if !images.views.contains_key("albedo") {
-            // Not read unless the pipeline demodulates; any texture will do.
-            let any = frame.color.clone();
-            images.upload("albedo", &any);
+        let step = field(step, "dispatch")?;
+        let shader = field(step, "shader")?.as_str().ok_or("a dispatch's shader")?;
+        let (stage, wgsl) = match shader {
+            "form" => (manifest, shaders.form.as_str()),
+            _ => (
+                field(manifest, shader)?,
+                shaders
+                    .stages
+                    .get(shader)
+                    .ok_or(format!("the frame dispatches {shader}, and no {shader} shader was given"))?
+                    .as_str(),
+            ),
+        };
+        let mut dispatch = Dispatch { values: HashMap::new(), images: HashMap::new() };
+        // A sequence's first frame replaces some values (the temporal stage's `history`).
+        let first_frame = if first { step.get("first_frame").unwrap_or(&none) } else { &none };
+        for values in [field(step, "values")?, first_frame] {
+            for (name, value) in values.as_object().ok_or("values")? {
+                dispatch.values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
+            }
         }
-        let mut values = HashMap::new();
-        for (name, value) in field(stage, "uniform_values")?.as_object().ok_or("uniform_values")? {
-            values.insert(name.as_str(), value.as_f64().ok_or("a uniform value")?);
+        // A window form's radius may be the caller's.
+        if shader == "form" && dispatch.values.contains_key("radius") {
+            dispatch.values.insert("radius", radius as f64);
         }
-        let dispatch = Dispatch { values, images: HashMap::new() };
+        for (role, image) in field(step, "images")?.as_object().ok_or("images")? {
+            dispatch.images.insert(role.as_str(), image.as_str().ok_or("an image name")?.to_string());
+        }
         record(&images, &mut encoder, wgsl, stage, workgroup, frame, &dispatch)?;
     }
-
-    // The spread, the temporal stage, then the guide, dispatch by dispatch:
-    // each names the image every role binds; its uniform takes the stage's
-    // values, then its own.
-    for name in BEFORE_THE_FORM {
-        run_stage(&mut images, &mut encoder, manifest, name, stage_shader(name), workgroup, frame, None, first)?;
-    }
-    // The form's first pass filters what the manifest names.
-    let mut colour = field(manifest, "filters")?.as_str().ok_or("`filters` is not a name")?.to_string();
-
-    // The form, `passes` times; pass k reads pass k-1's image and variance.
-    let passes = field(manifest, "passes")?.as_u64().ok_or("passes")? as u32;
-    // The variance the passes carry, where the weight reads one: pass 0 binds the frame's.
-    let carried = manifest.get("carries").and_then(Value::as_str);
-    let mut variance = carried.unwrap_or("colorVariance").to_string();
-    for k in 0..passes {
-        let (out, variance_out) = (format!("image{}", k % 2), format!("variance{}", k % 2));
-        images.target(&out, output_format);
-        if carried.is_some() {
-            images.target(&variance_out, wgpu::TextureFormat::R32Float);
-        }
-        let values: HashMap<&str, f64> = [
-            ("radius", radius as f64),
-            ("step", (1u64 << k) as f64),
-            ("level", k as f64),
-            ("last", if k + 1 == passes { 1.0 } else { 0.0 }),
-        ]
-        .into();
-        let mut roles: HashMap<&str, String> = [
-            ("color", colour.clone()),
-            ("output", out.clone()),
-            ("variance_out", variance_out.clone()),
-            // The guide stage's in pass 0, the pass's own colour after.
-            ("guide", if k == 0 { "guide".to_string() } else { colour.clone() }),
-        ]
-        .into();
-        if let Some(role) = carried {
-            roles.insert(role, variance.clone());
-        }
-        let dispatch = Dispatch { values, images: roles };
-        record(&images, &mut encoder, &shaders.form, manifest, workgroup, frame, &dispatch)?;
-        // The pass the temporal stage feeds back, kept before a later pass writes its texture again.
-        for (from, into) in keep_after(Some(k as u64)) {
-            images.keep(&mut encoder, &from, &into, &mut kept)?;
-        }
-        // Pass k+1 reads what pass k wrote and writes fresh textures (`target` replaces by name).
-        colour = out;
-        variance = variance_out;
-    }
-    // `planefit` after the form: its `filtered` is the last pass's output; it writes the frame.
-    if run_stage(
-        &mut images,
-        &mut encoder,
-        manifest,
-        "planefit",
-        stage_shader("planefit"),
-        workgroup,
-        frame,
-        Some(&colour),
-        first,
-    )? {
-        colour = "fitted".to_string();
-    }
-    // `pixelfilter`, last: it reads the frame so far (`fitted`, or `filtered`: the last pass's output).
-    if run_stage(
-        &mut images,
-        &mut encoder,
-        manifest,
-        "pixelfilter",
-        stage_shader("pixelfilter"),
-        workgroup,
-        frame,
-        Some(&colour),
-        first,
-    )? {
-        colour = "pixelfiltered".to_string();
-    }
-    // What the next frame reads of this one.
-    for (from, into) in keep_after(None) {
-        images.keep(&mut encoder, &from, &into, &mut kept)?;
-    }
+    let output = field(manifest, "output")?.as_str().ok_or("`output` is not a name")?;
 
     // Copy the last image out (rows padded to 256 bytes).
     let texel_bytes = if output_format == wgpu::TextureFormat::Rgba16Float { 8 } else { 16 };
@@ -539,7 +422,7 @@ pub fn filter_frame(
         usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
         mapped_at_creation: false,
     });
-    let (last, _) = images.views.get(&colour).ok_or("no filtered image")?;
+    let (last, _) = images.views.get(output).ok_or("no filtered image")?;
     encoder.copy_texture_to_buffer(
         wgpu::TexelCopyTextureInfo {
             texture: last,
@@ -564,7 +447,7 @@ pub fn filter_frame(
     }
     device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| e.to_string())?;
     let gpu_time = Some(submitted.elapsed());
-    if !history.is_empty() {
+    if !kept.is_empty() {
         let frames = if first { 1 } else { sequence.frames + 1 };
         *sequence = Sequence { kept, size: (width, height), frames, gpu_time };
     } else {

@@ -58,18 +58,22 @@ fn main() -> Result<(), String> {
     // A window form's radius: the one given, else the manifest's (what `filter` takes); à-trous forms read none.
     let radius = radius.or(manifest["radius"].as_u64().map(|r| r as u32)).unwrap_or(0);
 
-    // The other stages' shaders (the pre-pass's, the spread's…), where the pipeline has them, are files beside the form's.
+    // The other shaders the frame dispatches (the pre-pass's, the spread's…) are files beside the form's.
     let mut stages = HashMap::new();
-    for name in ["prepass", "spread", "temporal", "temporal_variance", "guide", "planefit", "pixelfilter"] {
-        let Some(stage) = manifest.get(name).filter(|p| !p.is_null()) else { continue };
-        let file = Path::new(shader).with_file_name(stage["file"].as_str().ok_or("a stage's file")?);
-        stages
-            .insert(name.to_string(), std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?);
+    for step in manifest["frame"].as_array().ok_or(format!("{manifest_path}: no `frame`"))? {
+        let Some(name) = step["dispatch"]["shader"].as_str().filter(|name| *name != "form") else { continue };
+        let file = Path::new(shader).with_file_name(manifest[name]["file"].as_str().ok_or("a stage's file")?);
+        if !stages.contains_key(name) {
+            let code = std::fs::read_to_string(&file).map_err(|e| format!("{}: {e}", file.display()))?;
+            stages.insert(name.to_string(), code);
+        }
     }
     let temporal = stages.contains_key("temporal");
     let shaders = host::Shaders { form: wgsl, stages };
 
     // The engine's G-buffer stand-in: every input the manifest names.
+    let inputs: Vec<&str> =
+        manifest["inputs"].as_array().into_iter().flatten().filter_map(|i| i["image"].as_str()).collect();
     let roles: Vec<String> = manifest["bindings"]
         .as_array()
         .into_iter()
@@ -86,10 +90,8 @@ fn main() -> Result<(), String> {
         }
     }
     // A pre-pass that demodulates divides by the raw albedo; the temporal stage compares it.
-    let prepass = manifest.get("prepass").filter(|p| !p.is_null());
-    request.albedo =
-        temporal || prepass.is_some_and(|p| p["uniform_values"]["stages"].as_f64().unwrap_or(0.0) as u32 & 2 != 0);
-    if manifest.get("planefit").is_some_and(|p| !p.is_null()) {
+    request.albedo = inputs.contains(&"albedo");
+    if inputs.contains(&"normal") {
         request.features.insert(Feature::Normal);
     }
 
@@ -121,7 +123,7 @@ fn main() -> Result<(), String> {
         println!("filtered {}x{} with radius {radius}: wrote {out}", scene.width, scene.height);
         return Ok(());
     }
-    // A sequence: its frames in order, what the manifest's `history` names kept between them.
+    // A sequence: its frames in order, what the manifest's `keep` steps copy kept between them.
     let sequence = filterjit::scene::Sequence::find(&input).map_err(|e| e.to_string())?;
     std::fs::create_dir_all(out).map_err(|e| format!("{out}: {e}"))?;
     let mut kept = host::Sequence::new();

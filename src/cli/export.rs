@@ -122,7 +122,7 @@ pub(super) fn export(
     }
     if !exported.manifest.history.is_empty() {
         let kept: Vec<&str> = exported.manifest.history.iter().map(|k| k.image.as_str()).collect();
-        println!("sequence  keep {} from frame to frame (the manifest's `history`)", kept.join(", "));
+        println!("sequence  keep {} from frame to frame (the manifest's `keep` steps)", kept.join(", "));
         if pipeline.pixel_filter.is_none() {
             let point_sampled =
                 FilterPipeline { pixel_filter: Some(filterjit::pipeline::PixelFilter::POINT_SAMPLED), ..pipeline };

@@ -46,8 +46,8 @@ pub struct Manifest {
     /// The pre-pass shader, dispatched once before the form, where the pipeline has one.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub prepass: Option<Stage>,
-    /// `keep`'s spread shader, dispatched after the pre-pass as its
-    /// `sequence` says, where the pipeline keeps what its clamp removed.
+    /// `keep`'s spread shader, dispatched after the pre-pass as `frame`
+    /// says, where the pipeline keeps what its clamp removed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub spread: Option<Stage>,
     /// The temporal stage's blend (docs/SEMANTICS.md, "The temporal
@@ -56,7 +56,7 @@ pub struct Manifest {
     /// into the history and writes `blend` (what the form filters instead),
     /// `moments_out`, `temporal_modulation` (what the form multiplies back)
     /// and `accumulated` (x the sample variance, y historyLength). Its
-    /// uniform's `history` is 0 on a sequence's first frame (`first_frame`).
+    /// uniform's `history` is 0 on a sequence's first frame (its dispatch's `first_frame`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub temporal: Option<Stage>,
     /// The temporal stage's second shader, dispatched once after `temporal`:
@@ -82,26 +82,97 @@ pub struct Manifest {
     pub pixelfilter: Option<Stage>,
     /// The image the form's first pass filters: `color` (the noisy colour),
     /// `prepared` (the pre-pass's), `kept` (the spread's) or `blend` (the
-    /// temporal stage's).
+    /// temporal stage's); `frame` binds it.
+    #[serde(skip)]
     pub filters: String,
     /// The variance the form's passes carry (`colorVariance` or
     /// `temporalVariance`), where its weight reads one and it has passes:
-    /// pass 0 binds the frame's, pass k the `variance_out` of pass k - 1.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    /// pass 0 binds the frame's, pass k the `variance_out` of pass k - 1;
+    /// `frame` binds it.
+    #[serde(skip)]
     pub carries: Option<String>,
     /// What a sequence keeps from frame to frame (empty without the temporal
     /// stage): each image takes what `from` holds, in `from`'s format,
-    /// copied at the end of the frame or right after form pass `after_pass`.
-    /// Before a sequence's first frame any texture of a float format will
-    /// do: the blend reads none of them then.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
+    /// copied at the end of the frame or right after form pass `after_pass`
+    /// (the `keep` steps of `frame`, and `images`, say so to a host).
+    #[serde(skip)]
     pub history: Vec<Kept>,
     /// What runs in which order and which image each binding is, in words.
     pub order: Vec<String>,
     /// The images the engine supplies every frame, by the name every
     /// binding that reads one uses; every other image a binding names is
-    /// made by a stage or kept from the frame before (`history`).
+    /// made by a stage or kept from the frame before (`images`).
     pub inputs: Vec<Supplied>,
+    /// The images the pipeline makes: written by a stage each frame, or
+    /// kept from the frame before. Every image, these and the inputs, is
+    /// width x height.
+    pub images: Vec<Image>,
+    /// One frame, step by step: what `order` says in words, as data. A
+    /// host runs the steps in order and binds what each names.
+    pub frame: Vec<Step>,
+    /// The image that holds the filtered frame once `frame` has run.
+    pub output: String,
+}
+
+/// One step of a frame (`Manifest::frame`).
+#[derive(Clone, Debug, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Step {
+    /// Dispatch a shader once over the frame (`dispatch` workgroups).
+    Dispatch(Dispatch),
+    /// Copy image `from` into the kept image `into`, which the next frame's
+    /// dispatches read (a texture of `from`'s format).
+    Keep { from: String, into: String },
+}
+
+/// One dispatch of a shader (`Step::Dispatch`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Dispatch {
+    /// `form` (the manifest's own shader) or a stage's key (`prepass`, `spread`…).
+    pub shader: String,
+    /// The uniform's fields other than width, height and `scale[k]`; a field
+    /// named nowhere (padding) is 0. Whole numbers are written as integers.
+    #[serde(serialize_with = "whole_as_integers")]
+    pub values: BTreeMap<String, f64>,
+    /// Values that replace `values` on a sequence's first frame (and after a
+    /// cut): the temporal stage's `history` = 0. On that frame the kept
+    /// images hold nothing yet; any texture of a float format will do.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty", serialize_with = "whole_as_integers")]
+    pub first_frame: BTreeMap<String, f64>,
+    /// The image each texture binding of the shader binds, by the binding's `role`.
+    pub images: BTreeMap<String, String>,
+}
+
+/// An image the pipeline makes (`Manifest::images`).
+#[derive(Clone, Debug, Serialize)]
+pub struct Image {
+    pub name: String,
+    /// Its texel format (a storage texture's); absent for a kept image,
+    /// which takes its source's (an input's: the one the engine supplies).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub format: Option<&'static str>,
+    /// The shader whose dispatch writes it first in a frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub written_by: Option<String>,
+    /// The image of the frame before it holds: a `keep` step copies it in.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub kept_from: Option<String>,
+    pub content: String,
+}
+
+/// A uniform's values with whole numbers as JSON integers, so that a host
+/// that reads a `u32` field as an integer reads `1`, not `1.0`.
+fn whole_as_integers<S: serde::Serializer>(values: &BTreeMap<String, f64>, serializer: S) -> Result<S::Ok, S::Error> {
+    use serde::ser::SerializeMap;
+    let mut map = serializer.serialize_map(Some(values.len()))?;
+    for (name, value) in values {
+        if value.fract() == 0.0 && value.abs() < 9.007_199_254_740_992e15 {
+            map.serialize_entry(name, &(*value as i64))?;
+        } else {
+            map.serialize_entry(name, value)?;
+        }
+    }
+    map.end()
 }
 
 /// An image the engine supplies every frame (`Manifest::inputs`).
@@ -121,16 +192,18 @@ pub struct Stage {
     pub entry_point: String,
     pub dispatch: String,
     pub uniform: Uniform,
-    /// Values for the uniform's fields other than width and height.
+    /// Values for the uniform's fields other than width and height, in
+    /// every dispatch (the frame's steps carry them).
+    #[serde(skip)]
     pub uniform_values: BTreeMap<String, f64>,
     pub bindings: Vec<Binding>,
     /// Values that replace `uniform_values` on a sequence's first frame
     /// (and after a cut): the temporal stage's `history` = 0.
-    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    #[serde(skip)]
     pub first_frame: BTreeMap<String, f64>,
     /// Its dispatches in order, where there are several (the spread); a
     /// stage without one is dispatched once, its images named by role.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
+    #[serde(skip)]
     pub sequence: Vec<StageDispatch>,
 }
 
@@ -165,8 +238,10 @@ pub struct Kept {
 /// `guide` stage, and the form's `guide` binding, which changes by pass; 4:
 /// the `planefit` stage after the form; 5: the temporal stage, its
 /// `history`, `carries` and a stage's `first_frame`; 6: the `pixelfilter`
-/// stage, last; 7: `inputs`, the images the engine supplies).
-pub const MANIFEST_VERSION: u32 = 7;
+/// stage, last; 7: `inputs`, the images the engine supplies; 8: `frame`,
+/// `images` and `output`, the frame as data, in place of each stage's
+/// `sequence` and values, `history`, `filters` and `carries`).
+pub const MANIFEST_VERSION: u32 = 8;
 
 /// Sampled textures per shader stage every WebGPU device allows.
 pub const PORTABLE_SAMPLED_TEXTURES: usize = 16;

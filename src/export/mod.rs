@@ -12,6 +12,7 @@
 //! `translate` runs naga's back ends.
 
 mod bindings;
+mod frame;
 mod manifest;
 mod stages;
 mod translate;
@@ -181,9 +182,8 @@ pub fn export_filter(
     target: Target,
     format: OutputFormat,
 ) -> Result<Exported, ExportError> {
-    let mut exported = export_pipeline(&crate::simplify::simplify(expr), pipeline, target, format)?;
-    exported.manifest.radius = (!pipeline.is_atrous()).then(|| radius.unwrap_or(crate::denoise::DEFAULT_RADIUS));
-    Ok(exported)
+    let radius = (!pipeline.is_atrous()).then(|| radius.unwrap_or(crate::denoise::DEFAULT_RADIUS));
+    export_with_radius(&crate::simplify::simplify(expr), pipeline, radius, target, format)
 }
 
 /// [`export`] of `expr` in `pipeline`: the form's shader (one à-trous pass,
@@ -194,12 +194,25 @@ pub fn export_pipeline(
     target: Target,
     format: OutputFormat,
 ) -> Result<Exported, ExportError> {
+    export_with_radius(expr, pipeline, None, target, format)
+}
+
+/// [`export_pipeline`] with the window radius its manifest states (and its
+/// frame sets), where the form reads one.
+fn export_with_radius(
+    expr: &Expr,
+    pipeline: &FilterPipeline,
+    radius: Option<u32>,
+    target: Target,
+    format: OutputFormat,
+) -> Result<Exported, ExportError> {
     let shape = jit::Shape::of(pipeline);
     let kernel =
         jit::compile(expr, jit::KernelSpec { kind: KernelKind::Export(format), shape, ..jit::KernelSpec::default() })?;
     let interface = &kernel.source().interface;
     let (code, entry_point) = translate(kernel.validated(), kernel.wgsl(), interface, target)?;
     let mut manifest = manifest(&kernel, target, format, entry_point, pipeline);
+    manifest.radius = radius;
     let mut stages = Vec::new();
     for name in StageName::ALL {
         if let Some((stage, code)) = stages::build(name, &kernel, pipeline, &manifest, target, format)? {
@@ -209,6 +222,7 @@ pub fn export_pipeline(
     }
     manifest.order = order(&manifest, pipeline);
     manifest.inputs = stages::inputs(&manifest, pipeline);
+    (manifest.frame, manifest.images, manifest.output) = frame::plan(&manifest);
     let with_header = |code: Code| match code {
         Code::Text(text) if target != Target::Wgsl => Code::Text(header(&manifest, &text)),
         other => other,

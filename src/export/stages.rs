@@ -313,8 +313,8 @@ pub(super) fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<Strin
             _ => "",
         };
         steps.push(format!(
-            "spread (`keep`), {} dispatches of the spread shader as its `sequence` says (uniform `step` and `stage`, \
-             the image each role binds): what the clamp removed (the noisy colour minus `prepared`) is handed out \
+            "spread (`keep`), {} dispatches of the spread shader as `frame` says (uniform `step` and `stage`, the \
+             image each role binds): what the clamp removed (the noisy colour minus `prepared`) is handed out \
              over the neighbourhood{surface}, then added back and divided by `modulation`; writes `kept` \
              (rgba32float)",
             stage.sequence.len()
@@ -434,6 +434,9 @@ pub(super) fn manifest(
         history: Vec::new(),
         order: Vec::new(),
         inputs: Vec::new(),
+        images: Vec::new(),
+        frame: Vec::new(),
+        output: String::new(),
     }
 }
 
