@@ -14,7 +14,7 @@ use crate::jit;
 use crate::lang::{Expr, Feature, ScalarVar};
 use crate::pipeline::{FilterPipeline, PixelFilter};
 use crate::scene::Scene;
-use crate::scene::{Holds, Needs, Request};
+use crate::scene::{Holds, Missing, Needs, Request};
 
 /// The shipped filters a render gets when none is asked for, best first, as
 /// measured on the seventeen built-in scenes (128x128, 4 spp, 1024-spp
@@ -114,8 +114,118 @@ pub struct Choice {
     pub expr: Expr,
     pub pipeline: FilterPipeline,
     pub radius: u32,
-    /// Why this filter, when it was chosen rather than asked for.
-    pub chosen_because: Option<String>,
+    /// Why this filter (and pipeline), where filterjit chose either.
+    pub chosen_because: Option<Because>,
+}
+
+/// A shipped filter passed over, with the inputs it reads that the render lacks.
+pub type PassedOver = (String, Vec<Missing>);
+
+/// Why a filter was chosen, as data: the command line renders it with
+/// filterjit's names for the inputs (`Display`), the Python module with its
+/// arguments' ([`Because::render`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Because {
+    /// Whether the filter was chosen (else it was asked for, and only its pipeline's end was).
+    pub chosen: bool,
+    /// The better shipped filters passed over, best first.
+    pub passed_over: Vec<PassedOver>,
+    /// For a sequence's frames, the temporal filters passed over where none
+    /// fits: the filter then runs frame by frame.
+    pub no_temporal: Vec<PassedOver>,
+    /// Where the sparse-light variant was taken: the render's median pixel
+    /// over its mean luminance.
+    pub sparse_light: Option<f64>,
+    /// Whether the pixel filter was added for a render sampled at one point a pixel.
+    pub point_sampled: bool,
+}
+
+/// How a caller names the inputs a filter reads, for [`Because::render`].
+pub trait InputNames {
+    /// An input, with why a render may lack it where that is not plain.
+    fn full(&self, missing: Missing) -> String;
+    /// An input, in a list of several.
+    fn short(&self, missing: Missing) -> String;
+    /// Where each shipped filter's inputs are listed.
+    fn listing(&self) -> &str;
+}
+
+/// filterjit's own names (`worldPosition`, `texture (the albedo …)`).
+struct FilterjitNames;
+
+impl InputNames for FilterjitNames {
+    fn full(&self, missing: Missing) -> String {
+        missing.to_string()
+    }
+
+    fn short(&self, missing: Missing) -> String {
+        missing.name().to_string()
+    }
+
+    fn listing(&self) -> &str {
+        "`filterjit list`"
+    }
+}
+
+impl Because {
+    /// In words, the inputs named by `names`.
+    pub fn render(&self, names: &dyn InputNames) -> String {
+        let full = |lacks: &[Missing]| lacks.iter().map(|m| names.full(*m)).collect::<Vec<_>>().join(", ");
+        let mut parts = Vec::new();
+        if self.chosen {
+            let mut chosen = match self.passed_over.as_slice() {
+                [] => "the best shipped filter, and the render has every input it reads".to_string(),
+                [(best, lacks)] => {
+                    format!(
+                        "the best shipped filter whose inputs the render has (@{best}, the best, needs {})",
+                        full(lacks)
+                    )
+                }
+                // One line, not one clause a filter passed over: what the better ones lack, together.
+                [(best, lacks), ..] => {
+                    let mut all: Vec<String> = Vec::new();
+                    for input in self.passed_over.iter().flat_map(|(_, lacks)| lacks) {
+                        let name = names.short(*input);
+                        if !all.contains(&name) {
+                            all.push(name);
+                        }
+                    }
+                    format!(
+                        "the best shipped filter whose inputs the render has: the {} better ones read what it lacks \
+                         ({}; @{best}, the best, needs {}); {} gives each one's inputs",
+                        self.passed_over.len(),
+                        all.join(", "),
+                        full(lacks),
+                        names.listing()
+                    )
+                }
+            };
+            if !self.no_temporal.is_empty() {
+                let each: Vec<String> =
+                    self.no_temporal.iter().map(|(name, lacks)| format!("@{name} needs {}", full(lacks))).collect();
+                chosen = format!("{chosen}, frame by frame (no shipped temporal filter fits: {})", each.join("; "));
+            }
+            parts.push(chosen);
+        }
+        if let Some(median_over_mean) = self.sparse_light {
+            parts.push(format!(
+                "its variant for sparse light, as the render's median pixel is {median_over_mean:.3} of its mean \
+                 luminance (under {SPARSE_MEDIAN_OVER_MEAN})"
+            ));
+        }
+        if self.point_sampled {
+            parts.push(
+                "then the pixel filter, as the render samples each pixel at one point (Cycles at 1 sample)".to_string(),
+            );
+        }
+        parts.join("; ")
+    }
+}
+
+impl std::fmt::Display for Because {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.render(&FilterjitNames))
+    }
 }
 
 impl Choice {
@@ -134,62 +244,49 @@ impl Choice {
 
     /// The best shipped filter (`SHIPPED_BY_QUALITY`) whose inputs `provided` has.
     pub fn best_for(provided: &Provided) -> Result<Choice> {
-        Self::best_of(SHIPPED_BY_QUALITY, provided)
+        match Self::best_of(SHIPPED_BY_QUALITY, provided)? {
+            Ok(choice) => Ok(choice),
+            Err(passed_over) => {
+                let each: Vec<String> = passed_over
+                    .iter()
+                    .map(|(name, lacks)| {
+                        let lacks: Vec<String> = lacks.iter().map(Missing::to_string).collect();
+                        format!("@{name} needs {}", lacks.join(", "))
+                    })
+                    .collect();
+                bail!("no shipped filter fits this render: {}", each.join("; "))
+            }
+        }
     }
 
     /// The best shipped temporal filter (`SHIPPED_TEMPORAL_BY_QUALITY`) whose
     /// inputs a sequence's frames (`provided`) have; without motion vectors,
     /// the best filter of single renders, frame by frame.
     pub fn best_temporal_for(provided: &Provided) -> Result<Choice> {
-        match Self::best_of(SHIPPED_TEMPORAL_BY_QUALITY, provided) {
+        match Self::best_of(SHIPPED_TEMPORAL_BY_QUALITY, provided)? {
             Ok(choice) => Ok(choice),
-            Err(temporal) => {
+            Err(no_temporal) => {
                 let choice = Self::best_for(provided)?;
-                let because = choice.chosen_because.unwrap_or_default();
-                Ok(Choice { chosen_because: Some(format!("{because}, frame by frame ({temporal})")), ..choice })
+                let because = Because { no_temporal, ..choice.chosen_because.clone().unwrap_or_default() };
+                Ok(Choice { chosen_because: Some(because), ..choice })
             }
         }
     }
 
-    /// The first of `names` (shipped filters, best first) whose inputs `provided` has.
-    fn best_of(names: &[&str], provided: &Provided) -> Result<Choice> {
-        let mut passed_over: Vec<(&str, Vec<String>)> = Vec::new();
+    /// The first of `names` (shipped filters, best first) whose inputs
+    /// `provided` has, or else each one with what it lacks.
+    fn best_of(names: &[&str], provided: &Provided) -> Result<Result<Choice, Vec<PassedOver>>> {
+        let mut passed_over = Vec::new();
         for name in names {
             let choice = Choice::asked(&format!("@{name}"), None, None)?;
             let missing = choice.missing(provided);
             if missing.is_empty() {
-                let because = match passed_over.as_slice() {
-                    [] => "the best shipped filter, and the render has every input it reads".to_string(),
-                    [(best, lacks)] => format!(
-                        "the best shipped filter whose inputs the render has (@{best}, the best, needs {})",
-                        lacks.join(", ")
-                    ),
-                    // One line, not one clause a filter passed over: what the better ones lack, together.
-                    [(best, lacks), ..] => {
-                        // Each input once, by its name (`texture (the albedo …)` is `texture`).
-                        let mut all: Vec<&str> = Vec::new();
-                        for input in passed_over.iter().flat_map(|(_, lacks)| lacks) {
-                            let name = input.split(' ').next().unwrap_or(input);
-                            if !all.contains(&name) {
-                                all.push(name);
-                            }
-                        }
-                        format!(
-                            "the best shipped filter whose inputs the render has: the {} better ones read what it lacks \
-                             ({}; @{best}, the best, needs {}); `filterjit list` gives each one's inputs",
-                            passed_over.len(),
-                            all.join(", "),
-                            lacks.join(", ")
-                        )
-                    }
-                };
-                return Ok(Choice { chosen_because: Some(because), ..choice });
+                let because = Because { chosen: true, passed_over, ..Because::default() };
+                return Ok(Ok(Choice { chosen_because: Some(because), ..choice }));
             }
-            passed_over.push((name, missing));
+            passed_over.push((name.to_string(), missing));
         }
-        let each: Vec<String> =
-            passed_over.iter().map(|(name, lacks)| format!("@{name} needs {}", lacks.join(", "))).collect();
-        bail!("no shipped filter fits this render: {}", each.join("; "))
+        Ok(Err(passed_over))
     }
 
     /// This choice for a render whose noisy colour is `color`: a chosen
@@ -199,7 +296,9 @@ impl Choice {
     /// filter asked for, stays. The variant reads what its filter reads, so
     /// the render loaded for the first serves the second.
     pub fn for_light<A: Copy + Into<f64>>(self, color: &[[A; 3]]) -> Result<Choice> {
-        let (Some(because), Some(name)) = (&self.chosen_because, &self.name) else { return Ok(self) };
+        let (Some(because), Some(name)) = (self.chosen_because.as_ref().filter(|b| b.chosen), &self.name) else {
+            return Ok(self);
+        };
         let Some((_, variant)) = SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| base == name) else { return Ok(self) };
         let Some(tails) = crate::metrics::tails(color) else { return Ok(self) };
         if tails.median_over_mean >= SPARSE_MEDIAN_OVER_MEAN {
@@ -211,10 +310,7 @@ impl Choice {
             name: asked.name,
             expr: asked.expr,
             pipeline: if self.pipeline == stored { asked.pipeline } else { self.pipeline },
-            chosen_because: Some(format!(
-                "{because}; its variant for sparse light, as the render's median pixel is {:.3} of its mean luminance (under {SPARSE_MEDIAN_OVER_MEAN})",
-                tails.median_over_mean
-            )),
+            chosen_because: Some(Because { sparse_light: Some(tails.median_over_mean), ..because.clone() }),
             ..self
         })
     }
@@ -230,13 +326,9 @@ impl Choice {
         if !point_sampled || pipeline_given || self.pipeline.pixel_filter.is_some() {
             return self;
         }
-        let why = "then the pixel filter, as the render samples each pixel at one point (Cycles at 1 sample)";
         Choice {
             pipeline: FilterPipeline { pixel_filter: Some(PixelFilter::POINT_SAMPLED), ..self.pipeline },
-            chosen_because: Some(match self.chosen_because {
-                Some(because) => format!("{because}; {why}"),
-                None => why.to_string(),
-            }),
+            chosen_because: Some(Because { point_sampled: true, ..self.chosen_because.unwrap_or_default() }),
             ..self
         }
     }
@@ -263,9 +355,9 @@ impl Choice {
         }
     }
 
-    /// The inputs this filter reads that `provided` lacks, by name (the
-    /// albedo under `texture`, which demodulation divides by): `scene::Needs`'s rule.
-    pub fn missing(&self, provided: &Provided) -> Vec<String> {
+    /// The inputs this filter reads that `provided` lacks (the albedo, which
+    /// demodulation divides by, among them): `scene::Needs`'s rule.
+    pub fn missing(&self, provided: &Provided) -> Vec<Missing> {
         let holds = Holds {
             features: &provided.features,
             variances: &provided.variances,
@@ -274,7 +366,7 @@ impl Choice {
             albedo: provided.features.contains(&Feature::Texture),
             motion: provided.motion,
         };
-        Needs::of_filter(&self.expr, &self.pipeline).missing(holds).iter().map(|m| m.to_string()).collect()
+        Needs::of_filter(&self.expr, &self.pipeline).missing(holds)
     }
 
     /// What a scene must hold for this filter (its reference too, for errors).
@@ -470,14 +562,15 @@ mod tests {
         assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64PlaneDepth"));
         assert!(!chosen.expr.features().contains(&WorldPosition), "{:?}", chosen.name);
         let because = chosen.chosen_because.unwrap();
-        assert!(because.contains("@evolvedAtrous64Plane, the best, needs worldPosition"), "{because}");
+        assert_eq!(because.passed_over, [("evolvedAtrous64Plane".to_string(), vec![Missing::Feature(WorldPosition)])]);
+        assert!(because.to_string().contains("@evolvedAtrous64Plane, the best, needs worldPosition"), "{because}");
         // Without the depth too (OIDN's inputs), the one with neither; the filters passed over
         // are summed up in one clause, each input named once.
         let oidn_inputs = provided(&[Texture, Normal], &[]);
         let chosen = Choice::best_for(&oidn_inputs).unwrap();
         assert_eq!(chosen.name.as_deref(), Some("evolvedAtrous64PlaneNoPosition"));
         assert_eq!(chosen.pipeline.to_string(), "outliers=2.5,trim,keep=surface,demodulate,atrous=3,planefit=3");
-        let because = chosen.chosen_because.unwrap();
+        let because = chosen.chosen_because.unwrap().to_string();
         assert!(because.contains("the 2 better ones read what it lacks (worldPosition, depth;"), "{because}");
 
         // A sequence's frames with motion but no position (a real-time G-buffer): @temporal with the depth.
@@ -487,6 +580,18 @@ mod tests {
         assert!(g_buffer.pipeline.is_temporal() && g_buffer.missing(&frames(&[Texture, Normal, Depth])).is_empty());
         let full = Choice::best_temporal_for(&frames(&[Texture, Normal, Depth, WorldPosition])).unwrap();
         assert_eq!(full.name.as_deref(), Some(SHIPPED_TEMPORAL_BY_QUALITY[0]));
+        // Without motion vectors, the best filter of single renders, frame by frame, and why.
+        let still = Provided { motion: false, ..frames(&[Texture, Normal, Depth, WorldPosition]) };
+        let frame_by_frame = Choice::best_temporal_for(&still).unwrap();
+        assert_eq!(frame_by_frame.name.as_deref(), Some(SHIPPED_BY_QUALITY[0]));
+        let because = frame_by_frame.chosen_because.unwrap();
+        assert_eq!(because.no_temporal.len(), SHIPPED_TEMPORAL_BY_QUALITY.len());
+        assert!(because.no_temporal.iter().all(|(_, lacks)| lacks.contains(&Missing::Motion)), "{because:?}");
+        let said = because.to_string();
+        assert!(
+            said.contains("frame by frame (no shipped temporal filter fits: @temporal needs motion vectors"),
+            "{said}"
+        );
 
         // `keep=surface` reads the normal even where the weight does not:
         // its needs say so, and so does what it asks a render for.
@@ -495,7 +600,7 @@ mod tests {
         let even = Choice { expr: weight, ..Choice::asked("@evolvedAtrous64Trim", None, None).unwrap() };
         assert!(surface.request().features.contains(&Normal) && !even.request().features.contains(&Normal));
         let no_normal = provided(&[Texture, WorldPosition, Depth], &[]);
-        assert_eq!(surface.missing(&no_normal), ["normal"]);
+        assert_eq!(surface.missing(&no_normal), [Missing::Feature(Normal)]);
         assert!(even.missing(&no_normal).is_empty());
 
         // Demodulation needs the albedo even where the weight does not read it.
@@ -532,7 +637,7 @@ mod tests {
         assert_eq!(swapped.name.as_deref(), Some(variant));
         assert_eq!(swapped.pipeline, Choice::asked(&format!("@{variant}"), None, None).unwrap().pipeline);
         assert_ne!(swapped.pipeline, chosen.pipeline, "the sparse variant reaches one pass farther");
-        let because = swapped.chosen_because.as_deref().unwrap();
+        let because = swapped.chosen_because.as_ref().unwrap().to_string();
         assert!(because.contains("sparse light") && because.contains("0.000 of its mean"), "{because}");
         let kept = chosen.clone().for_light(&even).unwrap();
         assert_eq!(kept.name.as_deref(), Some(base), "an even light keeps the filter");

@@ -13,7 +13,7 @@ use pyo3::exceptions::{PyRuntimeError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyDict};
 
-use filterjit::denoise::{Choice, Provided};
+use filterjit::denoise::{Choice, InputNames, Provided};
 use filterjit::environment::Environment;
 use filterjit::export::{Code, Target};
 use filterjit::gpu::Gpu;
@@ -21,7 +21,7 @@ use filterjit::gpu::TemporalState;
 use filterjit::jit::{self, OutputFormat, ValidatedKernel};
 use filterjit::lang::{Feature, ScalarVar};
 use filterjit::pipeline::FilterPipeline;
-use filterjit::scene::{self, import, Images, Motion, Origin};
+use filterjit::scene::{self, import, Images, Missing, Motion, Origin};
 
 /// The device, opened on first use and kept for the process (adapter chosen
 /// as the command line chooses it, from `FILTERJIT_BACKEND` and `FILTERJIT_ADAPTER`).
@@ -364,12 +364,13 @@ fn check_given(choice: &Choice, given: &Provided) -> PyResult<()> {
     if missing.is_empty() {
         return Ok(());
     }
-    let arguments: Vec<String> = missing.iter().map(|m| argument_for(m, given.sequence)).collect();
+    let arguments: Vec<String> = missing.iter().map(|m| argument_for(*m, given.sequence)).collect();
+    let names: Vec<String> = missing.iter().map(|m| m.to_string()).collect();
     Err(PyValueError::new_err(format!(
         "filter {} (pipeline {}) reads {}, which the call does not give: {}",
         choice.describe(),
         choice.pipeline,
-        missing.join(", "),
+        names.join(", "),
         arguments.join("; ")
     )))
 }
@@ -506,11 +507,10 @@ impl Denoiser {
     }
 }
 
-/// How a caller gives the input a filter reads (`Choice::missing`'s names),
-/// to `Denoiser.denoise` (`sequence`) or to `denoise`.
-fn argument_for(input: &str, sequence: bool) -> String {
-    let name = input.split_whitespace().next().unwrap_or(input);
-    if name == "motion" {
+/// How a caller gives the input a filter reads, to `Denoiser.denoise`
+/// (`sequence`) or to `denoise`.
+fn argument_for(input: Missing, sequence: bool) -> String {
+    if input == Missing::Motion {
         return if sequence {
             "pass motion= (with normal= and depth=)".to_string()
         } else {
@@ -518,11 +518,38 @@ fn argument_for(input: &str, sequence: bool) -> String {
                 .to_string()
         };
     }
-    let argument = INPUTS.iter().find(|(_, f)| f.map(Feature::name) == Some(name));
-    match (argument, name == ScalarVar::ColorVariance.name()) {
-        (Some((argument, _)), _) => format!("pass {argument}="),
-        (None, true) => "pass variance=".to_string(),
-        (None, false) => format!("`{name}` is no input of denoise: choose a filter without it"),
+    match argument_name(input) {
+        Some(argument) => format!("pass {argument}="),
+        None => format!("`{}` is no input of denoise: choose a filter without it", input.name()),
+    }
+}
+
+/// The keyword argument of `denoise` that gives `input`, where one does.
+fn argument_name(input: Missing) -> Option<&'static str> {
+    let feature = match input {
+        Missing::Albedo => Some(Feature::Texture),
+        Missing::Feature(feature) => Some(feature),
+        Missing::Variance(ScalarVar::ColorVariance) => return Some("variance"),
+        Missing::Motion => return Some("motion"),
+        _ => None,
+    };
+    INPUTS.iter().find(|(_, f)| f.is_some() && *f == feature).map(|(argument, _)| *argument)
+}
+
+/// The inputs a filter reads, as `denoise`'s arguments name them (`choose`'s reasons).
+struct ArgumentNames;
+
+impl InputNames for ArgumentNames {
+    fn full(&self, missing: Missing) -> String {
+        self.short(missing)
+    }
+
+    fn short(&self, missing: Missing) -> String {
+        argument_name(missing).unwrap_or(missing.name()).to_string()
+    }
+
+    fn listing(&self) -> &str {
+        "filterjit.check('@NAME')['inputs']"
     }
 }
 
@@ -573,7 +600,8 @@ fn choose(inputs: &Bound<'_, PyAny>) -> PyResult<(String, String, String)> {
         };
     }
     let choice = Choice::best_for(&Provided::new(features, variances)).map_err(value)?;
-    Ok((choice.describe(), choice.pipeline.to_string(), choice.chosen_because.unwrap_or_default()))
+    let because = choice.chosen_because.as_ref().map(|because| because.render(&ArgumentNames)).unwrap_or_default();
+    Ok((choice.describe(), choice.pipeline.to_string(), because))
 }
 
 /// An expression argument: text, `@name` of a shipped one, or `@FILE[:NAME]`.

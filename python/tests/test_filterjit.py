@@ -123,10 +123,14 @@ def test_the_default_filter_follows_the_inputs_given(render):
     assert filterjit.choose(list(inputs(render, "depth")))[0] == filterjit.SHIPPED_BY_QUALITY[0]
     # It reads the position: without it, the next best that reads none, and why.
     name, _, why = filterjit.choose(list(inputs(render, "position")))
-    assert "needs worldPosition" in why and name == "@evolvedAtrous64PlaneDepth", (name, why)
+    # Named as denoise's arguments name them, not as filterjit's expressions do.
+    assert "needs position" in why and "worldPosition" not in why, why
+    assert name == "@evolvedAtrous64PlaneDepth", name
     # OIDN's inputs alone (colour, albedo, normal): the default's weight without the position.
     assert filterjit.choose(["albedo", "normal"])[0] == "@evolvedAtrous64PlaneNoPosition"
-    assert filterjit.choose([])[0] == "@evolvedAtrous64ColorOnly"
+    colour_only, _, why = filterjit.choose([])
+    assert colour_only == "@evolvedAtrous64ColorOnly", colour_only
+    assert "needs position, normal, albedo" in why and "texture" not in why, why
     # What choose names is what denoise runs: the same pixels as asking for it by name.
     without = inputs(render, "position")
     chosen = filterjit.denoise(render["color"], **without)
