@@ -143,6 +143,21 @@ fn sequence_name(dir: &Path) -> String {
     scene.unwrap_or_else(|| dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default())
 }
 
+/// Whether frames filtered by `pipeline` can be scored one by one: a
+/// temporal pipeline only where its history is the blend (`feedback=0`),
+/// since a pass fed back makes each frame's input depend on the weight that
+/// filtered the one before.
+pub fn check_scorable(pipeline: &FilterPipeline) -> Result<()> {
+    match pipeline.temporal {
+        Some(stage) if stage.feedback != 0 => bail!(
+            "pipeline `{pipeline}` feeds back pass {} of its form: its frames cannot be scored apart from the weight \
+             that filtered the frame before; score temporal pipelines whose history is the blend (feedback=0)",
+            stage.feedback
+        ),
+        _ => Ok(()),
+    }
+}
+
 /// A temporal pipeline's frames as its form receives them, in order: each
 /// frame's pre-pass and temporal stage run (the CPU reference's, frame
 /// after frame with the history carried), its colour the blend (multiplied
@@ -153,12 +168,7 @@ fn sequence_name(dir: &Path) -> String {
 /// input depend on the weight that filtered the one before.
 pub fn accumulated(frames: &[Scene], pipeline: &FilterPipeline) -> Result<Vec<Scene>> {
     let Some(stage) = pipeline.temporal else { return Ok(frames.to_vec()) };
-    if stage.feedback != 0 {
-        bail!(
-            "pipeline `{pipeline}` feeds back pass {} of its form: its frames cannot be scored apart from the              weight that filtered the frame before; score temporal pipelines whose history is the blend (feedback=0)",
-            stage.feedback
-        );
-    }
+    check_scorable(pipeline)?;
     let mut history = None;
     let mut out = Vec::with_capacity(frames.len());
     for frame in frames {

@@ -201,8 +201,22 @@ impl Because {
                 }
             };
             if !self.no_temporal.is_empty() {
-                let each: Vec<String> =
-                    self.no_temporal.iter().map(|(name, lacks)| format!("@{name} needs {}", full(lacks))).collect();
+                // Filters that lack the same inputs in one clause: the reason is said once.
+                let mut groups: Vec<(Vec<&str>, &[Missing])> = Vec::new();
+                for (name, lacks) in &self.no_temporal {
+                    match groups.iter_mut().find(|(_, same)| *same == lacks.as_slice()) {
+                        Some((names, _)) => names.push(name),
+                        None => groups.push((vec![name], lacks)),
+                    }
+                }
+                let each: Vec<String> = groups
+                    .iter()
+                    .map(|(names, lacks)| {
+                        let names: Vec<String> = names.iter().map(|name| format!("@{name}")).collect();
+                        let need = if names.len() == 1 { "needs" } else { "need" };
+                        format!("{} {need} {}", names.join(", "), full(lacks))
+                    })
+                    .collect();
                 chosen = format!("{chosen}, frame by frame (no shipped temporal filter fits: {})", each.join("; "));
             }
             parts.push(chosen);
@@ -244,7 +258,13 @@ impl Choice {
 
     /// The best shipped filter (`SHIPPED_BY_QUALITY`) whose inputs `provided` has.
     pub fn best_for(provided: &Provided) -> Result<Choice> {
-        match Self::best_of(SHIPPED_BY_QUALITY, provided)? {
+        Self::best_single(provided, None)
+    }
+
+    /// [`Choice::best_for`] in `pipeline` where one is given: the best
+    /// shipped weight whose inputs the render has in that pipeline.
+    fn best_single(provided: &Provided, pipeline: Option<FilterPipeline>) -> Result<Choice> {
+        match Self::best_of(SHIPPED_BY_QUALITY, provided, pipeline)? {
             Ok(choice) => Ok(choice),
             Err(passed_over) => {
                 let each: Vec<String> = passed_over
@@ -263,10 +283,16 @@ impl Choice {
     /// inputs a sequence's frames (`provided`) have; without motion vectors,
     /// the best filter of single renders, frame by frame.
     pub fn best_temporal_for(provided: &Provided) -> Result<Choice> {
-        match Self::best_of(SHIPPED_TEMPORAL_BY_QUALITY, provided)? {
+        Self::best_sequence(provided, None)
+    }
+
+    /// [`Choice::best_temporal_for`] in `pipeline` where one is given (a
+    /// pipeline without the temporal stage fits no temporal filter).
+    fn best_sequence(provided: &Provided, pipeline: Option<FilterPipeline>) -> Result<Choice> {
+        match Self::best_of(SHIPPED_TEMPORAL_BY_QUALITY, provided, pipeline)? {
             Ok(choice) => Ok(choice),
             Err(no_temporal) => {
-                let choice = Self::best_for(provided)?;
+                let choice = Self::best_single(provided, pipeline)?;
                 let because = Because { no_temporal, ..choice.chosen_because.clone().unwrap_or_default() };
                 Ok(Choice { chosen_because: Some(because), ..choice })
             }
@@ -274,11 +300,16 @@ impl Choice {
     }
 
     /// The first of `names` (shipped filters, best first) whose inputs
-    /// `provided` has, or else each one with what it lacks.
-    fn best_of(names: &[&str], provided: &Provided) -> Result<Result<Choice, Vec<PassedOver>>> {
+    /// `provided` has, each in its own pipeline or in `pipeline` where one
+    /// is given, or else each one with what it lacks.
+    fn best_of(
+        names: &[&str],
+        provided: &Provided,
+        pipeline: Option<FilterPipeline>,
+    ) -> Result<Result<Choice, Vec<PassedOver>>> {
         let mut passed_over = Vec::new();
         for name in names {
-            let choice = Choice::asked(&format!("@{name}"), None, None)?;
+            let choice = Choice::asked(&format!("@{name}"), pipeline, None)?;
             let missing = choice.missing(provided);
             if missing.is_empty() {
                 let because = Because { chosen: true, passed_over, ..Because::default() };
@@ -344,13 +375,12 @@ impl Choice {
         match filter {
             Some(filter) => Choice::asked(filter, pipeline, radius),
             None => {
-                let best =
-                    if provided.sequence { Choice::best_temporal_for(provided)? } else { Choice::best_for(provided)? };
-                Ok(Choice {
-                    pipeline: pipeline.unwrap_or(best.pipeline),
-                    radius: radius.unwrap_or(best.radius),
-                    ..best
-                })
+                // The best whose inputs the render has in the pipeline given, where one is.
+                let best = match provided.sequence {
+                    true => Choice::best_sequence(provided, pipeline)?,
+                    false => Choice::best_single(provided, pipeline)?,
+                };
+                Ok(Choice { radius: radius.unwrap_or(best.radius), ..best })
             }
         }
     }
@@ -589,7 +619,9 @@ mod tests {
         assert!(because.no_temporal.iter().all(|(_, lacks)| lacks.contains(&Missing::Motion)), "{because:?}");
         let said = because.to_string();
         assert!(
-            said.contains("frame by frame (no shipped temporal filter fits: @temporal needs motion vectors"),
+            said.contains(
+                "frame by frame (no shipped temporal filter fits: @temporal, @temporalDepth, @svgf need motion vectors"
+            ),
             "{said}"
         );
 

@@ -746,6 +746,41 @@ fn the_default_search_starts_from_a_cross_bilateral_filter_and_compares_with_wha
     assert!(settings.contains("pipeline outliers=") && !settings.contains("radius"), "an à-trous search: {settings}");
 }
 
+/// `filterjit evolve --preset temporal` improves on what a sequence gets
+/// (`@temporal`, seeded and scored against), on the built-in sequences; a
+/// baseline it cannot score frame by frame (SVGF's pipeline feeds a pass
+/// back) is refused by the name it was asked by, before anything is rendered.
+#[test]
+fn the_temporal_preset_starts_from_the_shipped_temporal_filter() {
+    let dir = temp_dir("temporal-preset");
+    let run = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_filterjit"))
+            .args(["evolve", "--preset", "temporal", "--islands", "1", "--island-size", "4", "--generations", "1"])
+            .args(["--size", "32x32", "--reference-spp", "8", "--seed", "3"])
+            .args(extra)
+            .arg("-o")
+            .arg(dir.join("run"))
+            .env("FILTERJIT_CACHE", dir.join("cache"))
+            .output()
+            .unwrap()
+    };
+    let o = run(&["--baseline", "@svgf"]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success() && stderr.contains("--baseline @svgf: pipeline"), "{stderr}");
+    assert!(stderr.contains("feeds back pass 1"), "{stderr}");
+    assert!(!dir.join("cache").exists() && !dir.join("run").exists(), "refused before anything is rendered");
+
+    let o = run(&[]);
+    let (stdout, stderr) = (String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{stderr}");
+    let temporal = filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0];
+    assert!(stdout.contains(&format!("against   @{temporal}, the seed")), "{stdout}");
+    let settings = stderr.lines().find(|l| l.starts_with("evolve    ")).unwrap_or_else(|| panic!("{stderr}"));
+    let pipeline = filterjit::corpus::resolve_with_pipeline(&format!("@{temporal}")).unwrap().pipeline.unwrap();
+    assert!(settings.contains(&format!("pipeline {pipeline},")), "the shipped filter's pipeline: {settings}");
+    assert!(stdout.contains("seq-orbit-desk/frame_0008"), "tested on the built-in test sequence: {stdout}");
+}
+
 /// `--objectives error,cost` on a search scored against a baseline filter
 /// (the default and the shipped presets): members worse than the baseline
 /// still filter, so the front is written (it was left empty, silently).

@@ -343,6 +343,82 @@ fn a_damaged_sequence_is_refused_before_anything_is_written() {
     assert!(image.data.iter().flatten().all(|v| v.is_finite()), "every pixel finite");
 }
 
+/// What a user's folders get wrong, each refused before anything is
+/// written or, where the frames can still be filtered, said: a frame twice
+/// (a dataset folder beside an EXR of its name), an output into the frames'
+/// own folder (either layout), a filter whose pipeline lacks what it reads,
+/// a report on frames one of which lacks its reference or written into the
+/// frames' folder; a frame without a reference among frames with one is
+/// filtered, scored where it can be, and every file written.
+#[test]
+fn a_sequence_folder_used_wrongly_is_refused_or_said_before_anything_is_written() {
+    let keep = |_: &str, values: Vec<f32>| Some(values);
+    let run = |args: &[&str]| {
+        let o = filterjit(args);
+        (o.status.success(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    let text = |p: &Path| p.to_str().unwrap().to_string();
+
+    // Frame 2 twice: as an EXR file and as a dataset folder of the same name.
+    let dir = sequence_with("twice", &[1, 2, 3], 0, keep, None);
+    let noisy = dir.join("noisy");
+    std::fs::create_dir_all(noisy.join("frame_0002")).unwrap();
+    std::fs::copy(noisy.join("frame_0002.exr"), noisy.join("frame_0002/noisy.exr")).unwrap();
+    let out = dir.join("out");
+    let (ok, stderr) = run(&["filter", &text(&noisy), "-o", &text(&out)]);
+    assert!(!ok && stderr.contains("frame 2 is there twice") && stderr.contains("frame_0002.exr"), "{stderr}");
+    assert!(!out.exists(), "nothing written");
+    std::fs::remove_dir_all(noisy.join("frame_0002")).unwrap();
+
+    // Into the frames' own folder, named with or without a trailing slash, or inside it as datasets.
+    for output in [text(&noisy), format!("{}/", text(&noisy))] {
+        let (ok, stderr) = run(&["filter", &text(&noisy), "-o", &output]);
+        assert!(!ok && stderr.contains("the renders are read from this folder"), "{output}: {stderr}");
+    }
+    let datasets = dir.join("datasets");
+    for k in 1..=3 {
+        let frame = datasets.join(format!("frame_{k:04}"));
+        std::fs::create_dir_all(&frame).unwrap();
+        std::fs::copy(noisy.join(format!("frame_{k:04}.exr")), frame.join("noisy.exr")).unwrap();
+    }
+    let (ok, stderr) = run(&["filter", &text(&datasets), "-o", &text(&datasets)]);
+    assert!(!ok && stderr.contains("the renders are read from this folder"), "{stderr}");
+    assert!(!datasets.join("frame_0001.exr").exists(), "nothing written beside the frames' folders");
+
+    // A filter whose pipeline lacks what its weight reads.
+    let (ok, stderr) = run(&["filter", &text(&noisy), "--expr", "@svgf", "--pipeline", "atrous=5", "-o", &text(&out)]);
+    assert!(!ok && stderr.contains("reads temporalVariance") && stderr.contains("temporal=A"), "{stderr}");
+    assert!(!out.exists(), "nothing written");
+    // No filter asked for, a pipeline without the temporal stage: the best filter that fits it.
+    let (ok, stderr) = run(&["filter", &text(&noisy), "--pipeline", "window", "-o", &text(&out)]);
+    assert!(ok && stderr.contains("(pipeline window)") && stderr.contains("frame by frame"), "{stderr}");
+    std::fs::remove_dir_all(&out).unwrap();
+
+    // One reference missing: filtered, said, every file written, that frame unscored.
+    std::fs::remove_file(dir.join("reference/frame_0002.exr")).unwrap();
+    let o = filterjit(&["filter", &text(&noisy), "-o", &text(&out)]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains("frame_0002 has no reference"), "{stderr}");
+    for file in ["frame_0002.exr", "animation.png", "comparison.png", "metrics.json"] {
+        assert!(out.join(file).is_file(), "{file} written");
+    }
+    let metrics: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).unwrap()).unwrap();
+    let frames = metrics["frames"].as_array().unwrap();
+    assert!(frames[0]["relmse"].is_f64() && frames[1]["relmse"].is_null() && frames[2]["relmse"].is_f64());
+    assert!(frames[2]["flicker"].is_null(), "no change scored against a frame without a reference");
+    // A report needs every frame's reference, and is not written among the frames.
+    let report = dir.join("report");
+    let (ok, stderr) = run(&["report", "--sequence", &text(&dir), "--no-oidn", "-o", &text(&report)]);
+    assert!(!ok && stderr.contains("frame_0002.exr: no reference"), "{stderr}");
+    assert!(!report.exists(), "refused before anything is measured");
+    std::fs::copy(committed().join("reference/frame_0002.exr"), dir.join("reference/frame_0002.exr")).unwrap();
+    let (ok, stderr) = run(&["report", "--sequence", &text(&dir), "--no-oidn", "-o", &text(&dir)]);
+    assert!(!ok && stderr.contains("the report's files would mix with them"), "{stderr}");
+    assert!(!dir.join("sequence.json").exists());
+}
+
 /// A regression: filterjit's own frames name one normal for the feature and
 /// for the temporal stage's surface test, and loading both decoded the
 /// channels into one of the two only (the feature read as zero, so every

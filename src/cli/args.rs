@@ -213,13 +213,16 @@ pub(crate) enum Preset {
     /// (colour, position, normal, albedo, depth, colour variance) plus the
     /// outlier rule's measures. About 9 minutes on a 2-core CPU once the scenes are rendered.
     Realtime,
-    /// A temporal filter for sequences at one sample per pixel: the built-in
-    /// training sequences (96x96, 1 spp, 256-spp references, each frame
-    /// scored after the temporal stage), pipeline
-    /// `outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5`, seeded with
-    /// `@svgf` and scored against it (`--fitness-pool guarded`, the light
-    /// charged), 4 islands of 20, 10 generations, 2 elites, and only what an
-    /// engine's G-buffer holds plus the temporal stage's measures.
+    /// Improve on the best shipped temporal filter (`filter SEQ_DIR`'s
+    /// default, `@temporal`) for sequences at one sample per pixel: the
+    /// built-in training sequences (96x96, 1 spp, 256-spp references, each
+    /// frame scored after the temporal stage), `@temporal`'s pipeline,
+    /// seeded with it and scored against it (`--fitness-pool guarded`, 2
+    /// elites, the light charged), 4 islands of 20, 10 generations,
+    /// expressions up to 100 nodes, only what an engine's G-buffer holds plus
+    /// the temporal stage's measures; the test compares the best with it on
+    /// the built-in test sequence. About 11 minutes on a 2-core CPU with the
+    /// first renders.
     Temporal,
 }
 
@@ -243,7 +246,10 @@ pub(crate) struct RenderArgs {
     /// The filter pipeline around the expression: stages separated by commas,
     /// `outliers=K` (firefly pre-pass), `trim` (its rule without the brightest neighbour),
     /// `keep` (put back what it clamped, spread evenly) or `keep=surface` (along the normals and toward the light),
-    /// `demodulate` (filter colour/albedo), then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3) [evolve: the preset's (shipped: the best shipped filter's, quick, thesis: window); report, tune: the run's, else window].
+    /// `demodulate` (filter colour/albedo), for sequences the temporal stage `temporal=ALPHA` (with `feedback=K`,
+    /// `clamp=G`, `antilag=K`), then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3),
+    /// then `planefit=R` and `pixelfilter=S` (docs/SEMANTICS.md, "The pipeline") [evolve: the preset's (shipped: the
+    /// best shipped filter's, quick, thesis: window; temporal: @temporal's); report, tune: the run's, else window].
     #[arg(long)]
     pub(crate) pipeline: Option<filterjit::pipeline::FilterPipeline>,
 }
@@ -385,19 +391,19 @@ pub(crate) struct EvolveArgs {
     pub(crate) test_scenes: Vec<String>,
     #[command(flatten)]
     pub(crate) render: RenderArgs,
-    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous64Plane; quick, thesis: @bilateral; realtime: @svgfAtrous].
+    /// The expression the population is seeded from [shipped: the best shipped filter, @evolvedAtrous64Plane; quick, thesis: @bilateral; realtime: @svgfAtrous; temporal: the best shipped temporal filter, @temporal].
     #[arg(long)]
     pub(crate) seed_expr: Option<String>,
     /// Number of islands [every preset: 4].
     #[arg(long)]
     pub(crate) islands: Option<usize>,
-    /// Individuals per island [shipped: 12, quick: 25, thesis: 100, realtime: 40].
+    /// Individuals per island [shipped: 12, quick: 25, thesis: 100, realtime: 40, temporal: 20].
     #[arg(long)]
     pub(crate) island_size: Option<usize>,
-    /// Generations to run: the stopping rule [shipped: 6, quick: 15, thesis: 200, realtime: 30].
+    /// Generations to run: the stopping rule [shipped: 6, quick: 15, thesis: 200, realtime: 30, temporal: 10].
     #[arg(long)]
     pub(crate) generations: Option<u32>,
-    /// Longest expression, in nodes [shipped: 150; quick, thesis, realtime: 75, the thesis's].
+    /// Longest expression, in nodes [shipped: 150; temporal: 100; quick, thesis, realtime: 75, the thesis's].
     #[arg(long)]
     pub(crate) max_length: Option<usize>,
     /// Tournament size [8].
@@ -434,7 +440,7 @@ pub(crate) struct EvolveArgs {
     /// What the search minimises: `error` (the thesis) or `error,cost`:
     /// NSGA-II over error and the modelled cost per pixel (src/cost.rs); the
     /// run's result is a front of filters, fast to accurate (pareto.json)
-    /// [shipped, quick, thesis: error; realtime: error,cost].
+    /// [shipped, quick, thesis, temporal: error; realtime: error,cost].
     #[arg(long)]
     pub(crate) objectives: Option<filterjit::gp::Objectives>,
     /// With `--objectives error,cost`: how many islands (the first) keep
@@ -458,7 +464,7 @@ pub(crate) struct EvolveArgs {
     /// Threads that compile kernels [default: the number of cores].
     #[arg(long)]
     pub(crate) threads: Option<usize>,
-    /// Filters to compare with on the test scenes at the end (repeatable), a shipped one through its own pipeline [start: @crossBilateralTuned and the best shipped filter; others: @crossBilateral].
+    /// Filters to compare with on the test scenes at the end (repeatable), a shipped one through its own pipeline [start: @crossBilateralTuned and the best shipped filter; temporal: none, the seed is compared; others: @crossBilateral].
     #[arg(long)]
     pub(crate) baseline: Vec<String>,
     /// Stage fitness kernels' windows in workgroup memory: auto = on hardware GPUs, off on software adapters (same results either way).

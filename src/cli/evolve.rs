@@ -169,6 +169,12 @@ pub(crate) fn evolve_on(
     // Each baseline as asked for, resolved once: the run compares them, and the table names them.
     let resolved: Vec<(&String, filterjit::corpus::Resolved)> =
         baselines.iter().map(|b| Ok((b, filterjit::corpus::resolve_with_pipeline(b)?))).collect::<Result<_>>()?;
+    // One the run could not score, said by the name it was asked by, before the run starts.
+    for (asked, r) in &resolved {
+        if let Some(pipeline) = &r.pipeline {
+            filterjit::datasets::check_scorable(pipeline).with_context(|| format!("--baseline {asked}"))?;
+        }
+    }
     let summary = ev::run_with(
         &gpu,
         ev::RunOptions {
@@ -377,17 +383,19 @@ const G_BUFFER: &[&str] = &[
     "clampedShare",
 ];
 
-/// The temporal preset's pipeline: fireflies clamped and their light kept,
-/// then SVGF's, its history the blend itself (`feedback=0`, which `evolve`
-/// scores exactly), clamped (`clamp=2`) and cut where the light changed
-/// (`antilag=3`): chosen with SVGF's weight on the built-in training
-/// sequences (docs/SEQUENCES.md, "Measured").
-const TEMPORAL_PIPELINE: &str = "outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5";
-
 /// What an engine's G-buffer holds (no colour variance: a real-time
 /// renderer keeps none) plus the temporal stage's measures.
 const TEMPORAL_G_BUFFER: &[&str] =
     &["color", "pixel", "normal", "texture", "worldPosition", "depth", "historyLength", "temporalVariance"];
+
+/// The pipeline `@temporal`, the best shipped temporal filter, is stored with.
+fn temporal_pipeline() -> filterjit::pipeline::FilterPipeline {
+    let best = format!("@{}", filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0]);
+    filterjit::corpus::resolve_with_pipeline(&best)
+        .ok()
+        .and_then(|r| r.pipeline)
+        .expect("the best shipped temporal filter is stored with its pipeline")
+}
 
 impl PresetValues {
     fn of(preset: Preset) -> PresetValues {
@@ -495,17 +503,27 @@ impl PresetValues {
             },
             Preset::Temporal => PresetValues {
                 gp: Settings { island_size: 20, generations: 10, max_length: 100, ..Settings::default() },
+                // `@temporal`'s: fireflies clamped and their light kept, then SVGF's stage, its
+                // history the blend itself (`feedback=0`, which `evolve` scores exactly), clamped
+                // (`clamp=2`) and cut where the light changed (`antilag=3`): chosen with SVGF's
+                // weight on the built-in training sequences (docs/SEQUENCES.md, "Measured").
+                pipeline: temporal_pipeline(),
                 size: (96, 96),
                 spp: 1,
                 reference_spp: 256,
                 radius: 3,
-                pipeline: TEMPORAL_PIPELINE.parse().expect("a valid pipeline"),
-                seed_expr: "@svgf".into(),
+                // What a sequence gets today (`filter SEQ_DIR`'s default), which the search improves on:
+                // with every loss against it counted and two elites, the best is never worse on the
+                // training sequences.
+                seed_expr: format!("@{}", filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0]),
                 elites: 2,
                 features: TEMPORAL_G_BUFFER,
-                relative_to: Some("@svgf".into()),
+                relative_to: Some(format!("@{}", filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0])),
                 pool: Pool::Guarded,
                 light_tolerance: Some(0.05),
+                // The seed is the one to beat; SVGF's pipeline feeds a pass back, which `evolve`
+                // cannot score frame by frame (`report --sequence` compares it).
+                baselines: Vec::new(),
                 ..thesis()
             },
         }

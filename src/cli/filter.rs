@@ -19,13 +19,15 @@ pub(crate) fn filter(env: &Environment, asked: Asked, scene_path: &Path, output:
         bail!("{}: no such file or folder", scene_path.display());
     }
     if scene::is_sequence(scene_path) {
-        let renders = scene::Sequence::find(scene_path).with_context(|| format!("reading {}", scene_path.display()))?;
+        // Its errors name the folder.
+        let renders = scene::Sequence::find(scene_path)?;
         // The filtered frames keep their names: written where they were read
-        // (the one folder `Sequence::find` lists), they would replace them.
-        let read_from = renders.frames.iter().find(|f| f.path.is_file()).and_then(|f| f.path.parent());
+        // (the one folder `Sequence::find` lists), they would replace them,
+        // or sit beside the frames' own folders as a second copy of each frame.
+        let read_from = renders.frames.first().and_then(|f| f.path.parent());
         if read_from.is_some_and(|folder| same_file(folder, output)) {
             bail!(
-                "-o {}: the renders are read from this folder, and the filtered ones, of the same names, would replace them; write them into another folder",
+                "-o {}: the renders are read from this folder, and the filtered ones, of the same names, would replace them or be read as frames again; write them into another folder",
                 output.display()
             );
         }
@@ -277,6 +279,6 @@ pub(crate) fn refuse_radius(radius: Option<u32>, pipeline: &filterjit::pipeline:
 }
 
 /// Whether `a` and `b` name the same existing file or folder.
-fn same_file(a: &Path, b: &Path) -> bool {
+pub(crate) fn same_file(a: &Path, b: &Path) -> bool {
     matches!((a.canonicalize(), b.canonicalize()), (Ok(a), Ok(b)) if a == b)
 }

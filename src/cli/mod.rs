@@ -33,7 +33,7 @@ use filterjit::{corpus, cpu, datasets, gpu, jit, lang, preview, render, semantic
 use args::*;
 pub(crate) use args::{Cli, Command};
 use evolve::evolve;
-use filter::{filter, refuse_radius};
+use filter::{filter, refuse_radius, same_file};
 use report::{report, scene_context};
 use scenes::{render, sample_bar, scene_stats};
 

@@ -273,8 +273,16 @@ fn report_sequence(env: &Environment, args: &ReportArgs, dir: &std::path::Path) 
     if let Some((flag, _)) = refused.iter().find(|(_, given)| *given) {
         bail!("{flag} describes scenes to render; with --sequence the frames are the sequence's own");
     }
-    let sequence =
-        filterjit::scene::Sequence::find(dir).with_context(|| format!("reading sequence {}", dir.display()))?;
+    let sequence = filterjit::scene::Sequence::find(dir)?;
+    // The report's files (`sequence.json`, `frames/`) would mix with the frames' own.
+    let read_from = sequence.frames.first().and_then(|f| f.path.parent());
+    if super::same_file(dir, &args.output) || read_from.is_some_and(|folder| super::same_file(folder, &args.output)) {
+        bail!(
+            "-o {}: the sequence's frames are read from this folder, and the report's files would mix with them; \
+             write the report into another folder",
+            args.output.display()
+        );
+    }
     let asked: Vec<&str> = match args.exprs.is_empty() {
         true => SEQUENCE_FILTERS.to_vec(),
         false => args.exprs.iter().map(String::as_str).collect(),

@@ -73,18 +73,26 @@ pub(crate) fn filter_sequence(
             dir.display()
         );
     }
-    let sequence = Sequence::find(dir).with_context(|| format!("reading sequence {}", dir.display()))?;
+    // Its errors name the folder.
+    let sequence = Sequence::find(dir)?;
     let first = &sequence.frames.first().context("the sequence has no frames")?.path;
-    let choice = match expr {
-        Some(expr) => Choice::asked(expr, pipeline, radius)?,
-        None => {
-            let (features, variances) = scene::provides(first, view_layer.as_deref())
-                .with_context(|| format!("reading frame {}", first.display()))?;
-            let motion = scene::has_motion(first, view_layer.as_deref())?;
-            let provided = Provided { motion, sequence: true, ..Provided::new(features, variances) };
-            Choice::asked_or_best(None, pipeline, radius, &provided)?
-        }
-    };
+    let (features, variances) =
+        scene::provides(first, view_layer.as_deref()).with_context(|| format!("reading frame {}", first.display()))?;
+    let motion = scene::has_motion(first, view_layer.as_deref())?;
+    let provided = Provided { motion, sequence: true, ..Provided::new(features, variances) };
+    let choice = Choice::asked_or_best(expr, pipeline, radius, &provided)?;
+    // A filter asked for in a pipeline that lacks what it reads (`temporalVariance` without
+    // `temporal=A`), or a frame that lacks it: said before anything is written.
+    let missing: Vec<String> = choice.missing(&provided).iter().map(ToString::to_string).collect();
+    if !missing.is_empty() {
+        bail!(
+            "{} (pipeline {}) reads {}, which neither the pipeline nor the frames of {} give",
+            choice.describe(),
+            choice.pipeline,
+            missing.join(", "),
+            dir.display()
+        );
+    }
     let point_sampled = scene::point_sampled(first, view_layer.as_deref())
         .with_context(|| format!("reading frame {}", first.display()))?;
     let choice = choice.for_point_sampled(point_sampled, pipeline.is_some());
@@ -95,6 +103,18 @@ pub(crate) fn filter_sequence(
     let request = Request { spp, absent, view_layer, ..choice.request() };
     // Every frame's header first: a damaged sequence is refused before anything is written.
     let (width, height) = sequence.check(&request).with_context(|| format!("checking sequence {}", dir.display()))?;
+    // Frames without a reference among frames with one: filtered alike, scored where they can be.
+    let unreferenced: Vec<&str> =
+        sequence.frames.iter().filter(|f| f.reference.is_none()).map(|f| f.name.as_str()).collect();
+    let any_reference = unreferenced.len() < sequence.frames.len();
+    if any_reference && !unreferenced.is_empty() {
+        let (has, them) = if unreferenced.len() == 1 { ("has", "it") } else { ("have", "them") };
+        eprintln!(
+            "note: {} {has} no reference: the figures of {them} and of the change to and from {them} are left out \
+             of the sequence's means",
+            unreferenced.join(", ")
+        );
+    }
     std::fs::create_dir_all(output).with_context(|| format!("creating {}", output.display()))?;
     filterjit::io::remove_stale_temporaries(output);
 
@@ -120,6 +140,8 @@ pub(crate) fn filter_sequence(
     let (side, preview_height) = preview::preview_size(width, height, preview::ANIMATION_SIDE);
     let mut animation: Vec<Vec<[f32; 3]>> = Vec::new();
     let mut comparison: Vec<Vec<[f32; 3]>> = Vec::new();
+    // The comparison's reference panel of a frame without one, where others have one.
+    let blank: Image = if any_reference { vec![[0.0; 3]; width * height] } else { Vec::new() };
     for k in 0..sequence.frames.len() {
         let frame = &sequence.frames[k];
         let scene = sequence.load(k, &request).with_context(|| format!("loading frame {}", frame.path.display()))?;
@@ -172,8 +194,13 @@ pub(crate) fn filter_sequence(
             cell(figure.device_ms, 9, 2),
         );
         if let Some(l) = figure.light.filter(|l| (l - 1.0).abs() > metrics::LIGHT_TOLERANCE) {
+            // The input's own light beside it: a frame whose samples missed a highlight the reference has is dark
+            // before any filter touches it.
+            let noisy = figure
+                .noisy_light
+                .map_or(String::new(), |n| format!("; the noisy input's {:+.1} %", (n - 1.0) * 100.0));
             println!(
-                "light     {}: mean luminance {:+.1} % from the reference's (more than {} %)",
+                "light     {}: mean luminance {:+.1} % from the reference's (more than {} %{noisy})",
                 figure.name,
                 (l - 1.0) * 100.0,
                 metrics::LIGHT_TOLERANCE * 100.0
@@ -189,7 +216,8 @@ pub(crate) fn filter_sequence(
         }
         if k < preview::ANIMATION_FRAMES {
             let small = |image: &[[f32; 3]]| preview::shrunk(image, width, height, side, preview_height);
-            let strip: Vec<Image> = [Some(scene.color.as_slice()), Some(rgb.as_slice()), reference]
+            let reference_panel = reference.or(any_reference.then_some(blank.as_slice()));
+            let strip: Vec<Image> = [Some(scene.color.as_slice()), Some(rgb.as_slice()), reference_panel]
                 .into_iter()
                 .flatten()
                 .map(small)
@@ -243,16 +271,22 @@ fn print_summary(figures: &SequenceFigures) {
         false => String::new(),
     };
     println!(
-        "sequence  relMSE {}{} | flicker {}{} | temporal relMSE {} | HDR-FLIP {} | light {}–{} | {:.1} ms a frame",
+        "sequence  relMSE {}{} | flicker {}{} | temporal relMSE {} | HDR-FLIP {} | light {} | {:.1} ms a frame",
         f(s.relmse),
         settled(s.relmse_settled),
         f(s.flicker),
         settled(s.flicker_settled),
         f(s.temporal_relmse),
         f(s.hdr_flip),
-        s.light_min.map_or("-".into(), |l| format!("{l:.3}")),
-        s.light_max.map_or("-".into(), |l| format!("{l:.3}")),
+        match (s.light_min, s.light_max) {
+            (Some(min), Some(max)) => format!("{min:.3}–{max:.3}"),
+            _ => "-".to_string(),
+        },
         s.frame_ms.unwrap_or(0.0)
     );
-    println!("          (relMSE: Σ_rgb (o − r)² / (r² + 0.01); flicker F: mean |(o_t − o_t−1) − (r_t − r_t−1)| over pixels and channels)");
+    println!(
+        "          (relMSE: Σ_rgb (o − r)² / (r² + 0.01); flicker F: mean |(o_t − o_t−1) − (r_t − r_t−1)| over pixels and \
+         channels; temporal relMSE: the mean of ((o_t − o_t−1) − (r_t − r_t−1))² / (r_t² + 0.01); light: the mean \
+         luminance over the reference's)"
+    );
 }

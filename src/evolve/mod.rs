@@ -104,6 +104,11 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
         cache,
     } = options;
     settings.check().map_err(anyhow::Error::msg)?;
+    // Every pipeline the run scores, before anything is rendered or searched.
+    datasets::check_scorable(&config.pipeline)?;
+    for (baseline, pipeline) in baselines.iter().filter_map(|(b, p)| Some((b, p.as_ref()?))) {
+        datasets::check_scorable(pipeline).with_context(|| format!("baseline {baseline}"))?;
+    }
     let root = transport.is_root();
     let resumed = if root { run_dir::prepare_run_dir(&output, resume, &settings, &config)? } else { None };
     let resumed: Option<State> = serde_json::from_slice(&transport.broadcast(serde_json::to_vec(&resumed)?)?)?;
@@ -279,8 +284,11 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let mut test_baselines = Vec::new();
     for (baseline, pipeline) in baselines {
         match pipeline.filter(|p| *p != config.pipeline) {
-            // Through the run's pipeline, where the scenes hold what it reads.
-            None if baseline.features().is_subset(&features) && baseline.stored_variables().is_subset(&variances) => {
+            // Through the run's pipeline, where the scenes hold what it reads (a feature the
+            // pipeline derives, as the guide, is there wherever the colour is).
+            None if baseline.features().iter().filter(|f| f.needs_data()).all(|f| features.contains(f))
+                && baseline.stored_variables().is_subset(&variances) =>
+            {
                 test_baselines.extend(test(&mut tester, std::slice::from_ref(&baseline))?)
             }
             None => {}

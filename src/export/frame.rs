@@ -151,7 +151,7 @@ impl Plan<'_> {
                     format: binding.format,
                     written_by: Some(shader.to_string()),
                     kept_from: None,
-                    content: what_it_holds(&binding.content),
+                    content: what_it_holds(&image, &binding.content),
                 });
             }
             bound.insert(binding.role.clone(), image);
@@ -177,8 +177,22 @@ impl Plan<'_> {
     }
 }
 
-/// A storage binding's content without how it is written (`images` gives the format).
-fn what_it_holds(content: &str) -> String {
+/// What image `image` holds: its writing binding's `content` without how it
+/// is written (`images` gives the format), except where one binding writes
+/// several images (the spread's `output`, the form's passes).
+fn what_it_holds(image: &str, content: &str) -> String {
+    let named = match image {
+        "spread0" | "spread1" => "the spread so far, read by its next dispatch",
+        "kept" => "the colour the form filters: the clamped colour with what the clamp removed handed back",
+        "surface" => "each pixel's normal direction and clamped luminance, for the spread along the surface",
+        "total" => "texel (0, 0): the clamped luminance summed over the frame, for the spread along the surface",
+        "image0" | "image1" => "the output of a form pass (pass k writes `image{k mod 2}`)",
+        "variance0" | "variance1" => "the variance a form pass carries to the next (pass k writes `variance{k mod 2}`)",
+        _ => "",
+    };
+    if !named.is_empty() {
+        return named.to_string();
+    }
     let cut = [", written with textureStore", "; written with textureStore", "; format "]
         .iter()
         .filter_map(|tail| content.find(tail))

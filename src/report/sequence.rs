@@ -193,6 +193,10 @@ pub fn run(
         request.albedo = true;
         request.features.insert(Feature::Normal);
     }
+    // Every frame scored against its own reference: one without is refused before anything is measured.
+    if let Some(frame) = sequence.frames.iter().find(|f| f.reference.is_none()) {
+        bail!("{}: no reference; a sequence report scores every frame against its own", frame.path.display());
+    }
     let (width, height) = sequence.check(&request).with_context(|| format!("checking sequence {}", sequence.name))?;
     std::fs::create_dir_all(output).with_context(|| format!("creating {}", output.display()))?;
     io::remove_stale_temporaries(output);

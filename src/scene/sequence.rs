@@ -96,10 +96,22 @@ impl Sequence {
         Ok(sequence)
     }
 
-    /// Frame numbers that skip one are a missing frame.
+    /// Frame numbers that skip one are a missing frame; one number twice
+    /// (a frame's folder beside a file of its name) is two layouts in one folder.
     fn check_numbers(&self, dir: &Path) -> Result<(), SceneError> {
         for pair in self.frames.windows(2) {
             if let (Some(a), Some(b)) = (pair[0].number, pair[1].number) {
+                if a == b {
+                    return Err(SceneError::Sequence {
+                        path: dir.to_path_buf(),
+                        message: format!(
+                            "frame {a} is there twice: {} and {} (a sequence's folder holds each frame once, as a \
+                             dataset folder or as an EXR file; move one of them out)",
+                            pair[0].path.display(),
+                            pair[1].path.display()
+                        ),
+                    });
+                }
                 if b > a + 1 {
                     return Err(SceneError::Sequence {
                         path: dir.to_path_buf(),
