@@ -216,10 +216,15 @@ fn a_sequence_filters_end_to_end_with_no_flag() {
         assert!(frame["hdr_flip"].as_f64().is_some() && frame["wall_ms"].as_f64().unwrap() > 0.0, "{frame}");
     }
     assert!(frames[0]["flicker"].is_null() && frames[1]["flicker"].as_f64().unwrap() > 0.0, "flicker from frame 2 on");
+    // The noisy input's flicker beside it: what the filter took out.
+    for frame in &frames[1..] {
+        assert!(frame["noisy_flicker"].as_f64().unwrap() > 2.0 * frame["flicker"].as_f64().unwrap(), "{frame}");
+    }
     assert!(metrics["flicker"].as_f64().is_some() && metrics["temporal_relmse"].as_f64().is_some());
     // The sequence's line states what the issue asks of it.
     let line = stdout.lines().find(|l| l.starts_with("sequence  relMSE")).unwrap_or_else(|| panic!("{stdout}"));
     assert!(line.contains("flicker") && line.contains("light") && line.contains("ms a frame"), "{line}");
+    assert!(line.contains("(the noisy input's "), "{line}");
 
     // One frame of it filtered alone is scored against its reference of the
     // same name in `reference/` beside `noisy/`, as the sequence's frames are.

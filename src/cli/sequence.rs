@@ -34,6 +34,8 @@ struct FrameFigures {
     hdr_flip: Option<f64>,
     /// Against the frame before (none for the first).
     flicker: Option<f64>,
+    /// The noisy input's, likewise: what the filter is given.
+    noisy_flicker: Option<f64>,
     temporal_relmse: Option<f64>,
     wall_ms: f64,
     device_ms: Option<f64>,
@@ -134,8 +136,9 @@ pub(crate) fn filter_sequence(
     );
     let mut figures = Vec::new();
     let mut scores = Vec::new();
-    // The frame before's output and reference, for the change between frames.
+    // The frame before's output and reference, for the change between frames, and its noisy input.
     let mut previous: Option<(Image, Option<Image>)> = None;
+    let mut previous_noisy: Option<Image> = None;
     // The previews' frames, made small as they come.
     let (side, preview_height) = preview::preview_size(width, height, preview::ANIMATION_SIDE);
     let mut animation: Vec<Vec<[f32; 3]>> = Vec::new();
@@ -163,6 +166,12 @@ pub(crate) fn filter_sequence(
         let before = previous.as_ref().and_then(|(output, reference)| Some((output.as_slice(), reference.as_deref()?)));
         let score = reference.map(|r| FrameScore::of(&rgb, r, before, scene.spp, (width, height)));
         let noisy = reference.map(|r| metrics::errors(&scene.color, r, scene.spp));
+        let noisy_flicker = match (reference, before, &previous_noisy) {
+            (Some(r), Some((_, r0)), Some(noisy_before)) => {
+                Some(metrics::temporal((noisy_before.as_slice(), scene.color.as_slice()), (r0, r)).flicker)
+            }
+            _ => None,
+        };
         let temporal_ms = done.temporal.map(|span| ms(span.device.unwrap_or(span.wall)));
         let figure = FrameFigures {
             name: frame.name.clone(),
@@ -172,6 +181,7 @@ pub(crate) fn filter_sequence(
             noisy_light: noisy.and_then(|e| e.light),
             hdr_flip: score.map(|s| s.hdr_flip),
             flicker: score.and_then(|s| s.flicker),
+            noisy_flicker,
             temporal_relmse: score.and_then(|s| s.temporal_relmse),
             wall_ms: ms(wall),
             device_ms: filtered.time.device.map(ms),
@@ -228,6 +238,7 @@ pub(crate) fn filter_sequence(
         }
         figures.push(figure);
         scores.push(score);
+        previous_noisy = Some(scene.color);
         previous = Some((rgb, scene.reference));
     }
 
@@ -270,12 +281,27 @@ fn print_summary(figures: &SequenceFigures) {
         true => format!(" (frames {}–{}: {})", SETTLED_FROM + 1, figures.frames.len(), f(v)),
         false => String::new(),
     };
+    // The noisy input's flicker beside the output's, over the same frames: what the filter took out.
+    let from = if figures.frames.len() > SETTLED_FROM { SETTLED_FROM } else { 0 };
+    let noisy: Vec<f64> = figures.frames.iter().skip(from).filter_map(|f| f.noisy_flicker).collect();
+    let noisy =
+        (!noisy.is_empty()).then(|| format!("the noisy input's {:.5}", noisy.iter().sum::<f64>() / noisy.len() as f64));
+    let flicker = match (from, noisy) {
+        (0, None) => f(s.flicker),
+        (0, Some(noisy)) => format!("{} ({noisy})", f(s.flicker)),
+        (_, None) => format!("{}{}", f(s.flicker), settled(s.flicker_settled)),
+        (_, Some(noisy)) => format!(
+            "{} (frames {}–{}: {}; {noisy})",
+            f(s.flicker),
+            SETTLED_FROM + 1,
+            figures.frames.len(),
+            f(s.flicker_settled)
+        ),
+    };
     println!(
-        "sequence  relMSE {}{} | flicker {}{} | temporal relMSE {} | HDR-FLIP {} | light {} | {:.1} ms a frame",
+        "sequence  relMSE {}{} | flicker {flicker} | temporal relMSE {} | HDR-FLIP {} | light {} | {:.1} ms a frame",
         f(s.relmse),
         settled(s.relmse_settled),
-        f(s.flicker),
-        settled(s.flicker_settled),
         f(s.temporal_relmse),
         f(s.hdr_flip),
         match (s.light_min, s.light_max) {
