@@ -24,8 +24,7 @@ pub(crate) fn filter(env: &Environment, asked: Asked, scene_path: &Path, output:
         // The filtered frames keep their names: written where they were read
         // (the one folder `Sequence::find` lists), they would replace them,
         // or sit beside the frames' own folders as a second copy of each frame.
-        let read_from = renders.frames.first().and_then(|f| f.path.parent());
-        if read_from.is_some_and(|folder| same_file(folder, output)) {
+        if renders.folder().is_some_and(|folder| same_file(folder, output)) {
             bail!(
                 "-o {}: the renders are read from this folder, and the filtered ones, of the same names, would replace them or be read as frames again; write them into another folder",
                 output.display()

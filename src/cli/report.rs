@@ -275,8 +275,7 @@ fn report_sequence(env: &Environment, args: &ReportArgs, dir: &std::path::Path) 
     }
     let sequence = filterjit::scene::Sequence::find(dir)?;
     // The report's files (`sequence.json`, `frames/`) would mix with the frames' own.
-    let read_from = sequence.frames.first().and_then(|f| f.path.parent());
-    if super::same_file(dir, &args.output) || read_from.is_some_and(|folder| super::same_file(folder, &args.output)) {
+    if super::same_file(dir, &args.output) || sequence.folder().is_some_and(|f| super::same_file(f, &args.output)) {
         bail!(
             "-o {}: the sequence's frames are read from this folder, and the report's files would mix with them; \
              write the report into another folder",

@@ -5,7 +5,8 @@
 
 use std::collections::BTreeMap;
 
-use super::{BindingKind, Dispatch, Image, Manifest, Stage, StageName, Step};
+use super::{Binding, BindingKind, Dispatch, Image, Manifest, StageName, Step};
+use crate::jit::interface::UniformField;
 
 /// The manifest's shader name for the form's.
 const FORM: &str = "form";
@@ -54,10 +55,7 @@ impl Plan<'_> {
     fn stage(&mut self, name: StageName, filtered: Option<&str>) -> bool {
         let manifest = self.manifest;
         let Some(stage) = manifest.stage(name) else { return false };
-        // The pre-pass names no images: each binding takes its role's.
-        let once = [super::StageDispatch { uniform_values: BTreeMap::new(), images: BTreeMap::new() }];
-        let sequence = if stage.sequence.is_empty() { &once[..] } else { &stage.sequence[..] };
-        for dispatch in sequence {
+        for dispatch in &stage.sequence {
             let mut values = stage.uniform_values.clone();
             values.extend(dispatch.uniform_values.clone());
             let images = dispatch
@@ -71,7 +69,8 @@ impl Plan<'_> {
                     (role.clone(), image)
                 })
                 .collect();
-            self.dispatch(name.key(), stage, values, stage.first_frame.clone(), images);
+            let first_frame = stage.first_frame.clone();
+            self.dispatch(name.key(), (&stage.uniform.fields, &stage.bindings), values, first_frame, images);
         }
         true
     }
@@ -80,16 +79,7 @@ impl Plan<'_> {
     /// image the last one writes.
     fn form(&mut self) -> String {
         let manifest = self.manifest;
-        let form = Stage {
-            file: String::new(),
-            entry_point: manifest.entry_point.clone(),
-            dispatch: manifest.dispatch.clone(),
-            uniform: manifest.uniform.clone(),
-            uniform_values: BTreeMap::new(),
-            bindings: manifest.bindings.clone(),
-            first_frame: BTreeMap::new(),
-            sequence: Vec::new(),
-        };
+        let form = (&manifest.uniform.fields[..], &manifest.bindings[..]);
         let mut colour = manifest.filters.clone();
         // The variance the passes carry, where the weight reads one: pass 0 binds the frame's.
         let carried = manifest.carries.clone();
@@ -115,7 +105,7 @@ impl Plan<'_> {
                 images.insert(role.clone(), image.clone());
             }
             let values = values.map(|(field, value)| (field.to_string(), value)).into();
-            self.dispatch(FORM, &form, values, BTreeMap::new(), images);
+            self.dispatch(FORM, form, values, BTreeMap::new(), images);
             // The pass the temporal stage feeds back, kept before a later pass writes its texture again.
             self.keep(Some(k));
             colour = out;
@@ -124,20 +114,21 @@ impl Plan<'_> {
         colour
     }
 
-    /// One dispatch of `stage`'s shader: every texture binding's image
-    /// (the one `images` names for its role, else the binding's own `image`,
-    /// else its role), and the uniform fields of `values` the shader has.
+    /// One dispatch of `shader`, whose uniform has `fields` and which has
+    /// `bindings`: every texture binding's image (the one `images` names for
+    /// its role, else the binding's own `image`, else its role), and the
+    /// fields of `values` the uniform has.
     fn dispatch(
         &mut self,
         shader: &str,
-        stage: &Stage,
+        (fields, bindings): (&[UniformField], &[Binding]),
         values: BTreeMap<String, f64>,
         first_frame: BTreeMap<String, f64>,
         images: BTreeMap<String, String>,
     ) {
-        let has_field = |name: &String| stage.uniform.fields.iter().any(|f| &f.name == name);
+        let has_field = |name: &String| fields.iter().any(|f| &f.name == name);
         let mut bound = BTreeMap::new();
-        for binding in stage.bindings.iter().filter(|b| b.kind != BindingKind::Uniform) {
+        for binding in bindings.iter().filter(|b| b.kind != BindingKind::Uniform) {
             let image = images.get(&binding.role).cloned().or(binding.image.map(str::to_string));
             let mut image = image.unwrap_or_else(|| binding.role.clone());
             // An input the pipeline does not read (the albedo of a pre-pass that

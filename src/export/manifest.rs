@@ -201,8 +201,8 @@ pub struct Stage {
     /// (and after a cut): the temporal stage's `history` = 0.
     #[serde(skip)]
     pub first_frame: BTreeMap<String, f64>,
-    /// Its dispatches in order, where there are several (the spread); a
-    /// stage without one is dispatched once, its images named by role.
+    /// Its dispatches in order: one, or the spread's several; each names the
+    /// image of the roles that do not bind their own name.
     #[serde(skip)]
     pub sequence: Vec<StageDispatch>,
 }

@@ -40,9 +40,9 @@ pub(super) fn build(
             let module = jit::prepass_module(Some(format)).map_err(jit::CompileError::from)?;
             let (mut stage, code) = stage(&interface, &module, &jit::prepass_wgsl(Some(format)))?;
             let params = jit::PrepassParams::of(pipeline, 0, 0);
-            stage.uniform_values = [("k", params.k as f64), ("stages", params.stages as f64)]
-                .map(|(field, value)| (field.to_string(), value))
-                .into();
+            // Each binding takes its role's image.
+            (stage.uniform_values, stage.sequence) =
+                once(&[("k", params.k as f64), ("stages", params.stages as f64)], &[]);
             (stage, code)
         }
         StageName::Spread => {

@@ -55,6 +55,13 @@ pub fn is_sequence(path: &Path) -> bool {
 }
 
 impl Sequence {
+    /// The folder its frames are listed in (`noisy/` where the frames are
+    /// files there, else the folder given): where files of the frames' names
+    /// would be read as frames.
+    pub fn folder(&self) -> Option<&Path> {
+        self.frames.first().and_then(|f| f.path.parent())
+    }
+
     /// Whether the folder holds frames of one sequence: two or more, and a
     /// frame number at the end of their names. A folder whose renders are
     /// named without one (`tabletop/`, `corridor_4spp.exr`), or that holds one
