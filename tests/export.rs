@@ -423,6 +423,19 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
             (Some(1), Some(0)),
             "{text}: `history` is a u32, 0 on a first frame"
         );
+        // What the engine supplies, with the channels the frame reads of it.
+        let read = |image: &str| {
+            let inputs = manifest["inputs"].as_array().unwrap();
+            let input = inputs.iter().find(|i| i["image"] == image);
+            input.map(|i| i["components"].as_str().unwrap().to_string())
+        };
+        assert_eq!(
+            (read("geometry").as_deref(), read("motion").as_deref(), read("albedo").as_deref()),
+            (Some("xyzw"), Some("xy"), Some("xyz")),
+            "{text}: the normal and depth of each pixel, its motion, its albedo"
+        );
+        assert_eq!(exported.manifest.dispatches_of(StageName::Temporal), 1, "{text}");
+        assert_eq!(exported.manifest.kept().count(), 5, "{text}: five images kept for the next frame");
         let feedback = pipeline.temporal.unwrap().feedback;
         let fed_back = steps.iter().position(|s| s["keep"]["into"] == "history").expect("the history kept");
         match feedback {

@@ -112,7 +112,11 @@ pub(super) fn export(
     }
     for (name, _) in &exported.stages {
         let stage = exported.manifest.stage(*name).expect("the manifest has every exported stage");
-        println!("wrote {} ({})", output.with_file_name(&stage.file).display(), describe(*name, stage.sequence.len()));
+        println!(
+            "wrote {} ({})",
+            output.with_file_name(&stage.file).display(),
+            describe(*name, exported.manifest.dispatches_of(*name))
+        );
     }
     if exported.manifest.passes > 1 {
         println!(
@@ -120,8 +124,8 @@ pub(super) fn export(
             exported.manifest.passes
         );
     }
-    if !exported.manifest.history.is_empty() {
-        let kept: Vec<&str> = exported.manifest.history.iter().map(|k| k.image.as_str()).collect();
+    let kept: Vec<&str> = exported.manifest.kept().map(|k| k.name.as_str()).collect();
+    if !kept.is_empty() {
         println!("sequence  keep {} from frame to frame (the manifest's `keep` steps)", kept.join(", "));
         if pipeline.pixel_filter.is_none() {
             let point_sampled =

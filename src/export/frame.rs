@@ -5,6 +5,7 @@
 
 use std::collections::BTreeMap;
 
+use super::placement::Placement;
 use super::{Binding, BindingKind, Dispatch, Image, Manifest, StageName, Step};
 use crate::jit::interface::UniformField;
 
@@ -13,9 +14,9 @@ const FORM: &str = "form";
 
 /// The steps of one frame, the images they make, and the image that holds
 /// the filtered frame at the end, for `manifest` once every stage is placed
-/// and its inputs known.
-pub(super) fn plan(manifest: &Manifest) -> (Vec<Step>, Vec<Image>, String) {
-    let mut plan = Plan { steps: Vec::new(), images: Vec::new(), manifest };
+/// (`placement`) and its inputs known.
+pub(super) fn plan(manifest: &Manifest, placement: &Placement) -> (Vec<Step>, Vec<Image>, String) {
+    let mut plan = Plan { steps: Vec::new(), images: Vec::new(), manifest, placement };
     for name in
         [StageName::Prepass, StageName::Spread, StageName::Temporal, StageName::TemporalVariance, StageName::Guide]
     {
@@ -30,7 +31,7 @@ pub(super) fn plan(manifest: &Manifest) -> (Vec<Step>, Vec<Image>, String) {
     }
     plan.keep(None);
     let Plan { steps, mut images, .. } = plan;
-    for kept in &manifest.history {
+    for kept in &placement.history {
         images.push(Image {
             name: kept.image.clone(),
             format: None,
@@ -46,6 +47,7 @@ struct Plan<'m> {
     steps: Vec<Step>,
     images: Vec<Image>,
     manifest: &'m Manifest,
+    placement: &'m Placement,
 }
 
 impl Plan<'_> {
@@ -53,11 +55,12 @@ impl Plan<'_> {
     /// is the image the name `filtered` stands for (the form's last output).
     /// Whether it has.
     fn stage(&mut self, name: StageName, filtered: Option<&str>) -> bool {
-        let manifest = self.manifest;
-        let Some(stage) = manifest.stage(name) else { return false };
-        for dispatch in &stage.sequence {
-            let mut values = stage.uniform_values.clone();
-            values.extend(dispatch.uniform_values.clone());
+        let (Some(stage), Some(dispatches)) = (self.manifest.stage(name), self.placement.of(name)) else {
+            return false;
+        };
+        for dispatch in &dispatches.each {
+            let mut values = dispatches.values.clone();
+            values.extend(dispatch.values.clone());
             let images = dispatch
                 .images
                 .iter()
@@ -69,7 +72,7 @@ impl Plan<'_> {
                     (role.clone(), image)
                 })
                 .collect();
-            let first_frame = stage.first_frame.clone();
+            let first_frame = dispatches.first_frame.clone();
             self.dispatch(name.key(), (&stage.uniform.fields, &stage.bindings), values, first_frame, images);
         }
         true
@@ -80,9 +83,9 @@ impl Plan<'_> {
     fn form(&mut self) -> String {
         let manifest = self.manifest;
         let form = (&manifest.uniform.fields[..], &manifest.bindings[..]);
-        let mut colour = manifest.filters.clone();
+        let mut colour = self.placement.filters.clone();
         // The variance the passes carry, where the weight reads one: pass 0 binds the frame's.
-        let carried = manifest.carries.clone();
+        let carried = self.placement.carries.clone();
         let mut variance = carried.clone();
         for k in 0..manifest.passes {
             let (out, variance_out) = (format!("image{}", k % 2), format!("variance{}", k % 2));
@@ -162,10 +165,35 @@ impl Plan<'_> {
 
     /// What a sequence keeps right after form pass `after_pass`, or at the end of the frame.
     fn keep(&mut self, after_pass: Option<u32>) {
-        for kept in self.manifest.history.iter().filter(|k| k.after_pass == after_pass) {
+        for kept in self.placement.history.iter().filter(|k| k.after_pass == after_pass) {
             self.steps.push(Step::Keep { from: kept.from.clone(), into: kept.image.clone() });
         }
     }
+}
+
+/// The channels of `image` that some dispatch of `manifest`'s frame reads,
+/// in `xyzw` order: the union of the components of every binding it is bound to.
+pub(super) fn components_read(manifest: &Manifest, image: &str) -> String {
+    let mut read = [false; 4];
+    for step in &manifest.frame {
+        let Step::Dispatch(dispatch) = step else { continue };
+        let bindings = match dispatch.shader.as_str() {
+            FORM => &manifest.bindings,
+            key => match StageName::ALL.iter().find(|name| name.key() == key).and_then(|name| manifest.stage(*name)) {
+                Some(stage) => &stage.bindings,
+                None => continue,
+            },
+        };
+        for (role, bound) in &dispatch.images {
+            let Some(binding) = bindings.iter().find(|b| &b.role == role) else { continue };
+            if bound == image && binding.kind == BindingKind::SampledTexture {
+                for (k, channel) in "xyzw".chars().enumerate() {
+                    read[k] |= binding.components.contains(channel);
+                }
+            }
+        }
+    }
+    "xyzw".chars().zip(read).filter(|(_, r)| *r).map(|(c, _)| c).collect()
 }
 
 /// What image `image` holds: its writing binding's `content` without how it

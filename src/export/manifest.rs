@@ -80,23 +80,6 @@ pub struct Manifest {
     /// filtered frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub pixelfilter: Option<Stage>,
-    /// The image the form's first pass filters: `color` (the noisy colour),
-    /// `prepared` (the pre-pass's), `kept` (the spread's) or `blend` (the
-    /// temporal stage's); `frame` binds it.
-    #[serde(skip)]
-    pub filters: String,
-    /// The variance the form's passes carry (`colorVariance` or
-    /// `temporalVariance`), where its weight reads one and it has passes:
-    /// pass 0 binds the frame's, pass k the `variance_out` of pass k - 1;
-    /// `frame` binds it.
-    #[serde(skip)]
-    pub carries: Option<String>,
-    /// What a sequence keeps from frame to frame (empty without the temporal
-    /// stage): each image takes what `from` holds, in `from`'s format,
-    /// copied at the end of the frame or right after form pass `after_pass`
-    /// (the `keep` steps of `frame`, and `images`, say so to a host).
-    #[serde(skip)]
-    pub history: Vec<Kept>,
     /// What runs in which order and which image each binding is, in words.
     pub order: Vec<String>,
     /// The images the engine supplies every frame, by the name every
@@ -180,11 +163,18 @@ fn whole_as_integers<S: serde::Serializer>(values: &BTreeMap<String, f64>, seria
 pub struct Supplied {
     /// The name the bindings read it by (`color`, `albedo`, `normal`, `geometry`, `motion`…).
     pub image: String,
+    /// The channels some dispatch of `frame` reads (`x`, `xy`, `xyz`, `xyzw`):
+    /// every input is read with `textureLoad` from a `texture_2d<f32>`, so
+    /// any float format with at least these channels will do
+    /// (`rgba32float`, `rgba16float`; `r32float` for `x`). filterjit's own
+    /// are `rgba32float`, `r32float` for one channel.
+    pub components: String,
     /// What it must hold.
     pub content: String,
 }
 
-/// A shader of the pipeline besides the form's (the pre-pass, the spread).
+/// A shader of the pipeline besides the form's (the pre-pass, the spread);
+/// `frame` says when it runs, with which values and images.
 #[derive(Clone, Debug, Serialize)]
 pub struct Stage {
     /// The shader's file, beside this manifest (set by whoever writes the files).
@@ -192,45 +182,7 @@ pub struct Stage {
     pub entry_point: String,
     pub dispatch: String,
     pub uniform: Uniform,
-    /// Values for the uniform's fields other than width and height, in
-    /// every dispatch (the frame's steps carry them).
-    #[serde(skip)]
-    pub uniform_values: BTreeMap<String, f64>,
     pub bindings: Vec<Binding>,
-    /// Values that replace `uniform_values` on a sequence's first frame
-    /// (and after a cut): the temporal stage's `history` = 0.
-    #[serde(skip)]
-    pub first_frame: BTreeMap<String, f64>,
-    /// Its dispatches in order: one, or the spread's several; each names the
-    /// image of the roles that do not bind their own name.
-    #[serde(skip)]
-    pub sequence: Vec<StageDispatch>,
-}
-
-/// One dispatch of a stage's shader.
-#[derive(Clone, Debug, Serialize)]
-pub struct StageDispatch {
-    /// Values for the uniform's fields other than width and height.
-    pub uniform_values: BTreeMap<String, f64>,
-    /// The image each binding role reads or writes: `color` (the noisy
-    /// colour), the pre-pass's `prepared` and `modulation`, or a texture of
-    /// the stage's own (`spread0`, `spread1`, `kept`), made in the format of
-    /// the storage binding that first writes it.
-    pub images: BTreeMap<String, String>,
-}
-
-/// An image a sequence keeps for its next frame (`Manifest::history`).
-#[derive(Clone, Debug, Serialize)]
-pub struct Kept {
-    /// The name the next frame's bindings read it by (`history`, `moments`…).
-    pub image: String,
-    /// The image of this frame it takes: a stage's output or an input.
-    pub from: String,
-    /// Copied right after this pass of the form (`from` is that pass's
-    /// output, which a later pass overwrites); else at the end of the frame.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub after_pass: Option<u32>,
-    pub content: String,
 }
 
 /// The version of the manifest's layout, raised whenever a host would have

@@ -8,12 +8,14 @@
 //!
 //! One module per part: [`manifest`] holds the manifest's types (the
 //! contract `web/filterjit.js` and `examples/run_exported` read), `stages`
-//! builds the manifest stage by stage, `bindings` describes each binding,
-//! `translate` runs naga's back ends.
+//! builds the manifest stage by stage, `placement` holds what placing them
+//! decides, `frame` writes that as the frame's steps, `bindings` describes
+//! each binding, `translate` runs naga's back ends.
 
 mod bindings;
 mod frame;
 mod manifest;
+mod placement;
 mod stages;
 mod translate;
 
@@ -24,6 +26,7 @@ use serde::Serialize;
 use crate::jit::{self, KernelKind, OutputFormat};
 use crate::lang::Expr;
 use crate::pipeline::FilterPipeline;
+use placement::Placement;
 use stages::{manifest, order};
 use translate::{header, translate};
 
@@ -213,16 +216,24 @@ fn export_with_radius(
     let (code, entry_point) = translate(kernel.validated(), kernel.wgsl(), interface, target)?;
     let mut manifest = manifest(&kernel, target, format, entry_point, pipeline);
     manifest.radius = radius;
+    let mut placement = Placement::new(interface.carried_variance().map(|v| v.name().to_string()));
     let mut stages = Vec::new();
     for name in StageName::ALL {
-        if let Some((stage, code)) = stages::build(name, &kernel, pipeline, &manifest, target, format)? {
-            stages::place(&mut manifest, name, stage, pipeline);
+        if let Some((stage, dispatches, code)) =
+            stages::build(name, &kernel, pipeline, (&manifest, &placement), target, format)?
+        {
+            placement.place(&mut manifest, name, (stage, dispatches), pipeline);
             stages.push((name, code));
         }
     }
-    manifest.order = order(&manifest, pipeline);
+    manifest.order = order(&manifest, &placement, pipeline);
     manifest.inputs = stages::inputs(&manifest, pipeline);
-    (manifest.frame, manifest.images, manifest.output) = frame::plan(&manifest);
+    (manifest.frame, manifest.images, manifest.output) = frame::plan(&manifest, &placement);
+    let read: Vec<String> =
+        manifest.inputs.iter().map(|input| frame::components_read(&manifest, &input.image)).collect();
+    for (input, components) in manifest.inputs.iter_mut().zip(read) {
+        input.components = components;
+    }
     let with_header = |code: Code| match code {
         Code::Text(text) if target != Target::Wgsl => Code::Text(header(&manifest, &text)),
         other => other,

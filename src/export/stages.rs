@@ -4,60 +4,56 @@
 use std::collections::BTreeMap;
 
 use super::bindings::{bindings, Stages};
+use super::placement::{Dispatches, Placement, StageDispatch};
 use super::translate::translate;
 use super::{
-    Binding, Code, ExportError, Kept, Manifest, Stage, StageDispatch, StageName, Supplied, Target, Uniform,
-    MANIFEST_VERSION, NORMALISATION, SEMANTICS,
+    Binding, Code, ExportError, Image, Manifest, Stage, StageName, Step, Supplied, Target, Uniform, MANIFEST_VERSION,
+    NORMALISATION, SEMANTICS,
 };
 use crate::jit::interface::BindingInterface;
 use crate::jit::{self, KernelKind, OutputFormat, Role, ValidatedKernel, ValidatedModule, WORKGROUP};
-use crate::pipeline::{FilterPipeline, Keep, Temporal};
+use crate::pipeline::{FilterPipeline, Keep};
 
-/// Stage `name`'s manifest entry and shader, where `pipeline` has the stage;
-/// `manifest` holds the stages before it ([`place`]d).
+/// A stage's manifest entry, its dispatches in a frame and its shader.
+pub(super) type Built = (Stage, Dispatches, Code);
+
+/// Stage `name`'s manifest entry, dispatches and shader, where `pipeline`
+/// has the stage; `manifest` and `placement` hold the stages before it
+/// ([`Placement::place`]d).
 pub(super) fn build(
     name: StageName,
     kernel: &ValidatedKernel,
     pipeline: &FilterPipeline,
-    manifest: &Manifest,
+    (manifest, placement): (&Manifest, &Placement),
     target: Target,
     format: OutputFormat,
-) -> Result<Option<(Stage, Code)>, ExportError> {
+) -> Result<Option<Built>, ExportError> {
     let stage = |interface: &BindingInterface, module: &ValidatedModule, wgsl: &str| {
         let (code, entry_point) = translate(module, wgsl, interface, target)?;
         Ok::<_, ExportError>((Stage::of(interface, entry_point, &manifest.dispatch, target, format, name.into()), code))
     };
-    let images = |pairs: &[(&str, &str)]| -> BTreeMap<String, String> {
-        pairs.iter().map(|(role, image)| (role.to_string(), image.to_string())).collect()
-    };
-    let once = |values: &[(&str, f64)], pairs: &[(&str, &str)]| {
-        let uniform_values = values.iter().map(|(field, value)| (field.to_string(), *value)).collect();
-        (uniform_values, vec![StageDispatch { uniform_values: BTreeMap::new(), images: images(pairs) }])
-    };
+    let once = Dispatches::once;
     let built = match name {
         StageName::Prepass if pipeline.outliers.is_some() || pipeline.demodulate => {
             let interface = jit::BindingInterface::prepass(Some(format));
             let module = jit::prepass_module(Some(format)).map_err(jit::CompileError::from)?;
-            let (mut stage, code) = stage(&interface, &module, &jit::prepass_wgsl(Some(format)))?;
+            let (stage, code) = stage(&interface, &module, &jit::prepass_wgsl(Some(format)))?;
             let params = jit::PrepassParams::of(pipeline, 0, 0);
             // Each binding takes its role's image.
-            (stage.uniform_values, stage.sequence) =
-                once(&[("k", params.k as f64), ("stages", params.stages as f64)], &[]);
-            (stage, code)
+            (stage, once(&[("k", params.k as f64), ("stages", params.stages as f64)], &[]), code)
         }
         StageName::Spread => {
             let Some(keep) = pipeline.keep() else { return Ok(None) };
             let (interface, wgsl, module) = jit::spread_kernel(keep, Some(format));
             let module = module.map_err(jit::CompileError::from)?;
-            let (mut stage, code) = stage(&interface, &module, &wgsl)?;
-            stage.sequence = spread_sequence(keep);
-            (stage, code)
+            let (stage, code) = stage(&interface, &module, &wgsl)?;
+            (stage, Dispatches { each: spread_sequence(keep), ..Dispatches::default() }, code)
         }
         StageName::Temporal => {
             let Some(temporal) = pipeline.temporal else { return Ok(None) };
             let interface = jit::BindingInterface::temporal(Some(format));
             let module = jit::temporal_module(Some(format)).map_err(jit::CompileError::from)?;
-            let (mut stage, code) = stage(&interface, &module, &jit::temporal_wgsl(Some(format)))?;
+            let (stage, code) = stage(&interface, &module, &jit::temporal_wgsl(Some(format)))?;
             let params = jit::TemporalParams::of(temporal, 0, 0, true);
             // As written (0.2, not 0.2's f32 widened); a host stores them as f32 again.
             let decimal = |v: f32| v.to_string().parse::<f64>().expect("a float's text");
@@ -70,42 +66,38 @@ pub(super) fn build(
             let read = ["geometry", "albedo", "motion", "history", "moments", "previous_geometry", "previous_albedo"];
             let mut pairs: Vec<(&str, &str)> = read.map(|image| (image, image)).to_vec();
             pairs.extend([
-                ("color", manifest.filters.as_str()),
+                ("color", placement.filters.as_str()),
                 ("past_modulation", "past_modulation"),
                 ("blend", "blend"),
                 ("moments_out", "moments_out"),
                 ("temporal_modulation", "temporal_modulation"),
                 ("accumulated", "accumulated"),
             ]);
-            (stage.uniform_values, stage.sequence) = once(&values, &pairs);
-            stage.first_frame = [("history".to_string(), 0.0)].into();
-            (stage, code)
+            let dispatches = Dispatches { first_frame: [("history".to_string(), 0.0)].into(), ..once(&values, &pairs) };
+            (stage, dispatches, code)
         }
         StageName::TemporalVariance if pipeline.temporal.is_some() => {
             let interface = jit::BindingInterface::temporal_variance(Some(format));
             let module = jit::temporal_variance_module(Some(format)).map_err(jit::CompileError::from)?;
-            let (mut stage, code) = stage(&interface, &module, &jit::temporal_variance_wgsl(Some(format)))?;
+            let (stage, code) = stage(&interface, &module, &jit::temporal_variance_wgsl(Some(format)))?;
             let pairs = [
                 ("sample_variance", "accumulated"),
                 ("moments", "moments_out"),
                 ("temporalVariance", "temporalVariance"),
             ];
-            (stage.uniform_values, stage.sequence) = once(&[], &pairs);
-            (stage, code)
+            (stage, once(&[], &pairs), code)
         }
         StageName::Guide if kernel.source().layout.reads_guide() => {
             let guide = jit::compile_guide(KernelKind::Export(format))?;
-            let (mut stage, code) = stage(&guide.source().interface, guide.validated(), guide.wgsl())?;
+            let (stage, code) = stage(&guide.source().interface, guide.validated(), guide.wgsl())?;
             let values = [("radius", 0.0), ("step", 1.0), ("level", 0.0), ("last", 1.0)];
-            (stage.uniform_values, stage.sequence) =
-                once(&values, &[("color", manifest.filters.as_str()), ("guide", "guide")]);
-            (stage, code)
+            (stage, once(&values, &[("color", placement.filters.as_str()), ("guide", "guide")]), code)
         }
         StageName::PlaneFit => {
             let Some(fit) = pipeline.planefit else { return Ok(None) };
             let interface = jit::BindingInterface::planefit(Some(format));
             let module = jit::planefit_module(Some(format)).map_err(jit::CompileError::from)?;
-            let (mut stage, code) = stage(&interface, &module, &jit::planefit_wgsl(Some(format)))?;
+            let (stage, code) = stage(&interface, &module, &jit::planefit_wgsl(Some(format)))?;
             let params = jit::PlaneFitParams::of(pipeline, fit, 0, 0);
             // Without demodulation the modulation is not read: the form's output stands in.
             let modulation = match (pipeline.demodulate, pipeline.temporal) {
@@ -115,75 +107,22 @@ pub(super) fn build(
             };
             let values = [("radius", params.radius as f64), ("demodulate", params.demodulate as f64)];
             let pairs = [("color", "filtered"), ("normal", "normal"), ("modulation", modulation), ("fitted", "fitted")];
-            (stage.uniform_values, stage.sequence) = once(&values, &pairs);
-            (stage, code)
+            (stage, once(&values, &pairs), code)
         }
         StageName::PixelFilter => {
             let Some(filter) = pipeline.pixel_filter else { return Ok(None) };
             let interface = jit::BindingInterface::pixel_filter(Some(format));
             let module = jit::pixel_filter_module(Some(format)).map_err(jit::CompileError::from)?;
-            let (mut stage, code) = stage(&interface, &module, &jit::pixel_filter_wgsl(Some(format)))?;
+            let (stage, code) = stage(&interface, &module, &jit::pixel_filter_wgsl(Some(format)))?;
             let params = jit::PixelFilterParams::of(filter, 0, 0);
             // The f32 weights widened exactly: a host stores them as the same f32s.
             let values = [("centre", params.centre as f64), ("side", params.side as f64)];
             let frame = if manifest.planefit.is_some() { "fitted" } else { "filtered" };
-            (stage.uniform_values, stage.sequence) =
-                once(&values, &[("color", frame), ("pixelfiltered", "pixelfiltered")]);
-            (stage, code)
+            (stage, once(&values, &[("color", frame), ("pixelfiltered", "pixelfiltered")]), code)
         }
         StageName::Prepass | StageName::TemporalVariance | StageName::Guide => return Ok(None),
     };
     Ok(Some(built))
-}
-
-/// Put stage `name` into `manifest`, with what it changes for the stages
-/// after it: the image the form filters, the modulation it multiplies back,
-/// what a sequence keeps.
-pub(super) fn place(manifest: &mut Manifest, name: StageName, stage: Stage, pipeline: &FilterPipeline) {
-    match name {
-        StageName::Prepass => manifest.filters = "prepared".into(),
-        StageName::Spread => manifest.filters = "kept".into(),
-        StageName::Temporal => {
-            manifest.filters = "blend".into();
-            if let Some(modulation) = manifest.bindings.iter_mut().find(|b| b.role == "modulation") {
-                modulation.image = Some("temporal_modulation");
-                modulation.content = "the temporal stage's `temporal_modulation`, multiplied back".into();
-            }
-            let temporal = pipeline.temporal.expect("a temporal stage where the pipeline has one");
-            manifest.history = history(temporal);
-        }
-        StageName::TemporalVariance | StageName::Guide | StageName::PlaneFit | StageName::PixelFilter => {}
-    }
-    *manifest.stage_mut(name) = Some(stage);
-}
-
-/// What a sequence keeps: the image fed back (the blend, or form pass
-/// `feedback - 1`'s output), the moments and the blended modulation, and
-/// the frame's surface and albedo to test the next frame's against.
-fn history(temporal: Temporal) -> Vec<Kept> {
-    let kept = |image: &str, from: String, after_pass, content: &str| Kept {
-        image: image.into(),
-        from,
-        after_pass,
-        content: content.into(),
-    };
-    let fed_back = match temporal.feedback {
-        0 => kept("history", "blend".into(), None, "the blend"),
-        k => kept(
-            "history",
-            // The form's passes write `image0`, `image1`, `image0`… (the manifest's `order`).
-            format!("image{}", (k - 1) % 2),
-            Some(k - 1),
-            "the output of the form's pass feedback - 1 (demodulated)",
-        ),
-    };
-    vec![
-        fed_back,
-        kept("moments", "moments_out".into(), None, "the luminance's moments"),
-        kept("past_modulation", "temporal_modulation".into(), None, "the blended modulation"),
-        kept("previous_geometry", "geometry".into(), None, "the frame's `geometry` input"),
-        kept("previous_albedo", "albedo".into(), None, "the frame's `albedo` input"),
-    ]
 }
 
 impl Manifest {
@@ -198,6 +137,17 @@ impl Manifest {
             StageName::PlaneFit => self.planefit.as_ref(),
             StageName::PixelFilter => self.pixelfilter.as_ref(),
         }
+    }
+
+    /// How many times a frame dispatches stage `name`'s shader (`frame`).
+    pub fn dispatches_of(&self, name: StageName) -> usize {
+        let of = |step: &&Step| matches!(step, Step::Dispatch(d) if d.shader == name.key());
+        self.frame.iter().filter(of).count()
+    }
+
+    /// The images a sequence keeps from frame to frame (`images` that are `kept_from` another).
+    pub fn kept(&self) -> impl Iterator<Item = &Image> {
+        self.images.iter().filter(|image| image.kept_from.is_some())
     }
 
     /// Stage `name`'s entry, to fill in.
@@ -215,8 +165,7 @@ impl Manifest {
 }
 
 impl Stage {
-    /// A stage's shader with `interface`, dispatched once with no uniform
-    /// values of its own until the caller sets them.
+    /// A stage's shader with `interface`.
     pub(super) fn of(
         interface: &BindingInterface,
         entry_point: String,
@@ -234,10 +183,7 @@ impl Stage {
                 size_bytes: interface.uniform_bytes,
                 fields: interface.uniform.clone(),
             },
-            uniform_values: BTreeMap::new(),
             bindings: bindings(interface, target, format, stage),
-            first_frame: BTreeMap::new(),
-            sequence: Vec::new(),
         }
     }
 }
@@ -282,8 +228,7 @@ pub(super) fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
                 images.insert("total".into(), read(jit::SpreadTarget::Total, "total"));
             }
             StageDispatch {
-                uniform_values: [("step".to_string(), params.step as f64), ("stage".to_string(), params.stage as f64)]
-                    .into(),
+                values: [("step".to_string(), params.step as f64), ("stage".to_string(), params.stage as f64)].into(),
                 images,
             }
         })
@@ -291,19 +236,21 @@ pub(super) fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
 }
 
 /// The steps a host takes per frame, in words.
-pub(super) fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<String> {
+pub(super) fn order(manifest: &Manifest, placement: &Placement, pipeline: &FilterPipeline) -> Vec<String> {
+    let values = |name: StageName| &placement.of(name).expect("a placed stage has its dispatches").values;
     let mut steps = Vec::new();
     let mut colour = "the noisy colour";
-    if let Some(stage) = &manifest.prepass {
+    if manifest.prepass.is_some() {
+        let values = values(StageName::Prepass);
         steps.push(format!(
             "pre-pass (`prepass`, k = {}, stages = {}): colour = the noisy colour, albedo = the raw albedo (any \
              texture when the pipeline does not demodulate); writes `prepared` and `modulation` (textures of the \
              output format)",
-            stage.uniform_values["k"], stage.uniform_values["stages"]
+            values["k"], values["stages"]
         ));
         colour = "`prepared`";
     }
-    if let Some(stage) = &manifest.spread {
+    if let Some(spread) = placement.of(StageName::Spread) {
         let surface = match pipeline.keep() {
             Some(Keep::Surface) => {
                 " along the surface (the first dispatch writes each pixel's normal direction and clamped luminance \
@@ -317,18 +264,20 @@ pub(super) fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<Strin
              image each role binds): what the clamp removed (the noisy colour minus `prepared`) is handed out \
              over the neighbourhood{surface}, then added back and divided by `modulation`; writes `kept` \
              (rgba32float)",
-            stage.sequence.len()
+            spread.each.len()
         ));
         colour = "`kept`";
     }
-    if let Some(stage) = &manifest.temporal {
-        let kept: Vec<String> = manifest.history.iter().map(|k| format!("`{}` (from `{}`)", k.image, k.from)).collect();
+    if manifest.temporal.is_some() {
+        let values = values(StageName::Temporal);
+        let kept: Vec<String> =
+            placement.history.iter().map(|k| format!("`{}` (from `{}`)", k.image, k.from)).collect();
         steps.push(format!(
             "temporal (`temporal`, one dispatch, alpha = {}, gamma = {}, antilag = {}, history = 1, or 0 on a \
              sequence's first frame): colour = {colour}; geometry, albedo and motion = the frame's inputs; the \
              history's images as the frame before kept them; writes `blend`, `moments_out`, \
              `temporal_modulation` and `accumulated` (rgba32float)",
-            stage.uniform_values["alpha"], stage.uniform_values["gamma"], stage.uniform_values["antilag"]
+            values["alpha"], values["gamma"], values["antilag"]
         ));
         steps.push(
             "temporal variance (`temporal_variance`, one dispatch): sample_variance = `accumulated`, moments = \
@@ -342,7 +291,7 @@ pub(super) fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<Strin
         colour = "`blend`";
     }
     let modulation = if manifest.temporal.is_some() { "`temporal_modulation`" } else { "`modulation`" };
-    let carried = manifest.carries.as_deref().unwrap_or("colorVariance");
+    let carried = placement.carries.as_deref().unwrap_or("colorVariance");
     if manifest.guide.is_some() {
         steps.push(format!(
             "guide (`guide`, one dispatch, step = 1, level = 0, last = 1): colour = {colour}; writes `guide`, the \
@@ -366,22 +315,24 @@ pub(super) fn order(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<Strin
             manifest.passes - 1
         ));
     }
-    if let Some(stage) = &manifest.planefit {
+    if manifest.planefit.is_some() {
+        let values = values(StageName::PlaneFit);
         steps.push(format!(
             "planefit (`planefit`, one dispatch, radius = {}, demodulate = {}): colour = `filtered`, the form's \
              last `output`; normal = the normal input (only its direction counts){}; writes `fitted`: the \
              filtered frame",
-            stage.uniform_values["radius"],
-            stage.uniform_values["demodulate"],
+            values["radius"],
+            values["demodulate"],
             if pipeline.demodulate { format!(", modulation = {modulation}") } else { String::new() }
         ));
     }
-    if let Some(stage) = &manifest.pixelfilter {
+    if manifest.pixelfilter.is_some() {
+        let values = values(StageName::PixelFilter);
         steps.push(format!(
             "pixelfilter (`pixelfilter`, one dispatch, centre = {}, side = {}): colour = {}; writes \
              `pixelfiltered`: the filtered frame",
-            stage.uniform_values["centre"],
-            stage.uniform_values["side"],
+            values["centre"],
+            values["side"],
             if manifest.planefit.is_some() { "`fitted`" } else { "`filtered`, the form's last `output`" }
         ));
     }
@@ -429,9 +380,6 @@ pub(super) fn manifest(
         guide: None,
         planefit: None,
         pixelfilter: None,
-        filters: "color".into(),
-        carries: interface.carried_variance().map(|v| v.name().to_string()),
-        history: Vec::new(),
         order: Vec::new(),
         inputs: Vec::new(),
         images: Vec::new(),
@@ -470,7 +418,8 @@ pub(super) fn inputs(manifest: &Manifest, pipeline: &FilterPipeline) -> Vec<Supp
                 "color" => "the noisy colour, linear RGB (HDR, not normalised; alpha passed through)".to_string(),
                 _ => every.iter().find(|b| b.role == image).map(|b| b.content.clone()).unwrap_or_default(),
             };
-            Supplied { image, content }
+            // What the frame reads of it is known once the frame is planned.
+            Supplied { image, components: String::new(), content }
         })
         .collect()
 }
