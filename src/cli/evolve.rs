@@ -166,15 +166,15 @@ pub(crate) fn evolve_on(
     // (a resumed run must have the same settings, so these are the checkpoint's).
     let rule = config.fitness.describe();
     let generations = settings.generations;
-    // Each baseline as asked for, resolved once: the run compares them, and the table names them.
-    let resolved: Vec<(&String, filterjit::corpus::Resolved)> =
-        baselines.iter().map(|b| Ok((b, filterjit::corpus::resolve_with_pipeline(b)?))).collect::<Result<_>>()?;
-    // One the run could not score, said by the name it was asked by, before the run starts.
-    for (asked, r) in &resolved {
-        if let Some(pipeline) = &r.pipeline {
-            filterjit::datasets::check_scorable(pipeline).with_context(|| format!("--baseline {asked}"))?;
-        }
-    }
+    // Each baseline as asked for, resolved once: the run compares them by that name (and
+    // refuses, by it, one it could not score before the run starts).
+    let baselines: Vec<ev::Baseline> = baselines
+        .iter()
+        .map(|asked| {
+            let resolved = filterjit::corpus::resolve_with_pipeline(asked)?;
+            Ok(ev::Baseline { name: asked.clone(), expr: resolved.expr, pipeline: resolved.pipeline })
+        })
+        .collect::<Result<_>>()?;
     let summary = ev::run_with(
         &gpu,
         ev::RunOptions {
@@ -186,7 +186,7 @@ pub(crate) fn evolve_on(
             stop_after: None,
             on_report: &mut on_report,
             on_render: &mut on_render,
-            baselines: resolved.iter().map(|(_, r)| (r.expr.clone(), r.pipeline)).collect(),
+            baselines,
             tiles: args.tiles,
             fusion: args.fuse,
             cache: env.cache.clone(),
@@ -208,20 +208,9 @@ pub(crate) fn evolve_on(
         ),
         None => println!("fitness   {:.5} (training: {rule}), length {length}", summary.best.fitness.value),
     }
-    // Each compared filter by the name it was asked for: a baseline whose
-    // scenes lack an input it reads is left out of the test, so the k-th
-    // result need not be the k-th asked for.
-    let baseline_names: Vec<String> = summary
-        .test_baselines
-        .iter()
-        .enumerate()
-        .map(|(k, b)| {
-            resolved
-                .iter()
-                .find(|(_, r)| r.expr.to_string() == b.expr)
-                .map_or_else(|| format!("baseline{}", k + 1), |(asked, _)| asked.to_string())
-        })
-        .collect();
+    // Each compared filter by the name it was asked for (a baseline whose scenes lack an
+    // input it reads is left out of the test).
+    let baseline_names: Vec<&str> = summary.test_baselines.iter().map(|b| b.name.as_str()).collect();
     let width = baseline_names.iter().map(|n| n.len()).max().unwrap_or(0).max(12);
     println!(
         "test      {:<16} {:>12} {:>12} {:>12}{}",
@@ -238,7 +227,7 @@ pub(crate) fn evolve_on(
             summary.test_noisy_relmse[k],
             summary.test_seed.relmse[k],
             summary.test_best.relmse[k],
-            summary.test_baselines.iter().map(|b| format!(" {:>width$.5}", b.relmse[k])).collect::<String>()
+            summary.test_baselines.iter().map(|b| format!(" {:>width$.5}", b.result.relmse[k])).collect::<String>()
         );
     }
     println!(
@@ -247,7 +236,7 @@ pub(crate) fn evolve_on(
         "1",
         summary.test_seed.normalised,
         summary.test_best.normalised,
-        summary.test_baselines.iter().map(|b| format!(" {:>width$.5}", b.normalised)).collect::<String>()
+        summary.test_baselines.iter().map(|b| format!(" {:>width$.5}", b.result.normalised)).collect::<String>()
     );
     // The light each output keeps: mean luminance over the reference's (1 keeps it).
     // noisy, seed and best are 12 wide, the baselines as wide as their names.
@@ -258,7 +247,7 @@ pub(crate) fn evolve_on(
     for (k, name) in summary.test_scenes.iter().enumerate() {
         let row = [summary.test_noisy_light[k], summary.test_seed.light[k], summary.test_best.light[k]]
             .into_iter()
-            .chain(summary.test_baselines.iter().map(|b| b.light[k]));
+            .chain(summary.test_baselines.iter().map(|b| b.result.light[k]));
         let row: Vec<Option<f64>> = row.collect();
         println!(
             "light     {:<16}{}{}",
@@ -273,16 +262,14 @@ pub(crate) fn evolve_on(
         ev::mean_light(&summary.test_best.light),
     ]
     .into_iter()
-    .chain(summary.test_baselines.iter().map(|b| ev::mean_light(&b.light)));
+    .chain(summary.test_baselines.iter().map(|b| ev::mean_light(&b.result.light)));
     println!(
         "          {:<16}{}   (mean luminance / the reference's)",
         "mean",
         means.zip(&widths).map(|(l, w)| light(l, *w)).collect::<String>()
     );
-    for (name, b) in baseline_names.iter().zip(&summary.test_baselines) {
-        if !name.starts_with('@') {
-            println!("          {name} = {}", b.expr);
-        }
+    for b in summary.test_baselines.iter().filter(|b| !b.name.starts_with('@')) {
+        println!("          {} = {}", b.name, b.result.expr);
     }
     let mut used: Vec<(&String, &usize)> = summary.feature_frequencies.iter().filter(|(_, n)| **n > 0).collect();
     used.sort_by(|a, b| b.1.cmp(a.1));
@@ -315,8 +302,8 @@ pub(crate) fn evolve_on(
     );
     // The best shipped filter, where the test compared it: how far the search got, and which search goes on from it.
     let best_shipped = filterjit::denoise::SHIPPED_BY_QUALITY[0];
-    let shipped_row = baseline_names.iter().position(|b| b.trim_start_matches('@') == best_shipped);
-    if let Some(b) = shipped_row.and_then(|k| summary.test_baselines.get(k)) {
+    let shipped_row = summary.test_baselines.iter().find(|b| b.name.trim_start_matches('@') == best_shipped);
+    if let Some(b) = shipped_row.map(|b| &b.result) {
         let best = summary.test_best.normalised;
         let verdict = match best < b.normalised {
             true => format!(

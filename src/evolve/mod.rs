@@ -20,7 +20,7 @@ use anyhow::{Context, Result};
 pub use config::RunConfig;
 pub use front::{time_filters, Front, FrontMember, FRONT_FILE, FRONT_TIMING_SIDE};
 pub use hall::{hall_of_fame, Rescored};
-pub use results::{mean_light, test, test_each, Summary, TestResult};
+pub use results::{mean_light, test, test_each, Named, Summary, TestResult};
 pub use run_dir::{
     append_log, default_run_dir, log_upto, read_checkpoint, write_checkpoint, Checkpoint, RunDirError, CHECKPOINT_FILE,
     DEFAULT_RUN_DIR, FEATURES_FILE, HALL_OF_FAME_FILE, LOG_FILE, SUMMARY_FILE,
@@ -52,6 +52,16 @@ pub enum TerminalError {
     SeedReads(String),
 }
 
+/// A filter the run compares its best with on the test scenes.
+#[derive(Clone, Debug)]
+pub struct Baseline {
+    /// What the user called it (`@svgf`, a file): errors and the test's table name it so.
+    pub name: String,
+    pub expr: Expr,
+    /// Its own pipeline, where it has one; else it runs through the run's.
+    pub pipeline: Option<FilterPipeline>,
+}
+
 /// Everything `run` needs.
 pub struct RunOptions<'a> {
     pub settings: Settings,
@@ -66,7 +76,7 @@ pub struct RunOptions<'a> {
     /// Filters to compare with on the test scenes (they do not affect the
     /// search): each through its own pipeline where it has one (a shipped
     /// filter's), else through the run's.
-    pub baselines: Vec<(Expr, Option<FilterPipeline>)>,
+    pub baselines: Vec<Baseline>,
     /// Whether fitness kernels stage their windows in workgroup memory
     /// (results are identical either way; only the time differs).
     pub tiles: Tiles,
@@ -106,8 +116,10 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     settings.check().map_err(anyhow::Error::msg)?;
     // Every pipeline the run scores, before anything is rendered or searched.
     datasets::check_scorable(&config.pipeline)?;
-    for (baseline, pipeline) in baselines.iter().filter_map(|(b, p)| Some((b, p.as_ref()?))) {
-        datasets::check_scorable(pipeline).with_context(|| format!("baseline {baseline}"))?;
+    for Baseline { name, pipeline, .. } in &baselines {
+        if let Some(pipeline) = pipeline {
+            datasets::check_scorable(pipeline).with_context(|| format!("baseline {name}"))?;
+        }
     }
     let root = transport.is_root();
     let resumed = if root { run_dir::prepare_run_dir(&output, resume, &settings, &config)? } else { None };
@@ -282,14 +294,15 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let test_best = results.next().expect("best");
     let test_seed = results.next().expect("seed");
     let mut test_baselines = Vec::new();
-    for (baseline, pipeline) in baselines {
+    for Baseline { name, expr: baseline, pipeline } in baselines {
+        let named = |results: Vec<TestResult>| results.into_iter().map(|result| Named { name: name.clone(), result });
         match pipeline.filter(|p| *p != config.pipeline) {
             // Through the run's pipeline, where the scenes hold what it reads (a feature the
             // pipeline derives, as the guide, is there wherever the colour is).
             None if baseline.features().iter().filter(|f| f.needs_data()).all(|f| features.contains(f))
                 && baseline.stored_variables().is_subset(&variances) =>
             {
-                test_baselines.extend(test(&mut tester, std::slice::from_ref(&baseline))?)
+                test_baselines.extend(named(test(&mut tester, std::slice::from_ref(&baseline))?))
             }
             None => {}
             // Through its own: the test scenes loaded again with what it reads.
@@ -298,7 +311,7 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
                 let scenes = datasets::load_all(&test_sets, &reads, &baseline.stored_variables(), &own)?;
                 let scoring = fitness::Settings::for_pipeline(config.radius, own.spatial(), threads);
                 let mut own_tester = Scorer::new(gpu, scenes, &scoring)?;
-                test_baselines.extend(test(&mut own_tester, std::slice::from_ref(&baseline))?);
+                test_baselines.extend(named(test(&mut own_tester, std::slice::from_ref(&baseline))?));
             }
         }
     }

@@ -24,6 +24,14 @@ pub struct TestResult {
     pub invalid: Option<String>,
 }
 
+/// A baseline's test result, by the name it was asked for.
+#[derive(Clone, Debug, Serialize)]
+pub struct Named {
+    pub name: String,
+    #[serde(flatten)]
+    pub result: TestResult,
+}
+
 /// What a finished run reports.
 #[derive(Clone, Debug, Serialize)]
 pub struct Summary {
@@ -43,7 +51,7 @@ pub struct Summary {
     pub test_best: TestResult,
     pub test_seed: TestResult,
     /// Other filters on the same test scenes, for comparison (those whose features the scenes have).
-    pub test_baselines: Vec<TestResult>,
+    pub test_baselines: Vec<Named>,
     pub feature_frequencies: std::collections::BTreeMap<String, usize>,
     pub seconds: f64,
 }
