@@ -243,17 +243,30 @@ pub(crate) fn evolve_on(
     let widths: Vec<usize> =
         [12; 3].into_iter().chain(std::iter::repeat(width)).take(3 + baseline_names.len()).collect();
     let light = |l: Option<f64>, w: usize| l.map_or_else(|| format!(" {:>w$}", "-"), |l| format!(" {l:>w$.3}"));
-    let flag = |l: Option<f64>| l.is_some_and(|l| (l - 1.0).abs() > filterjit::metrics::LIGHT_TOLERANCE);
+    let off = |l: f64| (l - 1.0).abs() > filterjit::metrics::LIGHT_TOLERANCE;
     for (k, name) in summary.test_scenes.iter().enumerate() {
-        let row = [summary.test_noisy_light[k], summary.test_seed.light[k], summary.test_best.light[k]]
+        let noisy = summary.test_noisy_light[k];
+        let row = [noisy, summary.test_seed.light[k], summary.test_best.light[k]]
             .into_iter()
             .chain(summary.test_baselines.iter().map(|b| b.result.light[k]));
         let row: Vec<Option<f64>> = row.collect();
+        // A filter is charged with what it moves, not with the light its input's samples missed.
+        let moved = row[1..].iter().flatten().any(|&l| off(noisy.map_or(l, |n| l / n)));
+        let said = match (moved, noisy.filter(|&n| off(n))) {
+            (true, None) => "   a filter moves the light by more than 3 %".to_string(),
+            (true, Some(n)) => format!(
+                "   a filter moves the light by more than 3 % from the input's, itself {:+.1} % off",
+                (n - 1.0) * 100.0
+            ),
+            (false, Some(n)) => {
+                format!("   the input's own light is {:+.1} % off; no filter moves it 3 %", (n - 1.0) * 100.0)
+            }
+            (false, None) => String::new(),
+        };
         println!(
-            "light     {:<16}{}{}",
+            "light     {:<16}{}{said}",
             name,
             row.iter().zip(&widths).map(|(l, w)| light(*l, *w)).collect::<String>(),
-            if row[1..].iter().any(|l| flag(*l)) { "   changes the light by more than 3 %" } else { "" }
         );
     }
     let means = [
