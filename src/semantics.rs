@@ -29,6 +29,28 @@ pub const SINC_SMALL: f64 = 1e-4;
 /// The sinc kernel's τ (thesis section 3.2.2).
 pub const SINC_TAU: f64 = 3.0;
 
+/// How far from 1 a normal's squared length may be and still count as unit
+/// length ([`unit_direction`]): far above f32's rounding of a unit vector's.
+pub const UNIT_LENGTH2_SLACK: f32 = 1e-5;
+
+/// A normal as the weights read it: its direction. One whose squared length
+/// is off 1 by more than [`UNIT_LENGTH2_SLACK`] is divided by its length;
+/// zero stays zero. A pixel's normal is the mean of its samples' unit
+/// normals, shorter where they differ (a seam, a silhouette, a bump), and
+/// a weight that compares normals (SVGF's `pow(dot(normal), 128)`) would
+/// collapse to 0 there on its length (docs/JOURNAL.md, "Normals made unit
+/// length"). In f32, as the exported shader's `fj_direction` computes it:
+/// filterjit applies it when it loads a render.
+pub fn unit_direction(v: [f32; 3]) -> [f32; 3] {
+    let length2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if length2 > 0.0 && (length2 - 1.0).abs() > UNIT_LENGTH2_SLACK {
+        let length = length2.sqrt();
+        v.map(|c| c / length)
+    } else {
+        v
+    }
+}
+
 /// Domain-error flag bits, as counted per pixel.
 pub mod flag {
     pub const SQRT: u32 = 1;

@@ -243,3 +243,58 @@ fn an_exr_written_twice_has_the_same_bytes() {
         assert!(std::fs::read(&again).unwrap() == bytes, "write {k} differs from the first");
     }
 }
+
+/// A normal is read as its direction: a render whose normals are averaged
+/// over a pixel's samples (shorter at a seam) loads as one whose normals are
+/// unit length, and a normal of zero (nothing hit) stays zero
+/// (docs/SEMANTICS.md, `semantics::unit_direction`).
+#[test]
+fn normals_load_as_their_direction_whatever_their_length() {
+    let (w, h) = (8, 8);
+    let directions: Vec<[f32; 3]> = (0..w * h)
+        .map(|k| match k % 7 {
+            0 => [0.0; 3],
+            _ => {
+                let (a, b) = (k as f32 * 0.37, k as f32 * 0.11);
+                [a.cos() * b.sin(), a.sin() * b.sin(), b.cos()]
+            }
+        })
+        .collect();
+    let load = |length: &dyn Fn(usize) -> f32, name: &str| {
+        let dir = temp_dir(name);
+        let axis = |c: usize| directions.iter().enumerate().map(|(k, v)| v[c] * length(k)).collect::<Vec<f32>>();
+        let colour = vec![0.5f32; w * h];
+        let channels = [
+            ("R", colour.clone()),
+            ("G", colour.clone()),
+            ("B", colour),
+            ("N.X", axis(0)),
+            ("N.Y", axis(1)),
+            ("N.Z", axis(2)),
+        ];
+        write_exr(&dir.join("noisy.exr"), w, h, &channels);
+        scene::load(&dir, &request(&[Feature::Normal], &[])).unwrap()
+    };
+    let unit = load(&|_| 1.0, "normals-unit");
+    // Averaged normals: between 0.3 and 0.95 of unit length, pixel by pixel.
+    let short = load(&|k| 0.3 + 0.65 * ((k * 13) % 10) as f32 / 10.0, "normals-short");
+    for (k, v) in unit.features[&Feature::Normal].iter().enumerate() {
+        let length = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        let expected = if directions[k] == [0.0; 3] { 0.0 } else { 1.0 };
+        assert!((length - expected).abs() < 1e-5, "pixel {k}: a normal of length {length}");
+    }
+    let bits =
+        |s: &scene::Scene| s.features[&Feature::Normal].iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
+    let (unit_bits, short_bits) = (bits(&unit), bits(&short));
+    let differing = unit_bits.iter().zip(&short_bits).filter(|(a, b)| a != b).count();
+    // The two directions are each rounded once; they may differ in the last bit, never more.
+    let worst = unit.features[&Feature::Normal]
+        .iter()
+        .flatten()
+        .zip(short.features[&Feature::Normal].iter().flatten())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst <= 2.0 * f32::EPSILON, "short normals load {worst} from unit ones ({differing} values differ)");
+    assert!(short.notes.iter().any(|n| n.contains("made unit length")), "{:?}", short.notes);
+    assert!(!unit.notes.iter().any(|n| n.contains("made unit length")), "{:?}", unit.notes);
+}

@@ -11,7 +11,7 @@ fn content(input: Input) -> String {
     match input {
         Input::Feature(f) => match f {
             Feature::WorldPosition => "world-space position of the first hit".into(),
-            Feature::Normal => "shading normal at the first hit".into(),
+            Feature::Normal => "shading normal at the first hit; only its direction counts (made unit length)".into(),
             Feature::Texture => "albedo (surface colour) at the first hit".into(),
             Feature::SecondaryTexture => "albedo at the second hit".into(),
             Feature::Depth => "distance from the camera to the first hit".into(),

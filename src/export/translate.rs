@@ -10,7 +10,13 @@ pub(super) fn target_slot(target: Target, interface: &BindingInterface, binding:
     let slot = binding.slot;
     match target {
         Target::Wgsl | Target::Spirv => format!("set 0, binding {slot}"),
-        Target::Glsl => format!("layout(binding = {slot})"),
+        // OpenGL numbers uniform blocks, texture units and image units apart;
+        // Vulkan takes a sampler2D as a combined image sampler (examples/README.md).
+        Target::Glsl => match binding.resource {
+            Resource::SampledTexture => format!("layout(binding = {slot}) sampler2D"),
+            Resource::StorageTexture(_) => format!("layout(binding = {slot}) image2D"),
+            _ => format!("layout(binding = {slot}) block"),
+        },
         Target::Hlsl => {
             let register = match binding.resource {
                 Resource::Uniform => 'b',

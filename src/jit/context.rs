@@ -74,6 +74,10 @@ pub(super) struct KernelContext {
     pub shared_neighbour_lines: Vec<String>,
     /// How many inputs the exported shader scales (`params.scale`).
     pub scales: usize,
+    /// An exported shader that reads the normal: `UNIT_LENGTH2_SLACK` for its
+    /// `fj_direction` (`semantics::unit_direction`, which filterjit applies on loading).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unit_length2_slack: Option<String>,
     pub bindings: Vec<BindingView>,
     /// The interface's binding declarations and its `struct Params`.
     pub declarations: String,

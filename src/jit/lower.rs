@@ -150,6 +150,9 @@ fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, Lower
         shared_centre_lines,
         shared_neighbour_lines,
         scales: bindings.iter().filter(|b| b.scale_index.is_some()).count(),
+        unit_length2_slack: (matches!(loads, Loads::Textures(_))
+            && interface.bindings.iter().any(|b| b.role == Role::Input(Input::Feature(Feature::Normal))))
+        .then(|| wgsl_f32(f64::from(semantics::UNIT_LENGTH2_SLACK))),
         bindings,
         declarations: interface.declarations(),
         relmse_epsilon: wgsl_f32(crate::metrics::RELMSE_EPSILON),
@@ -339,7 +342,12 @@ impl<'a> Loads<'a> {
                 let texel = texel(i.ident(input), coords);
                 let raw =
                     if f.dimension() == 1 { format!("vec3<f32>({texel}.x, 0.0, 0.0)") } else { format!("{texel}.xyz") };
-                format!("fj_normalised({raw}, {})", scale_of(i, Input::Feature(f)))
+                let normalised = format!("fj_normalised({raw}, {})", scale_of(i, Input::Feature(f)));
+                match f {
+                    // Its direction, as filterjit loads it (`semantics::unit_direction`), whatever the scale.
+                    Feature::Normal => format!("fj_direction({normalised})"),
+                    _ => normalised,
+                }
             }
         }
     }

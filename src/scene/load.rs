@@ -363,6 +363,12 @@ impl Preparer<'_> {
                 continue;
             };
             let mut values = self.sanitized(base, values, f32::MAX);
+            if base == Feature::Normal {
+                let changed = preprocess::unit_normals(&mut values);
+                if changed > 0 {
+                    self.notes.push(format!("normal: {changed} made unit length (their direction kept)"));
+                }
+            }
             let scale = preprocess::normalise_vectors(&mut values);
             self.notes.push(format!("{base}: divided by {scale:.6} (99.9th percentile of lengths)"));
             stored.insert(base, Some(values));

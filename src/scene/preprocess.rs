@@ -43,6 +43,20 @@ pub fn robust_scale(mut values: Vec<f32>) -> f32 {
     }
 }
 
+/// Make every normal its direction ([`crate::semantics::unit_direction`]).
+/// Returns how many were changed.
+pub fn unit_normals(values: &mut [[f32; 3]]) -> usize {
+    let mut changed = 0;
+    for v in values.iter_mut() {
+        let unit = crate::semantics::unit_direction(*v);
+        if unit != *v {
+            *v = unit;
+            changed += 1;
+        }
+    }
+    changed
+}
+
 /// Divide vectors by the robust scale of their lengths; clamp longer ones to length 1.
 /// Returns the scale used.
 pub fn normalise_vectors(values: &mut [[f32; 3]]) -> f32 {
