@@ -196,6 +196,8 @@ fn non_finite_inputs_are_sanitised_and_reported() {
     let mut r = vec![0.5f32; 16];
     r[3] = f32::NAN;
     r[7] = f32::INFINITY;
+    r[5] = -0.25;
+    r[9] = 3e9;
     let mut n = vec![0.0f32; 16];
     n[1] = f32::NEG_INFINITY;
     write_exr(
@@ -215,6 +217,11 @@ fn non_finite_inputs_are_sanitised_and_reported() {
     assert!(scene.color.iter().flatten().all(|v| v.is_finite()));
     assert!(scene.features[&Feature::Normal].iter().flatten().all(|v| v.is_finite()));
     assert!(scene.notes.iter().any(|n| n.contains("noisy colour: 2 non-finite")), "{:?}", scene.notes);
+    // Said before filtering, with what is only told where asked (a feature's scale) kept apart.
+    for said in ["noisy colour: 1 values beyond ±1e7", "noisy colour: 1 negative values", "normal: 1 non-finite"] {
+        assert!(scene.notes.iter().any(|n| n.contains(said) && n.warns), "{said}: {:?}", scene.notes);
+    }
+    assert!(scene.notes.iter().any(|n| n.contains("divided by") && !n.warns), "{:?}", scene.notes);
 }
 
 /// The same image written twice gives the same bytes: exr compresses blocks

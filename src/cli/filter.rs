@@ -150,10 +150,8 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
         eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
     }
     let (expr, pipeline, radius) = (&choice.expr, choice.pipeline, choice.radius);
-    for note in &scene.notes {
-        if note.contains("absent") || note.contains("non-finite") {
-            eprintln!("note: {note}");
-        }
+    for note in scene.notes.iter().filter(|n| n.warns) {
+        eprintln!("note: {note}");
     }
 
     let compile_start = Instant::now();

@@ -148,7 +148,7 @@ pub(crate) fn filter_sequence(
     for k in 0..sequence.frames.len() {
         let frame = &sequence.frames[k];
         let scene = sequence.load(k, &request).with_context(|| format!("loading frame {}", frame.path.display()))?;
-        for note in scene.notes.iter().filter(|n| n.contains("non-finite") || n.contains("absent")) {
+        for note in scene.notes.iter().filter(|n| n.warns) {
             eprintln!("note: {}: {note}", frame.name);
         }
         let start = Instant::now();

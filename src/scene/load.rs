@@ -10,7 +10,7 @@ use std::ops::Range;
 use std::path::Path;
 
 use super::import::{pick, Channels, Layout};
-use super::{exr_io, locate, preprocess, Absent, Images, Motion, Origin, Request, Scene, SceneError};
+use super::{exr_io, locate, preprocess, Absent, Images, Motion, Note, Origin, Request, Scene, SceneError};
 use crate::lang::{Feature, FeatureSource, ScalarVar};
 use crate::semantics::COLOR_LIMIT;
 
@@ -110,6 +110,7 @@ pub fn prepare(images: Images, request: &Request) -> Result<Scene, SceneError> {
     } = images;
     let mut preparer = Preparer { request, name: &name, origin: &origin, provided: &provided, notes: Vec::new() };
     let color = preparer.sanitized("noisy colour", color, COLOR_LIMIT);
+    preparer.check_negative("noisy colour", &color);
     let albedo = match request.albedo {
         false => None,
         true => match stored.get(&Feature::Texture) {
@@ -130,7 +131,7 @@ pub fn prepare(images: Images, request: &Request) -> Result<Scene, SceneError> {
             Some(values) => {
                 let mut values = preparer.sanitized(v, values, f32::MAX);
                 let scale = preprocess::normalise_scalars(&mut values);
-                preparer.notes.push(format!("{v}: divided by {scale:.6e}"));
+                preparer.notes.push(Note::info(format!("{v}: divided by {scale:.6e}")));
                 values
             }
             None => {
@@ -280,18 +281,32 @@ struct Preparer<'a> {
     name: &'a str,
     origin: &'a Origin,
     provided: &'a BTreeSet<Feature>,
-    notes: Vec<String>,
+    notes: Vec<Note>,
 }
 
 impl Preparer<'_> {
     /// `values` with non-finite entries replaced by 0 and magnitudes limited
     /// to `limit`, noting how many there were.
     fn sanitized<T: Values>(&mut self, what: impl std::fmt::Display, mut values: T, limit: f32) -> T {
-        let bad = preprocess::sanitize(values.flat(), limit);
-        if bad > 0 {
-            self.notes.push(format!("{what}: {bad} non-finite values replaced by 0"));
+        let preprocess::Sanitized { non_finite, limited } = preprocess::sanitize(values.flat(), limit);
+        if non_finite > 0 {
+            self.notes.push(Note::warning(format!("{what}: {non_finite} non-finite values replaced by 0")));
+        }
+        if limited > 0 {
+            self.notes.push(Note::warning(format!("{what}: {limited} values beyond ±{limit:e} limited to it")));
         }
         values
+    }
+
+    /// A colour (`what`) with negative values, said: a renderer's radiance
+    /// never is, and the light figures measure luminance from 0 up.
+    fn check_negative(&mut self, what: &str, color: &[[f32; 3]]) {
+        let negative = color.iter().flatten().filter(|c| **c < 0.0).count();
+        if negative > 0 {
+            self.notes.push(Note::warning(format!(
+                "{what}: {negative} negative values (kept; filterjit measures light from 0 up)"
+            )));
+        }
     }
 
     /// An input the scene lacks: refused, or read as 0 with a note (`Absent`).
@@ -313,7 +328,7 @@ impl Preparer<'_> {
                     .collect(),
             }),
             Absent::Zero => {
-                self.notes.push(format!("`{what}` is absent from this scene and is read as 0"));
+                self.notes.push(Note::warning(format!("`{what}` is absent from this scene and is read as 0")));
                 Ok(())
             }
         }
@@ -332,7 +347,9 @@ impl Preparer<'_> {
             *v = v.map(|c| c.clamp(-NO_HISTORY, NO_HISTORY));
         }
         if bad > 0 {
-            self.notes.push(format!("motion vectors: {bad} non-finite vectors; those pixels start a new history"));
+            self.notes.push(Note::warning(format!(
+                "motion vectors: {bad} non-finite vectors; those pixels start a new history"
+            )));
         }
         let mut bad = 0;
         for s in motion.surface.iter_mut().chain(&mut motion.albedo) {
@@ -342,7 +359,8 @@ impl Preparer<'_> {
             }
         }
         if bad > 0 {
-            self.notes.push(format!("normal, depth or albedo: {bad} non-finite values read as no surface"));
+            self.notes
+                .push(Note::warning(format!("normal, depth or albedo: {bad} non-finite values read as no surface")));
         }
         motion
     }
@@ -366,11 +384,11 @@ impl Preparer<'_> {
             if base == Feature::Normal {
                 let changed = preprocess::unit_normals(&mut values);
                 if changed > 0 {
-                    self.notes.push(format!("normal: {changed} made unit length (their direction kept)"));
+                    self.notes.push(Note::info(format!("normal: {changed} made unit length (their direction kept)")));
                 }
             }
             let scale = preprocess::normalise_vectors(&mut values);
-            self.notes.push(format!("{base}: divided by {scale:.6} (99.9th percentile of lengths)"));
+            self.notes.push(Note::info(format!("{base}: divided by {scale:.6} (99.9th percentile of lengths)")));
             stored.insert(base, Some(values));
         }
         let zeros = || vec![[0f32; 3]; pixels];
@@ -393,7 +411,7 @@ impl Preparer<'_> {
                         Some(values) => {
                             let mut g = preprocess::sobel(values, width, height);
                             let scale = preprocess::normalise_vectors(&mut g);
-                            self.notes.push(format!("{f}: Sobel magnitude divided by {scale:.6}"));
+                            self.notes.push(Note::info(format!("{f}: Sobel magnitude divided by {scale:.6}")));
                             g
                         }
                         None => {

@@ -173,6 +173,37 @@ pub struct Images {
     pub motion: Option<Motion>,
 }
 
+/// One thing loading a render did to it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Note {
+    pub text: String,
+    /// Whether it changed or questions the render's values (non-finite or
+    /// limited values, negative colour, an input read as 0), which a
+    /// command says before filtering; else a scale a feature was divided by,
+    /// told only where asked.
+    pub warns: bool,
+}
+
+impl Note {
+    pub fn warning(text: String) -> Note {
+        Note { text, warns: true }
+    }
+
+    pub fn info(text: String) -> Note {
+        Note { text, warns: false }
+    }
+
+    pub fn contains(&self, part: &str) -> bool {
+        self.text.contains(part)
+    }
+}
+
+impl std::fmt::Display for Note {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
+    }
+}
+
 /// A loaded scene. Features are normalised and zero-padded to 3 components.
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -192,7 +223,7 @@ pub struct Scene {
     /// What the temporal stage reads, when the request asked for it.
     pub motion: Option<Motion>,
     /// What loading did that a user should know: sanitised values, scales, absent features read as zero.
-    pub notes: Vec<String>,
+    pub notes: Vec<Note>,
 }
 
 /// What the temporal stage reads of a frame besides its colour

@@ -11,17 +11,28 @@
 pub const NORMALISATION_PERCENTILE: f64 = 0.999;
 
 /// Replace non-finite values by zero and clamp magnitudes to `limit`;
-/// returns how many values were not finite.
-pub fn sanitize(values: &mut [f32], limit: f32) -> usize {
-    let mut bad = 0;
+/// returns how many of each there were.
+pub fn sanitize(values: &mut [f32], limit: f32) -> Sanitized {
+    let mut counts = Sanitized::default();
     for v in values.iter_mut() {
         if !v.is_finite() {
             *v = 0.0;
-            bad += 1;
+            counts.non_finite += 1;
+        } else if v.abs() > limit {
+            *v = v.clamp(-limit, limit);
+            counts.limited += 1;
         }
-        *v = v.clamp(-limit, limit);
     }
-    bad
+    counts
+}
+
+/// What [`sanitize`] changed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Sanitized {
+    /// Values that were NaN or infinite, now 0.
+    pub non_finite: usize,
+    /// Finite values beyond the limit, now at it.
+    pub limited: usize,
 }
 
 fn length(v: [f32; 3]) -> f32 {
@@ -132,7 +143,7 @@ mod tests {
     #[test]
     fn sanitize_counts_and_zeroes_non_finite() {
         let mut v = vec![1.0, f32::NAN, f32::INFINITY, -3e9];
-        assert_eq!(sanitize(&mut v, 1e7), 2);
+        assert_eq!(sanitize(&mut v, 1e7), Sanitized { non_finite: 2, limited: 1 });
         assert_eq!(v, vec![1.0, 0.0, 0.0, -1e7]);
     }
 }
