@@ -106,7 +106,8 @@ pub fn accumulate(
             });
             let d = color[i].map(f64::from);
             let mut before = taken.as_ref().map_or(0.0, |t| t.moments[3]);
-            // The history's test: where its light is off the frame's, it is cut to one frame.
+            // The history's test: where its light is off the frame's, it is cut to one
+            // frame; TEMPORAL_ANTILAG_DROP times as far off, dropped.
             if let (Some(kappa), Some(t)) = (temporal.antilag, &taken) {
                 // The history's own spread of a sample's luminance: the frame's
                 // 3×3 alone is narrowest where its few samples happen to be dark.
@@ -116,6 +117,9 @@ pub fn accumulate(
                 let allowed = kappa as f64 * error + pipeline::TEMPORAL_ANTILAG_SLACK * mean.max(past);
                 if (past - mean).abs() > allowed {
                     before = before.min(1.0);
+                }
+                if (past - mean).abs() > pipeline::TEMPORAL_ANTILAG_DROP * allowed {
+                    before = 0.0;
                 }
             }
             let n = (before + 1.0).min(pipeline::TEMPORAL_MAX_HISTORY);
@@ -592,11 +596,17 @@ mod tests {
         // The same light again: the history stays.
         let same = accumulate(testing, &bright, &motion, w, h, history.as_ref());
         assert_eq!(same.length[12], 7.0);
-        // A shadow swept in: the history is cut to one frame, the blend half the new light.
-        let (dark, _) = still(w, h, 1.0);
-        let cut = accumulate(testing, &dark, &motion, w, h, history.as_ref());
+        // The light dimmed past what the test allows (noise-free: 2 % of it), within three
+        // times that: the history is cut to one frame, the blend half the new light.
+        let (dimmed, _) = still(w, h, 3.8);
+        let cut = accumulate(testing, &dimmed, &motion, w, h, history.as_ref());
         assert_eq!(cut.length[12], 2.0);
-        assert!((cut.color[12][0] - 2.5).abs() < 1e-5, "{}", cut.color[12][0]);
+        assert!((cut.color[12][0] - 3.9).abs() < 1e-5, "{}", cut.color[12][0]);
+        // A shadow swept in, far beyond it: the history is dropped, the blend the new light.
+        let (dark, _) = still(w, h, 1.0);
+        let dropped = accumulate(testing, &dark, &motion, w, h, history.as_ref());
+        assert_eq!(dropped.length[12], 1.0);
+        assert!((dropped.color[12][0] - 1.0).abs() < 1e-5, "{}", dropped.color[12][0]);
         // Without the test it lags: a seventh of the new light.
         let lagging = accumulate(stage(0.1), &dark, &motion, w, h, history.as_ref());
         assert!((lagging.color[12][0] - (4.0 - 3.0 / 7.0)).abs() < 1e-5, "{}", lagging.color[12][0]);

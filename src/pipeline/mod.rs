@@ -235,7 +235,8 @@ pub struct Temporal {
     /// luminance lies more than κ standard errors from the mean of the
     /// frame's 3×3 (plus [`TEMPORAL_ANTILAG_SLACK`] of it), the light there
     /// changed (a light moved, a shadow swept in) and the history is cut to
-    /// one frame, so that the blend follows within a few frames.
+    /// one frame, so that the blend follows within a few frames; beyond
+    /// [`TEMPORAL_ANTILAG_DROP`] times that bound it is dropped.
     pub antilag: Option<f32>,
 }
 
@@ -250,6 +251,13 @@ impl Temporal {
 /// allows, beside κ standard errors: where the frame's neighbourhood is
 /// flat, noise-free light that changed by less is no change.
 pub const TEMPORAL_ANTILAG_SLACK: f64 = 0.02;
+
+/// How many times farther than the history's test allows the history must
+/// lie from the frame's 3×3 to be dropped, not cut to one frame: a light
+/// switched on or moved, a cut that kept the surfaces. Cut to one frame, the
+/// old light took ½, ⅓, ¼ of the next frames (docs/JOURNAL.md, "A history
+/// far off the frame is dropped").
+pub const TEMPORAL_ANTILAG_DROP: f64 = 3.0;
 
 /// The largest relative depth difference |z' − z| / z at which a history
 /// sample is taken to see the same surface as the pixel.
