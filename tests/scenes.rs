@@ -294,7 +294,8 @@ fn normals_load_as_their_direction_whatever_their_length() {
         |s: &scene::Scene| s.features[&Feature::Normal].iter().flatten().map(|c| c.to_bits()).collect::<Vec<_>>();
     let (unit_bits, short_bits) = (bits(&unit), bits(&short));
     let differing = unit_bits.iter().zip(&short_bits).filter(|(a, b)| a != b).count();
-    // The two directions are each rounded once; they may differ in the last bit, never more.
+    // Each direction is rounded on its own (a unit vector is left as it is, a short one divided):
+    // they may differ in the last bits, never more.
     let worst = unit.features[&Feature::Normal]
         .iter()
         .flatten()

@@ -94,13 +94,21 @@ fn blenders_vector_pass_points_to_where_each_pixel_was_the_frame_before() {
 
 /// The temporal stage on the device, frame after frame with its state
 /// carried, against the CPU reference with its history carried: the same
-/// images on three frames of a real sequence, for pipelines that feed back
-/// the blend, a pass or a window's output, clamp or not, demodulate or not,
-/// and weights that read what the stage accumulated.
+/// images on three frames of a real sequence, then its last frame with the
+/// light all but off and on again (the history's test cuts or drops what
+/// the frame disagrees with), for pipelines that feed back the blend, a pass
+/// or a window's output, clamp or test the history or not, demodulate or
+/// not, and weights that read what the stage accumulated.
 #[test]
 fn the_temporal_stage_on_the_device_matches_the_cpu_reference_frame_after_frame() {
     let gpu = gpu();
-    let scenes = frames(&committed().join("noisy"), &temporal_request());
+    let mut scenes = frames(&committed().join("noisy"), &temporal_request());
+    // The camera stopped on the last frame (no motion), its light all but off, then on again.
+    let mut last = scenes.last().unwrap().clone();
+    last.motion.as_mut().unwrap().vectors.iter_mut().for_each(|v| *v = [0.0; 2]);
+    let mut dark = last.clone();
+    dark.color.iter_mut().flatten().for_each(|c| *c *= 0.05);
+    scenes.extend([dark, last]);
     let cases = [
         (
             "demodulate,temporal=0.2,feedback=1,atrous=3",
@@ -109,6 +117,11 @@ fn the_temporal_stage_on_the_device_matches_the_cpu_reference_frame_after_frame(
         ),
         ("outliers=2,keep,demodulate,temporal=0.1,feedback=0,clamp=2,window", "exp(-distance2(color))", 2),
         ("temporal=0.5,feedback=2,atrous=2,planefit=2", "exp(-(distance2(color) + historyLength))", 0),
+        (
+            "outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=3",
+            "exp(-(distanceMax(color) / (4 * sqrt(temporalVariance) + 0.001) + distance2(normal)))",
+            0,
+        ),
     ];
     for (text, weight, radius) in cases {
         let pipeline: FilterPipeline = text.parse().unwrap();
@@ -122,6 +135,13 @@ fn the_temporal_stage_on_the_device_matches_the_cpu_reference_frame_after_frame(
             let on_gpu = gpu.filter_frame(&kernel, &mut buffers, scene, radius, &mut state).unwrap();
             assert!(buffers.temporal_time().is_some(), "{text}: the stage ran and was timed");
             let (on_cpu, kept) = cpu::filter_frame(&expr, scene, &pipeline, radius, history.as_ref()).unwrap();
+            // The light all but off: a history far off the frame is dropped (its length 1 again), not cut to two.
+            if pipeline.temporal.unwrap().antilag.is_some() && k == 3 {
+                let lengths = &kept.as_ref().unwrap().moments;
+                let dropped = lengths.iter().filter(|m| m[3] == 1.0).count() as f64 / lengths.len() as f64;
+                eprintln!("{text}, frame {}: {dropped:.3} of the histories dropped", k + 1);
+                assert!(dropped > 0.2, "{text}: a history far off the dark frame is dropped ({dropped})");
+            }
             history = kept;
             let (fraction, worst) = agree_fraction(&on_gpu.rgb(), &on_cpu.color);
             eprintln!("{text}, frame {}: {:.4} within 1e-3, worst {worst:.2e}", k + 1, fraction);

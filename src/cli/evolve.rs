@@ -243,7 +243,9 @@ pub(crate) fn evolve_on(
     let widths: Vec<usize> =
         [12; 3].into_iter().chain(std::iter::repeat(width)).take(3 + baseline_names.len()).collect();
     let light = |l: Option<f64>, w: usize| l.map_or_else(|| format!(" {:>w$}", "-"), |l| format!(" {l:>w$.3}"));
-    let off = |l: f64| (l - 1.0).abs() > filterjit::metrics::LIGHT_TOLERANCE;
+    let tolerance = filterjit::metrics::LIGHT_TOLERANCE;
+    let off = |l: f64| (l - 1.0).abs() > tolerance;
+    let percent = tolerance * 100.0;
     for (k, name) in summary.test_scenes.iter().enumerate() {
         let noisy = summary.test_noisy_light[k];
         let row = [noisy, summary.test_seed.light[k], summary.test_best.light[k]]
@@ -253,13 +255,16 @@ pub(crate) fn evolve_on(
         // A filter is charged with what it moves, not with the light its input's samples missed.
         let moved = row[1..].iter().flatten().any(|&l| off(noisy.map_or(l, |n| l / n)));
         let said = match (moved, noisy.filter(|&n| off(n))) {
-            (true, None) => "   a filter moves the light by more than 3 %".to_string(),
+            (true, None) => format!("   a filter moves the light by more than {percent:.0} %"),
             (true, Some(n)) => format!(
-                "   a filter moves the light by more than 3 % from the input's, itself {:+.1} % off",
+                "   a filter moves the light by more than {percent:.0} % from the input's, itself {:+.1} % off",
                 (n - 1.0) * 100.0
             ),
             (false, Some(n)) => {
-                format!("   the input's own light is {:+.1} % off; no filter moves it 3 %", (n - 1.0) * 100.0)
+                format!(
+                    "   the input's own light is {:+.1} % off; no filter moves it {percent:.0} %",
+                    (n - 1.0) * 100.0
+                )
             }
             (false, None) => String::new(),
         };

@@ -16,7 +16,11 @@ fn content(input: Input) -> String {
             Feature::SecondaryTexture => "albedo at the second hit".into(),
             Feature::Depth => "distance from the camera to the first hit".into(),
             Feature::DirectIllumination => "visibility of the lights from the first hit (0..1)".into(),
-            gradient => format!("per-channel Sobel gradient magnitude of the normalised {}", gradient.base()),
+            gradient => format!(
+                "per-channel Sobel gradient magnitude of the normalised {}{}",
+                gradient.base(),
+                if gradient.base() == Feature::Normal { " (made unit length first)" } else { "" }
+            ),
         },
         Input::Variance(v) => {
             let of = match v {

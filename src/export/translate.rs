@@ -15,7 +15,7 @@ pub(super) fn target_slot(target: Target, interface: &BindingInterface, binding:
         Target::Glsl => match binding.resource {
             Resource::SampledTexture => format!("layout(binding = {slot}) sampler2D"),
             Resource::StorageTexture(_) => format!("layout(binding = {slot}) image2D"),
-            _ => format!("layout(binding = {slot}) block"),
+            _ => format!("layout(binding = {slot}) uniform block"),
         },
         Target::Hlsl => {
             let register = match binding.resource {
@@ -56,7 +56,7 @@ pub(super) fn header(manifest: &Manifest, code: &str) -> String {
         manifest.dispatch
     );
     for b in &manifest.bindings {
-        out.push_str(&format!("//   {:<26} {:<16} {:<14} {}\n", b.target_slot, b.kind, b.role, b.content));
+        out.push_str(&format!("//   {:<36} {:<16} {:<14} {}\n", b.target_slot, b.kind, b.role, b.content));
     }
     out.push_str(&format!(
         "// Uniform: {} bytes: width, height, radius, pad (u32), then one vec4 per input, .x its scale.\n// The manifest beside this file has the details.\n\n",

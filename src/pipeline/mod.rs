@@ -355,7 +355,13 @@ pub fn same_surface(s: Surface, at: Surface) -> bool {
     normals && albedo && (s.depth - at.depth).abs() <= TEMPORAL_DEPTH_TOLERANCE * at.depth
 }
 
-/// A normal's direction: the unit vector, or zero for a zero normal.
+/// A normal's direction: the unit vector, or zero for a zero normal. In f64,
+/// for the stages that compare surfaces (the temporal stage's test, the
+/// spread along the surface, planefit), each of which normalises in its own
+/// kernel; a weight's `normal` feature is made unit on loading instead, in
+/// f32 with a slack ([`crate::semantics::unit_direction`]), so that the
+/// exported shaders can apply the same rule to what an engine binds and
+/// leave a loaded normal's bits as they are.
 pub fn direction(v: [f64; 3]) -> [f64; 3] {
     let length2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
     if length2 > 0.0 {
