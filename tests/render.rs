@@ -70,7 +70,7 @@ fn every_builtin_scene_renders_into_a_loadable_dataset() {
             all_features.len() - 3,
             "{name}: every feature but colour, pixel and guide is stored"
         );
-        assert!(scene.notes.iter().all(|n| !n.contains("non-finite")), "{name}: {:?}", scene.notes);
+        assert!(scene.notes.iter().all(|n| !n.text.contains("non-finite")), "{name}: {:?}", scene.notes);
     }
     assert!(splits.0 >= 12 && splits.1 >= 4, "train/test split {splits:?}");
 }

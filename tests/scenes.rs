@@ -101,7 +101,7 @@ fn a_missing_feature_is_refused_naming_the_feature_and_the_scene() {
     let zero = Request { absent: Absent::Zero, ..request(&[Feature::DirectIllumination], &[]) };
     let scene = scene::load(&mitsuba_sample(), &zero).unwrap();
     assert!(scene.features[&Feature::DirectIllumination].iter().all(|v| *v == [0.0; 3]));
-    assert!(scene.notes.iter().any(|n| n.contains("directIllumination") && n.contains("absent")));
+    assert!(scene.notes.iter().any(|n| n.text.contains("directIllumination") && n.text.contains("absent")));
 }
 
 fn write_exr(path: &Path, width: usize, height: usize, channels: &[(&str, Vec<f32>)]) {
@@ -216,12 +216,12 @@ fn non_finite_inputs_are_sanitised_and_reported() {
     let scene = scene::load(&dir, &request(&[Feature::Normal], &[])).unwrap();
     assert!(scene.color.iter().flatten().all(|v| v.is_finite()));
     assert!(scene.features[&Feature::Normal].iter().flatten().all(|v| v.is_finite()));
-    assert!(scene.notes.iter().any(|n| n.contains("noisy colour: 2 non-finite")), "{:?}", scene.notes);
+    assert!(scene.notes.iter().any(|n| n.text.contains("noisy colour: 2 non-finite")), "{:?}", scene.notes);
     // Said before filtering, with what is only told where asked (a feature's scale) kept apart.
     for said in ["noisy colour: 1 values beyond ±1e7", "noisy colour: 1 negative values", "normal: 1 non-finite"] {
-        assert!(scene.notes.iter().any(|n| n.contains(said) && n.warns), "{said}: {:?}", scene.notes);
+        assert!(scene.notes.iter().any(|n| n.text.contains(said) && n.warns), "{said}: {:?}", scene.notes);
     }
-    assert!(scene.notes.iter().any(|n| n.contains("divided by") && !n.warns), "{:?}", scene.notes);
+    assert!(scene.notes.iter().any(|n| n.text.contains("divided by") && !n.warns), "{:?}", scene.notes);
 }
 
 /// The same image written twice gives the same bytes: exr compresses blocks
@@ -303,6 +303,6 @@ fn normals_load_as_their_direction_whatever_their_length() {
         .map(|(a, b)| (a - b).abs())
         .fold(0.0f32, f32::max);
     assert!(worst <= 2.0 * f32::EPSILON, "short normals load {worst} from unit ones ({differing} values differ)");
-    assert!(short.notes.iter().any(|n| n.contains("made unit length")), "{:?}", short.notes);
-    assert!(!unit.notes.iter().any(|n| n.contains("made unit length")), "{:?}", unit.notes);
+    assert!(short.notes.iter().any(|n| n.text.contains("made unit length")), "{:?}", short.notes);
+    assert!(!unit.notes.iter().any(|n| n.text.contains("made unit length")), "{:?}", unit.notes);
 }

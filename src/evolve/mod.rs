@@ -20,7 +20,7 @@ use anyhow::{Context, Result};
 pub use config::RunConfig;
 pub use front::{time_filters, Front, FrontMember, FRONT_FILE, FRONT_TIMING_SIDE};
 pub use hall::{hall_of_fame, Rescored};
-pub use results::{mean_light, test, test_each, Named, Summary, TestResult};
+pub use results::{mean_light, test, test_each, BaselineResult, Summary, TestResult};
 pub use run_dir::{
     append_log, default_run_dir, log_upto, read_checkpoint, write_checkpoint, Checkpoint, RunDirError, CHECKPOINT_FILE,
     DEFAULT_RUN_DIR, FEATURES_FILE, HALL_OF_FAME_FILE, LOG_FILE, SUMMARY_FILE,
@@ -295,7 +295,8 @@ pub fn run_with(gpu: &Gpu, options: RunOptions<'_>, transport: &mut dyn Transpor
     let test_seed = results.next().expect("seed");
     let mut test_baselines = Vec::new();
     for Baseline { name, expr: baseline, pipeline } in baselines {
-        let named = |results: Vec<TestResult>| results.into_iter().map(|result| Named { name: name.clone(), result });
+        let named =
+            |results: Vec<TestResult>| results.into_iter().map(|result| BaselineResult { name: name.clone(), result });
         match pipeline.filter(|p| *p != config.pipeline) {
             // Through the run's pipeline, where the scenes hold what it reads (a feature the
             // pipeline derives, as the guide, is there wherever the colour is).

@@ -26,7 +26,7 @@ pub struct TestResult {
 
 /// A baseline's test result, by the name it was asked for.
 #[derive(Clone, Debug, Serialize)]
-pub struct Named {
+pub struct BaselineResult {
     pub name: String,
     #[serde(flatten)]
     pub result: TestResult,
@@ -51,7 +51,7 @@ pub struct Summary {
     pub test_best: TestResult,
     pub test_seed: TestResult,
     /// Other filters on the same test scenes, for comparison (those whose features the scenes have).
-    pub test_baselines: Vec<Named>,
+    pub test_baselines: Vec<BaselineResult>,
     pub feature_frequencies: std::collections::BTreeMap<String, usize>,
     pub seconds: f64,
 }

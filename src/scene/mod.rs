@@ -192,10 +192,6 @@ impl Note {
     pub fn info(text: String) -> Note {
         Note { text, warns: false }
     }
-
-    pub fn contains(&self, part: &str) -> bool {
-        self.text.contains(part)
-    }
 }
 
 impl std::fmt::Display for Note {
