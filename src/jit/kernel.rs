@@ -13,7 +13,7 @@ use crate::pipeline::Stencil;
 
 /// Bumped whenever the template or the lowering changes what a kernel computes
 /// or how it binds its inputs; part of every pipeline-cache key.
-pub const TEMPLATE_VERSION: u32 = 11;
+pub const TEMPLATE_VERSION: u32 = 12;
 
 /// Workgroup shape of every filter kernel.
 pub const WORKGROUP: [u32; 2] = [8, 8];

@@ -275,8 +275,13 @@ pub const TEMPORAL_MIN_FOOTPRINT: f64 = 1e-3;
 pub const TEMPORAL_MAX_HISTORY: f64 = 255.0;
 
 /// Below this history length the variance comes from the frame's own
-/// neighbourhood (SVGF's spatial estimate) instead of the moments.
-pub const TEMPORAL_SHORT_HISTORY: f64 = 4.0;
+/// neighbourhood (SVGF's spatial estimate) instead of the moments: from
+/// four frames on. A pixel's length is the mean of its bilinear taps' whole
+/// lengths, which f32 rounds to either side of a whole number (taps of 3
+/// frames mix to 2.9999998 on the device, 3 in f64), so the threshold is a
+/// 64th below 4, which no such rounding reaches: the device and the CPU
+/// take the same branch (docs/JOURNAL.md, "Stale vectors").
+pub const TEMPORAL_SHORT_HISTORY: f64 = 3.984375;
 
 /// The spatial variance estimate's neighbourhood: (2R+1)² pixels. SVGF's
 /// 7×7 (R = 3) and a 5×5 gave the same errors on the two Cycles and five
