@@ -200,6 +200,8 @@ fn non_finite_inputs_are_sanitised_and_reported() {
     r[9] = 3e9;
     let mut n = vec![0.0f32; 16];
     n[1] = f32::NEG_INFINITY;
+    let mut a = vec![0.5f32; 16];
+    a[2] = f32::NAN;
     write_exr(
         &dir.join("noisy.exr"),
         w,
@@ -211,9 +213,13 @@ fn non_finite_inputs_are_sanitised_and_reported() {
             ("N.X", n),
             ("N.Y", vec![0.0; 16]),
             ("N.Z", vec![1.0; 16]),
+            ("Albedo.R", a),
+            ("Albedo.G", vec![0.5; 16]),
+            ("Albedo.B", vec![0.5; 16]),
         ],
     );
-    let scene = scene::load(&dir, &request(&[Feature::Normal], &[])).unwrap();
+    let scene =
+        scene::load(&dir, &Request { albedo: true, ..request(&[Feature::Normal, Feature::Texture], &[]) }).unwrap();
     assert!(scene.color.iter().flatten().all(|v| v.is_finite()));
     assert!(scene.features[&Feature::Normal].iter().flatten().all(|v| v.is_finite()));
     assert!(scene.notes.iter().any(|n| n.text.contains("noisy colour: 2 non-finite")), "{:?}", scene.notes);
@@ -222,6 +228,9 @@ fn non_finite_inputs_are_sanitised_and_reported() {
         assert!(scene.notes.iter().any(|n| n.text.contains(said) && n.warns), "{said}: {:?}", scene.notes);
     }
     assert!(scene.notes.iter().any(|n| n.text.contains("divided by") && !n.warns), "{:?}", scene.notes);
+    // The albedo demodulates and is the `texture` feature: its bad value is said once.
+    let albedo: Vec<_> = scene.notes.iter().filter(|n| n.text.contains("1 non-finite")).map(|n| &n.text).collect();
+    assert_eq!(albedo, ["texture: 1 non-finite values replaced by 0", "normal: 1 non-finite values replaced by 0"]);
 }
 
 /// The same image written twice gives the same bytes: exr compresses blocks

@@ -114,7 +114,8 @@ pub fn prepare(images: Images, request: &Request) -> Result<Scene, SceneError> {
     let albedo = match request.albedo {
         false => None,
         true => match stored.get(&Feature::Texture) {
-            Some(albedo) => Some(preparer.sanitized("albedo", albedo.clone(), f32::MAX)),
+            // Named as the feature it also is: one note where both read a bad value.
+            Some(albedo) => Some(preparer.sanitized(Feature::Texture, albedo.clone(), f32::MAX)),
             None => return Err(SceneError::MissingAlbedo { scene: name.clone(), origin: origin.clone() }),
         },
     };
@@ -131,7 +132,7 @@ pub fn prepare(images: Images, request: &Request) -> Result<Scene, SceneError> {
             Some(values) => {
                 let mut values = preparer.sanitized(v, values, f32::MAX);
                 let scale = preprocess::normalise_scalars(&mut values);
-                preparer.notes.push(Note::info(format!("{v}: divided by {scale:.6e}")));
+                preparer.note(Note::info(format!("{v}: divided by {scale:.6e}")));
                 values
             }
             None => {
@@ -285,15 +286,23 @@ struct Preparer<'a> {
 }
 
 impl Preparer<'_> {
+    /// Note `note` once: an image read for two uses (the albedo that
+    /// demodulates and the `texture` feature) is sanitised for each.
+    fn note(&mut self, note: Note) {
+        if !self.notes.contains(&note) {
+            self.notes.push(note);
+        }
+    }
+
     /// `values` with non-finite entries replaced by 0 and magnitudes limited
     /// to `limit`, noting how many there were.
     fn sanitized<T: Values>(&mut self, what: impl std::fmt::Display, mut values: T, limit: f32) -> T {
         let preprocess::Sanitized { non_finite, limited } = preprocess::sanitize(values.flat(), limit);
         if non_finite > 0 {
-            self.notes.push(Note::warning(format!("{what}: {non_finite} non-finite values replaced by 0")));
+            self.note(Note::warning(format!("{what}: {non_finite} non-finite values replaced by 0")));
         }
         if limited > 0 {
-            self.notes.push(Note::warning(format!("{what}: {limited} values beyond ±{limit:e} limited to it")));
+            self.note(Note::warning(format!("{what}: {limited} values beyond ±{limit:e} limited to it")));
         }
         values
     }
@@ -303,7 +312,7 @@ impl Preparer<'_> {
     fn check_negative(&mut self, what: &str, color: &[[f32; 3]]) {
         let negative = color.iter().flatten().filter(|c| **c < 0.0).count();
         if negative > 0 {
-            self.notes.push(Note::warning(format!(
+            self.note(Note::warning(format!(
                 "{what}: {negative} negative values (kept; filterjit measures light from 0 up)"
             )));
         }
@@ -328,7 +337,7 @@ impl Preparer<'_> {
                     .collect(),
             }),
             Absent::Zero => {
-                self.notes.push(Note::warning(format!("`{what}` is absent from this scene and is read as 0")));
+                self.note(Note::warning(format!("`{what}` is absent from this scene and is read as 0")));
                 Ok(())
             }
         }
@@ -347,7 +356,7 @@ impl Preparer<'_> {
             *v = v.map(|c| c.clamp(-NO_HISTORY, NO_HISTORY));
         }
         if bad > 0 {
-            self.notes.push(Note::warning(format!(
+            self.note(Note::warning(format!(
                 "motion vectors: {bad} non-finite vectors; those pixels start a new history"
             )));
         }
@@ -384,11 +393,11 @@ impl Preparer<'_> {
             if base == Feature::Normal {
                 let changed = preprocess::unit_normals(&mut values);
                 if changed > 0 {
-                    self.notes.push(Note::info(format!("normal: {changed} made unit length (their direction kept)")));
+                    self.note(Note::info(format!("normal: {changed} made unit length (their direction kept)")));
                 }
             }
             let scale = preprocess::normalise_vectors(&mut values);
-            self.notes.push(Note::info(format!("{base}: divided by {scale:.6} (99.9th percentile of lengths)")));
+            self.note(Note::info(format!("{base}: divided by {scale:.6} (99.9th percentile of lengths)")));
             stored.insert(base, Some(values));
         }
         let zeros = || vec![[0f32; 3]; pixels];
@@ -411,7 +420,7 @@ impl Preparer<'_> {
                         Some(values) => {
                             let mut g = preprocess::sobel(values, width, height);
                             let scale = preprocess::normalise_vectors(&mut g);
-                            self.notes.push(Note::info(format!("{f}: Sobel magnitude divided by {scale:.6}")));
+                            self.note(Note::info(format!("{f}: Sobel magnitude divided by {scale:.6}")));
                             g
                         }
                         None => {
