@@ -142,18 +142,13 @@ impl SceneBuffers {
         let motion = match (pipeline.is_temporal(), &scene.motion) {
             (false, _) => None,
             (true, Some(motion)) => {
+                // Only the temporal stage reads these, and it samples them: textures from the start.
                 let vectors: Vec<[f32; 4]> = motion.vectors.iter().map(|v| [v[0], v[1], 0.0, 0.0]).collect();
-                let buffer = |label, data: &[[f32; 4]]| {
-                    gpu.device().create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                        label: Some(label),
-                        contents: bytemuck::cast_slice(data),
-                        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-                    })
-                };
+                let size = (scene.width as u32, scene.height as u32);
                 Some(FrameMotion {
-                    vectors: buffer("motion", &vectors),
-                    surface: buffer("surface", &motion.surface),
-                    albedo: buffer("albedo of the surface", &motion.albedo),
+                    vectors: gpu.uploaded_texture(&vectors, size),
+                    surface: gpu.uploaded_texture(&motion.surface, size),
+                    albedo: gpu.uploaded_texture(&motion.albedo, size),
                 })
             }
             (true, None) => {
@@ -363,9 +358,9 @@ impl SceneBuffers {
 /// The frame's own inputs to the stage, uploaded with its colour.
 pub(super) struct FrameMotion {
     /// (dx, dy, 0, 0) per pixel.
-    pub(super) vectors: wgpu::Buffer,
+    pub(super) vectors: wgpu::Texture,
     /// The normal's direction and the depth per pixel.
-    pub(super) surface: wgpu::Buffer,
+    pub(super) surface: wgpu::Texture,
     /// The albedo clipped to [0, 1] per pixel.
-    pub(super) albedo: wgpu::Buffer,
+    pub(super) albedo: wgpu::Texture,
 }

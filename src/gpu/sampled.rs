@@ -113,6 +113,24 @@ impl Gpu {
         Ok(texture)
     }
 
+    /// A texture of `texels` (a frame of `size`), written from the host: an
+    /// image only the kernels that sample read is uploaded as one, not as a
+    /// buffer copied into one on the device.
+    pub(super) fn uploaded_texture(&self, texels: &[[f32; 4]], (width, height): (u32, u32)) -> wgpu::Texture {
+        let texture = self.sampled_texture(Element::Vec4F32, (width, height));
+        self.queue().write_texture(
+            texture.as_image_copy(),
+            bytemuck::cast_slice(texels),
+            wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(width * Element::Vec4F32.bytes()),
+                rows_per_image: Some(height),
+            },
+            wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        );
+        texture
+    }
+
     /// A texture of the frame's size for an image of `element`s.
     fn sampled_texture(&self, element: Element, (width, height): (u32, u32)) -> wgpu::Texture {
         self.device().create_texture(&wgpu::TextureDescriptor {

@@ -115,11 +115,10 @@ impl Gpu {
         };
         let view = |texture: &wgpu::Texture| texture.create_view(&Default::default());
         let color = view(&texture(encoder, &buffers.color)?);
-        // The frame's surface and albedo: this frame's test reads them, and the next frame's as its past.
-        let surface = texture(encoder, &surface)?;
-        let albedo = texture(encoder, &albedo)?;
+        // The frame's surface and albedo (uploaded as textures): this frame's
+        // test reads them, and the next frame's as its past.
         let (geometry, material) = (view(&surface), view(&albedo));
-        let motion = view(&texture(encoder, &vectors)?);
+        let motion = view(&vectors);
         // A first frame reads no history: the frame's own images stand in for it.
         let (past, past_moments, past_surface, past_albedo, past_modulation) = match history {
             Some(kept) => (
