@@ -94,9 +94,9 @@ fn blenders_vector_pass_points_to_where_each_pixel_was_the_frame_before() {
 
 /// The temporal stage on the device, frame after frame with its state
 /// carried, against the CPU reference with its history carried: the same
-/// images on three frames of a real sequence, then its last frame with the
-/// light all but off and on again (the history's test cuts or drops what
-/// the frame disagrees with), for pipelines that feed back the blend, a pass
+/// images on three frames of a real sequence, then its last frame with its
+/// vectors stale, then with the light all but off and on again (the
+/// history's test cuts or drops what the frame disagrees with), for pipelines that feed back the blend, a pass
 /// or a window's output, clamp or test the history or not, demodulate or
 /// not, and weights that read what the stage accumulated.
 #[test]
@@ -113,6 +113,7 @@ fn the_temporal_stage_on_the_device_matches_the_cpu_reference_frame_after_frame(
     let mut dark = last.clone();
     dark.color.iter_mut().flatten().for_each(|c| *c *= 0.05);
     scenes.extend([stale, dark, last]);
+    let dark_frame = scenes.len() - 2;
     let cases = [
         (
             "demodulate,temporal=0.2,feedback=1,atrous=3",
@@ -140,7 +141,7 @@ fn the_temporal_stage_on_the_device_matches_the_cpu_reference_frame_after_frame(
             assert!(buffers.temporal_time().is_some(), "{text}: the stage ran and was timed");
             let (on_cpu, kept) = cpu::filter_frame(&expr, scene, &pipeline, radius, history.as_ref()).unwrap();
             // The light all but off: a history far off the frame is dropped (its length 1 again), not cut to two.
-            if pipeline.temporal.unwrap().antilag.is_some() && k == 4 {
+            if pipeline.temporal.unwrap().antilag.is_some() && k == dark_frame {
                 let lengths = &kept.as_ref().unwrap().moments;
                 let dropped = lengths.iter().filter(|m| m[3] == 1.0).count() as f64 / lengths.len() as f64;
                 eprintln!("{text}, frame {}: {dropped:.3} of the histories dropped", k + 1);

@@ -368,8 +368,7 @@ impl Preparer<'_> {
             }
         }
         if bad > 0 {
-            self.notes
-                .push(Note::warning(format!("normal, depth or albedo: {bad} non-finite values read as no surface")));
+            self.note(Note::warning(format!("normal, depth or albedo: {bad} non-finite values read as no surface")));
         }
         motion
     }
