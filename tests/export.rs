@@ -182,6 +182,9 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         // `pixelfilter`, last: after planefit's `fitted`, and after the form's `filtered`.
         (named("bilateral"), "atrous=2,planefit=2,pixelfilter=0.6"),
         (named("crossBilateral"), "outliers=2,demodulate,atrous=3,pixelfilter=0.3"),
+        // `anchor`: after the form's `filtered`, and between planefit's `fitted` and the pixel filter.
+        (named("crossBilateral"), "outliers=2,demodulate,atrous=3,anchor=2"),
+        (named("bilateral"), "atrous=2,planefit=2,anchor=0.5,pixelfilter=0.6"),
         (parse_expr("exp(-(distance2(guide) * 2 + distance2(normal) * 4))").unwrap(), "atrous3x3=3"),
         (parse_expr("exp(-(distance2(guide, color) + distance2(pixel) / 8))").unwrap(), "window"),
         // What the outlier rule measured, from the exported pre-pass's packed `local` texture.
@@ -198,8 +201,15 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         let manifest = serde_json::to_value(&exported.manifest).unwrap();
         assert_eq!(
             exported.stage(StageName::Prepass).is_some(),
-            !["atrous=2", "atrous3x3=3", "window", "atrous=2,planefit=2", "atrous=2,planefit=2,pixelfilter=0.6"]
-                .contains(&text),
+            ![
+                "atrous=2",
+                "atrous3x3=3",
+                "window",
+                "atrous=2,planefit=2",
+                "atrous=2,planefit=2,pixelfilter=0.6",
+                "atrous=2,planefit=2,anchor=0.5,pixelfilter=0.6"
+            ]
+            .contains(&text),
             "{text}: a pre-pass exactly where the pipeline has one"
         );
         let measures = ["localMean", "localStd", "clampedShare"];
@@ -244,6 +254,11 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
             text.contains("pixelfilter"),
             "{text}: the pixel filter exactly where the pipeline has it"
         );
+        assert_eq!(
+            exported.manifest.dispatches_of(StageName::Anchor),
+            if text.contains("anchor") { filterjit::pipeline::ANCHOR_LEVELS as usize + 1 } else { 0 },
+            "{text}: the anchor's levels and its scaling exactly where the pipeline has it"
+        );
         let mut frame = frame_of(&scene, &manifest);
         frame
             .inputs
@@ -281,8 +296,10 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         assert!(error < 1e-4, "the exported `{text}` pipeline differs from filter by {error:e}");
         let passes = manifest["passes"].as_u64().unwrap();
         assert_eq!(passes, pipeline.passes() as u64);
-        let form =
-            text.split(',').rfind(|stage| !stage.starts_with("planefit") && !stage.starts_with("pixelfilter")).unwrap();
+        let form = text
+            .split(',')
+            .rfind(|stage| !["planefit", "anchor", "pixelfilter"].iter().any(|s| stage.starts_with(s)))
+            .unwrap();
         assert_eq!(passes, form.split_once('=').map_or(1, |(_, k)| k.parse().unwrap()), "{text}");
     }
 }
@@ -404,7 +421,7 @@ fn an_exported_temporal_pipeline_filters_a_sequence_as_filter_does() {
         ("@temporal", "", 0),
         // What `filter` runs on frames sampled at one point: the pixel filter last.
         (
-            "outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=3,pixelfilter=0.4",
+            "outliers=2.5,trim,keep,demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=3,anchor=2,pixelfilter=0.4",
             "@temporal",
             0,
         ),

@@ -253,6 +253,10 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "atrous3x3=2",
         "outliers=2,demodulate,atrous=3,pixelfilter=0.6",
         "atrous=2,planefit=2,pixelfilter=0.3",
+        // The anchor: after the form, and between planefit and the pixel
+        // filter with a gate low enough that it pulls over much of the frame.
+        "outliers=2,demodulate,atrous=3,anchor=2",
+        "atrous=2,planefit=2,anchor=0.5,pixelfilter=0.3",
     ] {
         let p = pipeline(text);
         for e in exprs {
@@ -807,4 +811,15 @@ fn a_search_refuses_the_pixel_filter_by_name() {
         .expect("a search's pipeline has no pixel filter")
         .to_string();
     assert!(error.contains("pixelfilter") && error.contains("one point"), "{error}");
+}
+
+#[test]
+fn a_search_refuses_the_light_anchor_by_name() {
+    let gpu = gpu();
+    let scene = scene_with_albedo(16, 16, 2);
+    let error = FitnessScene::for_pipeline(&gpu, &scene, &pipeline("atrous=2,anchor=2"))
+        .err()
+        .expect("a search's pipeline has no anchor")
+        .to_string();
+    assert!(error.contains("`anchor` is not scored") && error.contains("atrous=2,anchor=2"), "{error}");
 }

@@ -56,6 +56,8 @@ fn pipeline_kernels_match_snapshots() {
         insta::assert_snapshot!("export__planefit", jit::planefit_wgsl(Some(jit::OutputFormat::Rgba32float)));
         insta::assert_snapshot!("pipeline__pixelfilter", jit::pixel_filter_wgsl(None));
         insta::assert_snapshot!("export__pixelfilter", jit::pixel_filter_wgsl(Some(jit::OutputFormat::Rgba16float)));
+        insta::assert_snapshot!("pipeline__anchor", jit::anchor_wgsl(None));
+        insta::assert_snapshot!("export__anchor", jit::anchor_wgsl(Some(jit::OutputFormat::Rgba16float)));
         insta::assert_snapshot!("pipeline__temporal", jit::temporal_wgsl(None));
         insta::assert_snapshot!("export__temporal", jit::temporal_wgsl(Some(jit::OutputFormat::Rgba32float)));
         // An à-trous pass carrying the temporal stage's variance from pass to pass (SVGF's rule).

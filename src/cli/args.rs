@@ -248,8 +248,9 @@ pub(crate) struct RenderArgs {
     /// `keep` (put back what it clamped, spread evenly) or `keep=surface` (along the normals and toward the light),
     /// `demodulate` (filter colour/albedo), for sequences the temporal stage `temporal=ALPHA` (with `feedback=K`,
     /// `clamp=G`, `antilag=K`), then the form, `window`, `atrous=PASSES` (5x5 taps a pass) or `atrous3x3=PASSES` (3x3),
-    /// then `planefit=R` and `pixelfilter=S` (docs/SEMANTICS.md, "The pipeline") [evolve: the preset's (shipped: the
-    /// best shipped filter's, quick, thesis: window; temporal: @temporal's); report, tune: the run's, else window].
+    /// then `planefit=R`, `anchor=K` and `pixelfilter=S` (docs/SEMANTICS.md, "The pipeline") [evolve: the preset's
+    /// (shipped: the best shipped filter's, quick, thesis: window; temporal: @temporal's without its `anchor`);
+    /// report, tune: the run's, else window].
     #[arg(long)]
     pub(crate) pipeline: Option<filterjit::pipeline::FilterPipeline>,
 }

@@ -393,13 +393,16 @@ const G_BUFFER: &[&str] = &[
 const TEMPORAL_G_BUFFER: &[&str] =
     &["color", "pixel", "normal", "texture", "worldPosition", "depth", "historyLength", "temporalVariance"];
 
-/// The pipeline `@temporal`, the best shipped temporal filter, is stored with.
+/// The pipeline `@temporal`, the best shipped temporal filter, is stored
+/// with, less its light anchor: a search scores the weight before the
+/// anchor corrects what it leaves (`GpuError::AnchorScored`).
 fn temporal_pipeline() -> filterjit::pipeline::FilterPipeline {
     let best = format!("@{}", filterjit::denoise::SHIPPED_TEMPORAL_BY_QUALITY[0]);
-    filterjit::corpus::resolve_with_pipeline(&best)
+    let stored = filterjit::corpus::resolve_with_pipeline(&best)
         .ok()
         .and_then(|r| r.pipeline)
-        .expect("the best shipped temporal filter is stored with its pipeline")
+        .expect("the best shipped temporal filter is stored with its pipeline");
+    filterjit::pipeline::FilterPipeline { anchor: None, ..stored }
 }
 
 impl PresetValues {

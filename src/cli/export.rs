@@ -58,6 +58,7 @@ fn describe(name: StageName, dispatches: usize) -> String {
         StageName::TemporalVariance => "the temporal stage's variance: one dispatch after the blend".into(),
         StageName::Guide => "the guide: one dispatch before the form".into(),
         StageName::PlaneFit => "planefit: one dispatch after the form".into(),
+        StageName::Anchor => format!("the light anchor: {dispatches} dispatches after the form"),
         StageName::PixelFilter => "the pixel filter: one dispatch, last".into(),
     }
 }

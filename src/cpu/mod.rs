@@ -1,7 +1,10 @@
 //! The CPU reference: the same filter as the GPU kernels, evaluated in f64
 //! with the semantics of [`crate::semantics`]. Slow and simple on purpose.
 
+mod anchor;
 pub mod temporal;
+
+pub use anchor::anchor_light;
 
 use crate::lang::{Expr, Feature, ScalarVar};
 use crate::pipeline::{self, FilterPipeline, Form, Keep};
@@ -495,6 +498,11 @@ pub fn filter_frame(
         let image: Vec<[f32; 3]> = out.color.iter().map(|c| c.map(|v| v as f32)).collect();
         let normals = scene.required_feature(Feature::Normal)?;
         out.color = planefit(&image, normals, prepared.modulation.as_deref(), scene.width, scene.height, fit);
+    }
+    if let Some(anchor) = pipeline.anchor {
+        // Stored as f32 before the stage reads it, as on the device.
+        let image: Vec<[f32; 3]> = out.color.iter().map(|c| c.map(|v| v as f32)).collect();
+        out.color = anchor_light(&scene.color, &image, scene.width, scene.height, anchor);
     }
     if let Some(pixel) = pipeline.pixel_filter {
         // Stored as f32 before the stage reads it, as on the device.

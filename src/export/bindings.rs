@@ -70,6 +70,7 @@ pub(super) enum Stages {
     Spread,
     Guide,
     PlaneFit,
+    Anchor,
     PixelFilter,
     Temporal,
     TemporalVariance,
@@ -84,6 +85,7 @@ impl From<StageName> for Stages {
             StageName::TemporalVariance => Stages::TemporalVariance,
             StageName::Guide => Stages::Guide,
             StageName::PlaneFit => Stages::PlaneFit,
+            StageName::Anchor => Stages::Anchor,
             StageName::PixelFilter => Stages::PixelFilter,
         }
     }
@@ -164,6 +166,31 @@ pub(super) fn bindings(
                 (Role::Output, Stages::PixelFilter) => {
                     ("pixelfiltered".into(), "xyzw", written("the filtered frame"), None)
                 }
+                (Role::Color, Stages::Anchor) => {
+                    ("color".into(), "xyz", "noisy colour, linear RGB, as the engine supplied it".into(), None)
+                }
+                (Role::Image, Stages::Anchor) => (
+                    "image".into(),
+                    "xyz",
+                    "the frame so far: `fitted` after planefit, else `filtered`, the form's last output".into(),
+                    None,
+                ),
+                (Role::Sums, Stages::Anchor) => (
+                    "sums".into(),
+                    "xyz",
+                    "the level before's blurred sums (x the noisy luminance, y its square, z the frame's luminance); \
+                     unread in level 0"
+                        .into(),
+                    None,
+                ),
+                (Role::Output, Stages::Anchor) => (
+                    "output".into(),
+                    "xyzw",
+                    "the blurred sums (levels 0 … levels - 1), or in the last dispatch the filtered frame; written \
+                     with textureStore; format rgba32float"
+                        .into(),
+                    None,
+                ),
                 (Role::Output, Stages::Guide) => ("guide".into(), "xyzw", written("the guide"), None),
                 (Role::Color, Stages::Form) => {
                     ("color".into(), "xyzw", "noisy colour, linear RGB; alpha is copied to the output".into(), None)
@@ -311,10 +338,14 @@ pub(super) fn bindings(
                     | Role::History
                     | Role::Moments
                     | Role::MomentsOut
-                    | Role::Accumulated,
+                    | Role::Accumulated
+                    | Role::Sums,
                     _,
                 )
-                | (Role::Modulation, Stages::Guide | Stages::Temporal | Stages::TemporalVariance | Stages::PixelFilter)
+                | (
+                    Role::Modulation,
+                    Stages::Guide | Stages::Temporal | Stages::TemporalVariance | Stages::Anchor | Stages::PixelFilter,
+                )
                 | (Role::Color | Role::Output, Stages::TemporalVariance) => {
                     unreachable!("exported shaders bind no {:?}", b.role)
                 }

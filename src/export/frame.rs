@@ -26,6 +26,9 @@ pub(super) fn plan(manifest: &Manifest, placement: &Placement) -> (Vec<Step>, Ve
     if plan.stage(StageName::PlaneFit, Some(&colour)) {
         colour = "fitted".into();
     }
+    if plan.stage(StageName::Anchor, Some(&colour)) {
+        colour = "anchored".into();
+    }
     if plan.stage(StageName::PixelFilter, Some(&colour)) {
         colour = "pixelfiltered".into();
     }

@@ -74,8 +74,13 @@ pub struct Manifest {
     /// writes `fitted`, the filtered frame.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub planefit: Option<Stage>,
+    /// `anchor`'s shader, dispatched once per blur level and once more, after
+    /// the form and `planefit`, where the pipeline has it: it reads the noisy
+    /// `color` and the frame so far and writes `anchored`, the filtered frame.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anchor: Option<Stage>,
     /// `pixelfilter`'s shader, dispatched once last, where the pipeline has
-    /// it: it reads the frame so far (`fitted` after `planefit`, else
+    /// it: it reads the frame so far (`anchored` after `anchor`, `fitted` after `planefit`, else
     /// `filtered`, the form's last output) and writes `pixelfiltered`, the
     /// filtered frame.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -192,7 +197,8 @@ pub struct Stage {
 /// `history`, `carries` and a stage's `first_frame`; 6: the `pixelfilter`
 /// stage, last; 7: `inputs`, the images the engine supplies; 8: `frame`,
 /// `images` and `output`, the frame as data, in place of each stage's
-/// `sequence` and values, `history`, `filters` and `carries`).
+/// `sequence` and values, `history`, `filters` and `carries`). The `anchor`
+/// stage came within 8: a host that walks `frame` runs it unchanged.
 pub const MANIFEST_VERSION: u32 = 8;
 
 /// Sampled textures per shader stage every WebGPU device allows.

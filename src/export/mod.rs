@@ -100,7 +100,7 @@ impl Code {
 
 /// The shaders of a pipeline besides the form's, in the order a frame runs
 /// them (the form's passes come after the guide, planefit after the form,
-/// pixelfilter last).
+/// anchor after it, pixelfilter last).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum StageName {
     Prepass,
@@ -114,18 +114,21 @@ pub enum StageName {
     Guide,
     /// `planefit`, after the form.
     PlaneFit,
+    /// `anchor`, after `planefit`.
+    Anchor,
     /// `pixelfilter`, last.
     PixelFilter,
 }
 
 impl StageName {
-    pub const ALL: [StageName; 7] = [
+    pub const ALL: [StageName; 8] = [
         StageName::Prepass,
         StageName::Spread,
         StageName::Temporal,
         StageName::TemporalVariance,
         StageName::Guide,
         StageName::PlaneFit,
+        StageName::Anchor,
         StageName::PixelFilter,
     ];
 
@@ -138,6 +141,7 @@ impl StageName {
             StageName::TemporalVariance => "temporal_variance",
             StageName::Guide => "guide",
             StageName::PlaneFit => "planefit",
+            StageName::Anchor => "anchor",
             StageName::PixelFilter => "pixelfilter",
         }
     }

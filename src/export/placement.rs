@@ -114,7 +114,11 @@ impl Placement {
                 let temporal = pipeline.temporal.expect("a temporal stage where the pipeline has one");
                 self.history = history(temporal);
             }
-            StageName::TemporalVariance | StageName::Guide | StageName::PlaneFit | StageName::PixelFilter => {}
+            StageName::TemporalVariance
+            | StageName::Guide
+            | StageName::PlaneFit
+            | StageName::Anchor
+            | StageName::PixelFilter => {}
         }
         *manifest.stage_mut(name) = Some(stage);
         self.dispatches.insert(name, dispatches);

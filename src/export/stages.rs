@@ -55,8 +55,6 @@ pub(super) fn build(
             let module = jit::temporal_module(Some(format)).map_err(jit::CompileError::from)?;
             let (stage, code) = stage(&interface, &module, &jit::temporal_wgsl(Some(format)))?;
             let params = jit::TemporalParams::of(temporal, 0, 0, true);
-            // As written (0.2, not 0.2's f32 widened); a host stores them as f32 again.
-            let decimal = |v: f32| v.to_string().parse::<f64>().expect("a float's text");
             let values = [
                 ("alpha", decimal(params.alpha)),
                 ("gamma", decimal(params.gamma)),
@@ -109,6 +107,13 @@ pub(super) fn build(
             let pairs = [("color", "filtered"), ("normal", "normal"), ("modulation", modulation), ("fitted", "fitted")];
             (stage, once(&values, &pairs), code)
         }
+        StageName::Anchor => {
+            let Some(anchor) = pipeline.anchor else { return Ok(None) };
+            let interface = jit::BindingInterface::anchor(Some(format));
+            let module = jit::anchor_module(Some(format)).map_err(jit::CompileError::from)?;
+            let (stage, code) = stage(&interface, &module, &jit::anchor_wgsl(Some(format)))?;
+            (stage, Dispatches { each: anchor_sequence(anchor), ..Dispatches::default() }, code)
+        }
         StageName::PixelFilter => {
             let Some(filter) = pipeline.pixel_filter else { return Ok(None) };
             let interface = jit::BindingInterface::pixel_filter(Some(format));
@@ -117,7 +122,11 @@ pub(super) fn build(
             let params = jit::PixelFilterParams::of(filter, 0, 0);
             // The f32 weights widened exactly: a host stores them as the same f32s.
             let values = [("centre", params.centre as f64), ("side", params.side as f64)];
-            let frame = if manifest.planefit.is_some() { "fitted" } else { "filtered" };
+            let frame = match (&manifest.anchor, &manifest.planefit) {
+                (Some(_), _) => "anchored",
+                (None, Some(_)) => "fitted",
+                (None, None) => "filtered",
+            };
             (stage, once(&values, &[("color", frame), ("pixelfiltered", "pixelfiltered")]), code)
         }
         StageName::Prepass | StageName::TemporalVariance | StageName::Guide => return Ok(None),
@@ -135,6 +144,7 @@ impl Manifest {
             StageName::TemporalVariance => self.temporal_variance.as_ref(),
             StageName::Guide => self.guide.as_ref(),
             StageName::PlaneFit => self.planefit.as_ref(),
+            StageName::Anchor => self.anchor.as_ref(),
             StageName::PixelFilter => self.pixelfilter.as_ref(),
         }
     }
@@ -159,6 +169,7 @@ impl Manifest {
             StageName::TemporalVariance => &mut self.temporal_variance,
             StageName::Guide => &mut self.guide,
             StageName::PlaneFit => &mut self.planefit,
+            StageName::Anchor => &mut self.anchor,
             StageName::PixelFilter => &mut self.pixelfilter,
         }
     }
@@ -233,6 +244,34 @@ pub(super) fn spread_sequence(keep: Keep) -> Vec<StageDispatch> {
             }
         })
         .collect()
+}
+
+/// `anchor`'s dispatches (`jit::AnchorParams::sequence`) with the images
+/// each binds: the noisy `color` and the frame so far (`filtered`, which the
+/// plan replaces by `fitted` after `planefit`) in every one; the sums of the
+/// level before (`anchor_sums0`, `anchor_sums1` in turn; level 0 binds the
+/// frame in their place, unread); the last writes `anchored`.
+pub(super) fn anchor_sequence(anchor: crate::pipeline::Anchor) -> Vec<StageDispatch> {
+    jit::AnchorParams::sequence(anchor, 0, 0)
+        .iter()
+        .map(|params| {
+            let level = params.level as usize;
+            let sums = if level == 0 { "filtered".to_string() } else { format!("anchor_sums{}", (level - 1) % 2) };
+            let output = if params.scales() { "anchored".to_string() } else { format!("anchor_sums{}", level % 2) };
+            let images =
+                [("color", "color".to_string()), ("image", "filtered".into()), ("sums", sums), ("output", output)]
+                    .map(|(role, image)| (role.to_string(), image))
+                    .into();
+            let values =
+                [("level".to_string(), params.level as f64), ("gate".to_string(), decimal(params.gate))].into();
+            StageDispatch { values, images }
+        })
+        .collect()
+}
+
+/// An f32 parameter as written (0.2, not 0.2's f32 widened); a host stores it as f32 again.
+fn decimal(v: f32) -> f64 {
+    v.to_string().parse::<f64>().expect("a float's text")
 }
 
 /// The steps a host takes per frame, in words.
@@ -326,6 +365,19 @@ pub(super) fn order(manifest: &Manifest, placement: &Placement, pipeline: &Filte
             if pipeline.demodulate { format!(", modulation = {modulation}") } else { String::new() }
         ));
     }
+    if manifest.anchor.is_some() {
+        steps.push(format!(
+            "anchor (`anchor`, {} dispatches, gate = {}): level = 0 … {} blur the sums of colour = the noisy \
+             colour and image = {} (sums = the image in level 0, else the level before's `anchor_sums0` / \
+             `anchor_sums1`, written in turn); level = {} scales the image by the sums and writes `anchored`: \
+             the filtered frame",
+            crate::pipeline::ANCHOR_LEVELS + 1,
+            pipeline.anchor.map_or(0.0, |a| a.gate),
+            crate::pipeline::ANCHOR_LEVELS - 1,
+            if manifest.planefit.is_some() { "`fitted`" } else { "`filtered`, the form's last `output`" },
+            crate::pipeline::ANCHOR_LEVELS,
+        ));
+    }
     if manifest.pixelfilter.is_some() {
         let values = values(StageName::PixelFilter);
         steps.push(format!(
@@ -333,7 +385,13 @@ pub(super) fn order(manifest: &Manifest, placement: &Placement, pipeline: &Filte
              `pixelfiltered`: the filtered frame",
             values["centre"],
             values["side"],
-            if manifest.planefit.is_some() { "`fitted`" } else { "`filtered`, the form's last `output`" }
+            if manifest.anchor.is_some() {
+                "`anchored`"
+            } else if manifest.planefit.is_some() {
+                "`fitted`"
+            } else {
+                "`filtered`, the form's last `output`"
+            }
         ));
     }
     steps
@@ -379,6 +437,7 @@ pub(super) fn manifest(
         temporal_variance: None,
         guide: None,
         planefit: None,
+        anchor: None,
         pixelfilter: None,
         order: Vec::new(),
         inputs: Vec::new(),

@@ -192,6 +192,7 @@ mod tests {
             temporal: None,
             form: Form::Atrous { passes: 5, stencil: Default::default() },
             planefit: None,
+            anchor: None,
             pixel_filter: None,
         };
         // 2 (pre-pass) + 1 (guide) + 2 · (1 + 2 + 4 + 8 + 16).
@@ -275,6 +276,7 @@ mod tests {
             temporal: None,
             form: Form::Atrous { passes: 4, stencil: Default::default() },
             planefit: None,
+            anchor: None,
             pixel_filter: None,
         };
         let shared = cut(std::slice::from_ref(&scene), sampling, &surface, 3, 5);

@@ -46,6 +46,8 @@ pub struct SceneBuffers {
     pub(super) temporal_pending: bool,
     /// How long the temporal stage's dispatch took, once it ran.
     pub(super) temporal_dispatch: Option<Span>,
+    /// The noisy frame as it came, for `anchor`, which samples it (pipelines with the stage).
+    pub(super) frame: Option<wgpu::Texture>,
 }
 
 /// Intermediate images of the à-trous passes; they never leave the device.
@@ -117,14 +119,15 @@ impl SceneBuffers {
     /// The scene's colour and the pre-pass's inputs on the device, the pre-pass pending.
     fn upload(gpu: &Gpu, scene: &Scene, pipeline: &FilterPipeline, one_submission: bool) -> Result<Self, GpuError> {
         // The pre-pass, an à-trous form and `planefit` sample their images (`BindingInterface::samples_images`).
-        let samples = pipeline.has_prepass() || pipeline.is_atrous() || pipeline.planefit.is_some();
+        let samples =
+            pipeline.has_prepass() || pipeline.is_atrous() || pipeline.planefit.is_some() || pipeline.anchor.is_some();
         let limit = gpu.max_image_side();
         if samples && (scene.width as u64 > limit as u64 || scene.height as u64 > limit as u64) {
             return Err(GpuError::ImageTooLarge {
                 scene: scene.name.clone(),
                 width: scene.width as u32,
                 height: scene.height as u32,
-                pipeline: *pipeline,
+                pipeline: Box::new(*pipeline),
                 limit,
                 adapter: gpu.info().name.clone(),
             });
@@ -139,6 +142,11 @@ impl SceneBuffers {
         };
         let color = upload("color", &scene.color);
         let (width, height) = (scene.width as u32, scene.height as u32);
+        // Only `anchor` reads the frame as it came, and it samples it: a texture from the start.
+        let frame = pipeline.anchor.map(|_| {
+            let rgba: Vec<[f32; 4]> = scene.color.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();
+            gpu.uploaded_texture(&rgba, (width, height))
+        });
         let motion = match (pipeline.is_temporal(), &scene.motion) {
             (false, _) => None,
             (true, Some(motion)) => {
@@ -214,6 +222,7 @@ impl SceneBuffers {
             temporal_pending: motion.is_some(),
             motion,
             temporal_dispatch: None,
+            frame,
         })
     }
 

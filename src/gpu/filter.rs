@@ -153,6 +153,10 @@ impl Gpu {
         if planefit.is_some() {
             self.planefit_pipeline(!buffers.pipeline.is_atrous())?;
         }
+        let anchor = buffers.pipeline.anchor;
+        if anchor.is_some() {
+            self.prepare_anchor()?;
+        }
         let pixel_filter = buffers.pipeline.pixel_filter;
         if pixel_filter.is_some() {
             self.prepare_pixel_filter()?;
@@ -294,6 +298,16 @@ impl Gpu {
                 let fitted = self.planefit(&mut encoder, buffers, fit, &out)?;
                 dispatches += 1;
                 fitted
+            }
+            None => out,
+        };
+        // `anchor`: a dispatch per blur level, then one that scales the image.
+        let out = match anchor {
+            Some(anchor) => {
+                let frame = buffers.frame.as_ref().expect("uploaded for a pipeline with `anchor`");
+                let anchored = self.anchor(&mut encoder, anchor, frame, &out, (buffers.width, buffers.height))?;
+                dispatches += crate::pipeline::ANCHOR_LEVELS as usize + 1;
+                anchored
             }
             None => out,
         };

@@ -95,6 +95,9 @@ impl FitnessScene {
         if pipeline.pixel_filter.is_some() {
             return Err(GpuError::PixelFilterScored { pipeline: *pipeline });
         }
+        if pipeline.anchor.is_some() {
+            return Err(GpuError::AnchorScored { pipeline: *pipeline });
+        }
         let reference =
             scene.reference.as_ref().ok_or_else(|| GpuError::MissingReference { scene: scene.name.clone() })?;
         let rgba: Vec<[f32; 4]> = reference.iter().map(|c| [c[0], c[1], c[2], 1.0]).collect();

@@ -2,6 +2,7 @@
 //! buffers and filter dispatches. Only validated kernels come in.
 
 pub mod adapter;
+mod anchor;
 mod buffers;
 mod clock;
 mod filter;
@@ -75,6 +76,12 @@ pub enum GpuError {
     )]
     PixelFilterScored { pipeline: crate::pipeline::FilterPipeline },
     #[error(
+        "pipeline `{pipeline}`: `anchor` is not scored in a search: it corrects the light of whatever the search's \
+         filter leaves, so a weight would be chosen for what the anchor hides (leave it out of the search's pipeline \
+         and add it to the result's)"
+    )]
+    AnchorScored { pipeline: crate::pipeline::FilterPipeline },
+    #[error(
         "scene `{scene}` is {width}x{height} pixels; pipeline `{pipeline}` reads its images as textures, which {adapter} \
          allows at most {limit} pixels a side (a `window` form without a pre-pass reads storage buffers instead)"
     )]
@@ -82,7 +89,8 @@ pub enum GpuError {
         scene: String,
         width: u32,
         height: u32,
-        pipeline: crate::pipeline::FilterPipeline,
+        /// Boxed: the error's other variants are small.
+        pipeline: Box<crate::pipeline::FilterPipeline>,
         limit: u32,
         adapter: String,
     },

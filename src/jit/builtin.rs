@@ -24,6 +24,8 @@ pub enum BuiltIn {
     PlaneFit,
     /// `planefit` as a fitness kernel.
     PlaneFitTerms,
+    /// `anchor`, after the form and `planefit` (`jit::anchor`).
+    Anchor,
     /// `pixelfilter`, the last stage (`jit::pixel_filter`).
     PixelFilter,
     /// A storage buffer of `Element`s into a texture of the same values (`jit::blit`).
@@ -46,6 +48,7 @@ impl BuiltIn {
             BuiltIn::Spread(Keep::Surface) => "<surface spread>",
             BuiltIn::PlaneFit => "<planefit>",
             BuiltIn::PlaneFitTerms => "<planefit terms>",
+            BuiltIn::Anchor => "<anchor>",
             BuiltIn::PixelFilter => "<pixelfilter>",
             BuiltIn::Blit(_) => "<blit>",
             BuiltIn::Reduce => "<fitness reduction>",
@@ -63,6 +66,7 @@ impl BuiltIn {
             BuiltIn::Spread(Keep::Surface) => super::spread_surface_wgsl(None),
             BuiltIn::PlaneFit => super::planefit_wgsl(None),
             BuiltIn::PlaneFitTerms => super::planefit_terms_wgsl(),
+            BuiltIn::Anchor => super::anchor_wgsl(None),
             BuiltIn::PixelFilter => super::pixel_filter_wgsl(None),
             BuiltIn::Blit(element) => super::blit_wgsl(element),
             BuiltIn::Reduce => super::reduce_wgsl(),
@@ -81,6 +85,7 @@ impl BuiltIn {
             BuiltIn::Spread(Keep::Surface) => super::spread_surface_module(None),
             BuiltIn::PlaneFit => super::planefit_module(None),
             BuiltIn::PlaneFitTerms => super::planefit_terms_module(),
+            BuiltIn::Anchor => super::anchor_module(None),
             BuiltIn::PixelFilter => super::pixel_filter_module(None),
             BuiltIn::Blit(element) => super::blit_module(element),
             BuiltIn::Reduce => super::reduce_module(),
@@ -100,13 +105,14 @@ impl BuiltIn {
     }
 
     /// Every built-in kernel.
-    pub const ALL: [BuiltIn; 12] = [
+    pub const ALL: [BuiltIn; 13] = [
         BuiltIn::PathTracer,
         BuiltIn::Prepass,
         BuiltIn::Spread(Keep::Even),
         BuiltIn::Spread(Keep::Surface),
         BuiltIn::PlaneFit,
         BuiltIn::PlaneFitTerms,
+        BuiltIn::Anchor,
         BuiltIn::PixelFilter,
         BuiltIn::Blit(Element::F32),
         BuiltIn::Blit(Element::Vec4F32),

@@ -129,13 +129,8 @@ impl BindingInterface {
                 .into_iter()
                 .chain(extra.iter().copied())
                 .collect();
-        // Exported, every image it writes is rgba32float whatever the output
-        // format, so that the total it keeps is not rounded to half precision
-        // between passes.
-        let written = match textures {
-            None => Resource::Storage { element: Element::Vec4F32, writable: true },
-            Some(_) => Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float)),
-        };
+        // Exported, every image it writes is rgba32float: the total it keeps is not rounded between passes.
+        let written = Self::full_precision_written(textures);
         Self::image_stage(textures, true, &reads, written, [("step", step), ("stage", stage)])
     }
 
@@ -154,14 +149,49 @@ impl BindingInterface {
     /// filtered image (`Color`, sampled) and its output: a storage buffer for
     /// filterjit (`None`) or, exported, a storage texture of the output format.
     pub fn pixel_filter(textures: Option<OutputFormat>) -> BindingInterface {
-        let uniform = vec![
-            field("width", "u32", 0, "image width in pixels"),
-            field("height", "u32", 4, "image height in pixels"),
-            field("centre", "f32", 8, "the 1-D weight of the centre tap; tap (dx, dy) weighs w(dx) w(dy)"),
-            field("side", "f32", 12, "the 1-D weight of a tap one pixel off the centre"),
-        ];
+        let uniform = Self::sized_uniform([
+            ("centre", "f32", "the 1-D weight of the centre tap; tap (dx, dy) weighs w(dx) w(dy)"),
+            ("side", "f32", "the 1-D weight of a tap one pixel off the centre"),
+        ]);
         let written = Self::frame_written(textures);
         Self::image_stage_with(textures, true, &[(Role::Color, "color")], written, uniform)
+    }
+
+    /// The interface of `anchor`'s kernel (`jit::anchor`): the uniform
+    /// `AnchorParams` (its `gate` an f32), the noisy frame (`Color`), the
+    /// filtered image (`Image`) and the blurred sums (`Sums`), sampled, and
+    /// its output: a storage buffer for filterjit (`None`) or, exported, a
+    /// storage texture of `rgba32float` whatever the output format (the sums
+    /// hold squared luminances; the scaled image shares the binding).
+    pub fn anchor(textures: Option<OutputFormat>) -> BindingInterface {
+        let uniform = Self::sized_uniform([
+            ("level", "u32", "0 .. levels - 1: blur the sums at step 2^level; levels: scale the image"),
+            ("gate", "f32", "K of anchor=K: the standard errors the blurred lights may differ by"),
+        ]);
+        let reads = [(Role::Color, "color"), (Role::Image, "image"), (Role::Sums, "sums")];
+        Self::image_stage_with(textures, true, &reads, Self::full_precision_written(textures), uniform)
+    }
+
+    /// A 16-byte uniform: the image's width and height, then `fields` (name, WGSL type, meaning).
+    fn sized_uniform(fields: [(&str, &'static str, &str); 2]) -> Vec<super::interface::UniformField> {
+        let [(a, a_type, a_meaning), (b, b_type, b_meaning)] = fields;
+        vec![
+            field("width", "u32", 0, "image width in pixels"),
+            field("height", "u32", 4, "image height in pixels"),
+            field(a, a_type, 8, a_meaning),
+            field(b, b_type, 12, b_meaning),
+        ]
+    }
+
+    /// What a stage whose images another dispatch reads again writes: a
+    /// storage buffer for filterjit (`None`), or exported, a storage texture
+    /// of `rgba32float` whatever the output format, so that nothing it keeps
+    /// between dispatches is rounded to half precision.
+    fn full_precision_written(textures: Option<OutputFormat>) -> Resource {
+        match textures {
+            None => Resource::Storage { element: Element::Vec4F32, writable: true },
+            Some(_) => Resource::StorageTexture(TexelFormat::Color(OutputFormat::Rgba32float)),
+        }
     }
 
     /// What a stage that writes the filtered frame writes: a storage buffer

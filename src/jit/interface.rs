@@ -63,6 +63,9 @@ pub enum Role {
     /// The modulation the temporal stage blends, written: what the form's
     /// result is multiplied back by, and what the next frame keeps.
     ModulationOut,
+    /// `anchor`'s blurred sums (the frame's luminance, its square, the
+    /// filtered image's luminance), which each blur level writes and the next reads.
+    Sums,
     /// The temporal stage's history: the colour the frame before kept.
     History,
     /// The history's moments (m1, m2, r, n), read.

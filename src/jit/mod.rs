@@ -1,6 +1,7 @@
 //! The JIT: typed expression → WGSL (lower) → naga-validated kernel (validate).
 //! Nothing here talks to wgpu; [`crate::gpu`] turns a [`ValidatedKernel`] into a pipeline.
 
+pub mod anchor;
 pub mod blit;
 pub mod builtin;
 mod builtin_interface;
@@ -19,6 +20,7 @@ pub mod spread;
 pub mod temporal;
 pub mod validate;
 
+pub use anchor::{anchor_module, anchor_wgsl, AnchorParams};
 pub use blit::{blit_module, blit_wgsl, BlitParams};
 pub use builtin::BuiltIn;
 pub use helpers::Helper;

@@ -430,6 +430,81 @@ impl PlaneFit {
     }
 }
 
+/// `anchor=K`'s blur: the cubic B-spline stencil ([`Stencil::Cubic5`]) at
+/// steps 1, 2, 4, one level each: a kernel about as wide as a Gaussian of
+/// σ 4.6 pixels, the scale at which one sample a pixel still tells a change
+/// of light from noise (docs/JOURNAL.md, "The moving light's error is lag at
+/// low frequency").
+pub const ANCHOR_LEVELS: u32 = 3;
+
+/// Added to the anchor's standard error, so that a flat black region has one.
+pub const ANCHOR_ERROR_FLOOR: f64 = 1e-4;
+
+/// The least blurred output luminance the anchor divides by.
+pub const ANCHOR_LIGHT_FLOOR: f64 = 1e-6;
+
+/// `anchor=K`'s largest gate, in standard errors.
+pub const MAX_ANCHOR_GATE: f32 = 100.0;
+
+/// `anchor=K`, after the form and `planefit`: the filtered image's light
+/// pulled toward the frame's own at a coarse scale, where the two differ by
+/// more than the frame's noise explains. With G the blur of
+/// [`ANCHOR_LEVELS`] levels, l the luminance of the noisy frame and o of the
+/// filtered image (each clamped at 0 per channel):
+///
+///   e = sqrt(max(G l² − (G l)², 0) / N) + floor   (the standard error of G l; N = [`Anchor::samples`])
+///   t = clamp((|G l − G o| / e − K) / K, 0, 1)
+///   out = P · (1 + t · (G l / max(G o, floor) − 1))
+///
+/// A history that lags a moving light, or passes that lose light where it
+/// is sparse, are pulled back; where the difference is within K standard
+/// errors, nothing changes (docs/SEMANTICS.md, "The pipeline").
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Anchor {
+    /// K: how many standard errors the blurred lights must differ by before the pull starts.
+    pub gate: f32,
+}
+
+impl Anchor {
+    /// The gate shipped pipelines use.
+    pub const SHIPPED: Anchor = Anchor { gate: 2.0 };
+
+    /// The pixel step of blur level `level`.
+    pub fn step(level: u32) -> u32 {
+        1 << level
+    }
+
+    /// The 1-D weights of the whole blur (every level's stencil convolved),
+    /// from offset −half to +half.
+    pub fn blur_weights() -> Vec<f64> {
+        let stencil = Stencil::Cubic5;
+        let half = stencil.half_width();
+        let mut weights = vec![1.0];
+        for level in 0..ANCHOR_LEVELS {
+            let step = Self::step(level) as usize;
+            let reach = (weights.len() - 1) / 2;
+            let next_reach = reach + half as usize * step;
+            let mut next = vec![0.0; 2 * next_reach + 1];
+            for (i, w) in weights.iter().enumerate() {
+                for d in -half..=half {
+                    let at = i as i64 - reach as i64 + d as i64 * step as i64 + next_reach as i64;
+                    next[at as usize] += w * stencil.weight(d);
+                }
+            }
+            weights = next;
+        }
+        weights
+    }
+
+    /// N, the effective number of samples the blur averages, 1 / Σ W²
+    /// over its 2-D weights W (away from the edges), rounded to f32 once:
+    /// the device and the CPU reference divide by this same number.
+    pub fn samples() -> f32 {
+        let squares: f64 = Self::blur_weights().iter().map(|w| w * w).sum();
+        (1.0 / (squares * squares)) as f32
+    }
+}
+
 /// `pixelfilter=S`'s largest σ, in pixels: a 3×3 kernel holds no wider one.
 pub const MAX_PIXEL_FILTER_SIGMA: f32 = 1.0;
 
@@ -473,6 +548,8 @@ pub struct FilterPipeline {
     pub form: Form,
     /// `planefit=R` after the form, if any.
     pub planefit: Option<PlaneFit>,
+    /// `anchor=K` after the form and `planefit`, if any.
+    pub anchor: Option<Anchor>,
     /// `pixelfilter=S`, last, if any.
     pub pixel_filter: Option<PixelFilter>,
 }
@@ -492,6 +569,7 @@ impl FilterPipeline {
         temporal: None,
         form: Form::Window,
         planefit: None,
+        anchor: None,
         pixel_filter: None,
     };
 
@@ -633,6 +711,8 @@ mod tests {
             "temporal=0.05,feedback=1,window",
             "demodulate,temporal=0.2,feedback=0,clamp=2,antilag=3,atrous=5,pixelfilter=0.45",
             "atrous=4,planefit=3,pixelfilter=1",
+            "atrous=4,anchor=2",
+            "demodulate,temporal=0.2,feedback=1,atrous=5,planefit=3,anchor=2.5,pixelfilter=0.4",
         ] {
             let p: FilterPipeline = text.parse().unwrap();
             assert_eq!(p.to_string(), text);
@@ -671,6 +751,15 @@ mod tests {
             ("atrous=4,pixelfilter=1.5", "at most 1"),
             ("atrous=4,pixelfilter=wide", "number of pixels"),
             ("atrous=4,pixelfilter=0.5,planefit=3", "last stage"),
+            ("anchor=2,atrous=4", "after the form"),
+            ("atrous=4,anchor", "anchor=K"),
+            ("atrous=4,anchor=0", "above 0"),
+            ("atrous=4,anchor=-1", "above 0"),
+            ("atrous=4,anchor=1000", "at most 100"),
+            ("atrous=4,anchor=bright", "standard errors"),
+            ("atrous=4,anchor=2,anchor=2", "once"),
+            ("atrous=4,anchor=2,planefit=3", "before `anchor"),
+            ("atrous=4,pixelfilter=0.5,anchor=2", "last stage"),
             ("atrous=4,pixelfilter=0.5,pixelfilter=0.5", "last stage"),
             ("temporal,atrous=4", "temporal=A"),
             ("temporal=0,atrous=4", "above 0"),
@@ -764,6 +853,18 @@ mod tests {
         assert_eq!(surface_normal_term([0.0, 0.0, 2.5], up), 1.0, "a direction, whatever its length");
         assert_eq!(surface_light_term(0.5, 0.0), 1.0);
         assert_eq!(surface_light_term(0.5, 0.25), 0.75);
+    }
+
+    #[test]
+    fn the_anchors_blur_keeps_the_light_and_averages_about_a_gaussians_samples() {
+        let weights = Anchor::blur_weights();
+        assert_eq!(weights.len(), 2 * (2 + 4 + 8) + 1, "three levels reach 2 + 4 + 8 pixels");
+        assert!((weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+        let variance: f64 = weights.iter().enumerate().map(|(i, w)| w * (i as f64 - 14.0).powi(2)).sum();
+        assert!((variance - 21.0).abs() < 1e-9, "each level adds step², got {variance}");
+        // A Gaussian of variance 21 averages 4π·21 ≈ 264 samples; the spline, flatter, a few more.
+        let samples = Anchor::samples();
+        assert!((264.0..300.0).contains(&samples), "{samples}");
     }
 
     #[test]

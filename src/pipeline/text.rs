@@ -7,8 +7,8 @@ use std::fmt;
 use std::str::FromStr;
 
 use super::{
-    FilterPipeline, Form, Keep, Outliers, PixelFilter, PlaneFit, Stencil, Temporal, MAX_ATROUS_PASSES,
-    MAX_PIXEL_FILTER_SIGMA, MAX_PLANEFIT_RADIUS, TEMPORAL_MAX_ALPHA,
+    Anchor, FilterPipeline, Form, Keep, Outliers, PixelFilter, PlaneFit, Stencil, Temporal, MAX_ANCHOR_GATE,
+    MAX_ATROUS_PASSES, MAX_PIXEL_FILTER_SIGMA, MAX_PLANEFIT_RADIUS, TEMPORAL_MAX_ALPHA,
 };
 
 /// Text that is not a pipeline.
@@ -20,7 +20,7 @@ pub struct PipelineError {
 }
 
 /// Every stage's name, in the order a pipeline writes them.
-const STAGE_NAMES: [&str; 13] = [
+const STAGE_NAMES: [&str; 14] = [
     "outliers",
     "trim",
     "keep",
@@ -33,6 +33,7 @@ const STAGE_NAMES: [&str; 13] = [
     "atrous",
     "atrous3x3",
     "planefit",
+    "anchor",
     "pixelfilter",
 ];
 
@@ -42,7 +43,7 @@ fn unknown_stage(name: &str) -> String {
         crate::spelling::nearest(name, STAGE_NAMES).map(|n| format!(" (did you mean `{n}`?)")).unwrap_or_default();
     format!(
         "unknown stage `{name}`{nearest}; the stages are outliers=K, trim, keep, keep=surface, demodulate, temporal=A, \
-         feedback=K, clamp=G, antilag=K, window, atrous=N, atrous3x3=N, planefit=R, pixelfilter=S"
+         feedback=K, clamp=G, antilag=K, window, atrous=N, atrous3x3=N, planefit=R, anchor=K, pixelfilter=S"
     )
 }
 
@@ -64,9 +65,10 @@ impl FromStr for FilterPipeline {
             if !STAGE_NAMES.contains(&name) {
                 return Err(error(unknown_stage(name)));
             }
-            if form_seen && name != "planefit" && name != "pixelfilter" {
+            if form_seen && !["planefit", "anchor", "pixelfilter"].contains(&name) {
                 return Err(error(format!(
-                    "`{stage}` comes after the form; only `planefit=R` and `pixelfilter=S` follow the form (window or atrous)"
+                    "`{stage}` comes after the form; only `planefit=R`, `anchor=K` and `pixelfilter=S` follow the \
+                     form (window or atrous)"
                 )));
             }
             if pipeline.pixel_filter.is_some() {
@@ -89,6 +91,25 @@ impl FromStr for FilterPipeline {
                 ("pixelfilter", None) => {
                     return Err(error("`pixelfilter` needs its σ in pixels: pixelfilter=S".into()))
                 }
+                ("anchor", Some(v)) => {
+                    let gate: f32 =
+                        v.parse().map_err(|_| error(format!("anchor={v}: K must be a number of standard errors")))?;
+                    if !(gate > 0.0 && gate <= MAX_ANCHOR_GATE) {
+                        return Err(error(format!(
+                            "anchor={v}: K must be above 0 and at most {MAX_ANCHOR_GATE} standard errors"
+                        )));
+                    }
+                    if !form_seen {
+                        return Err(error("`anchor=K` comes after the form (window or atrous)".into()));
+                    }
+                    if pipeline.anchor.is_some() {
+                        return Err(error("`anchor` appears once".into()));
+                    }
+                    pipeline.anchor = Some(Anchor { gate });
+                }
+                ("anchor", None) => {
+                    return Err(error("`anchor` needs its gate in standard errors: anchor=K (2 is shipped)".into()))
+                }
                 ("planefit", Some(v)) => {
                     let radius: u32 =
                         v.parse().map_err(|_| error(format!("planefit={v}: the radius must be a whole number")))?;
@@ -100,6 +121,9 @@ impl FromStr for FilterPipeline {
                     }
                     if pipeline.planefit.is_some() {
                         return Err(error("`planefit` appears once".into()));
+                    }
+                    if pipeline.anchor.is_some() {
+                        return Err(error("`planefit=R` comes before `anchor=K`".into()));
                     }
                     pipeline.planefit = Some(PlaneFit { radius });
                 }
@@ -287,6 +311,9 @@ impl fmt::Display for FilterPipeline {
         }
         if let Some(PlaneFit { radius }) = self.planefit {
             write!(f, ",planefit={radius}")?;
+        }
+        if let Some(Anchor { gate }) = self.anchor {
+            write!(f, ",anchor={gate}")?;
         }
         if let Some(PixelFilter { sigma }) = self.pixel_filter {
             write!(f, ",pixelfilter={sigma}")?;

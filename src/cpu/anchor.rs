@@ -1,0 +1,107 @@
+//! `anchor=K`'s reference (docs/SEMANTICS.md, "The pipeline"): the
+//! filtered image's light pulled to the noisy frame's at a coarse scale,
+//! formula for formula as `templates/anchor.wgsl.tera`.
+
+use crate::pipeline;
+
+/// `anchor=K` on the filtered `image` of the noisy `frame` (docs/SEMANTICS.md,
+/// "The pipeline"; the formula at [`pipeline::Anchor`]): the sums (l, l², o)
+/// blurred level by level with the cubic B-spline at steps 1, 2, 4, taps
+/// outside the image clamped to its edge and each level's sums stored as
+/// f32, then the image scaled. The reference of `templates/anchor.wgsl.tera`.
+pub fn anchor_light(
+    frame: &[[f32; 3]],
+    image: &[[f32; 3]],
+    width: usize,
+    height: usize,
+    anchor: pipeline::Anchor,
+) -> Vec<[f64; 3]> {
+    use pipeline::{luminance, Anchor, Stencil, ANCHOR_ERROR_FLOOR, ANCHOR_LEVELS, ANCHOR_LIGHT_FLOOR};
+    let f64s = |c: [f32; 3]| c.map(f64::from);
+    let mut sums: Vec<[f32; 3]> = frame
+        .iter()
+        .zip(image)
+        .map(|(&c, &o)| {
+            let (l, o) = (luminance(f64s(c)) as f32, luminance(f64s(o)) as f32);
+            [l, l * l, o]
+        })
+        .collect();
+    let stencil = Stencil::Cubic5;
+    let half = stencil.half_width() as i64;
+    for level in 0..ANCHOR_LEVELS {
+        let step = Anchor::step(level) as i64;
+        let tap = |x: i64, y: i64| {
+            let (x, y) = (x.clamp(0, width as i64 - 1) as usize, y.clamp(0, height as i64 - 1) as usize);
+            sums[y * width + x].map(f64::from)
+        };
+        let mut next = Vec::with_capacity(sums.len());
+        for y in 0..height as i64 {
+            for x in 0..width as i64 {
+                let mut sum = [0.0f64; 3];
+                for dy in -half..=half {
+                    for dx in -half..=half {
+                        let w = stencil.weight(dx as i32) * stencil.weight(dy as i32);
+                        let v = tap(x + dx * step, y + dy * step);
+                        for k in 0..3 {
+                            sum[k] += w * v[k];
+                        }
+                    }
+                }
+                next.push(sum.map(|v| v as f32));
+            }
+        }
+        sums = next;
+    }
+    let samples = f64::from(Anchor::samples());
+    let gate = f64::from(anchor.gate);
+    sums.iter()
+        .zip(image)
+        .map(|(s, &o)| {
+            let [frame_light, frame_square, out_light] = s.map(f64::from);
+            let error = ((frame_square - frame_light * frame_light).max(0.0) / samples).sqrt() + ANCHOR_ERROR_FLOOR;
+            let pull = (((frame_light - out_light).abs() / error - gate) / gate).clamp(0.0, 1.0);
+            let scale = 1.0 + pull * (frame_light / out_light.max(ANCHOR_LIGHT_FLOOR) - 1.0);
+            f64s(o).map(|v| v * scale)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod anchor_tests {
+    use super::anchor_light;
+    use crate::pipeline::{luminance, Anchor};
+    use crate::rng::Rng;
+
+    fn mean_light(image: &[[f64; 3]]) -> f64 {
+        image.iter().map(|&c| luminance(c)).sum::<f64>() / image.len() as f64
+    }
+
+    #[test]
+    fn the_anchor_restores_lost_light_and_leaves_light_within_the_noise() {
+        let (width, height) = (64, 64);
+        let mut rng = Rng::seeded(7);
+        // A noisy frame of mean light 1 (one sample a pixel, exponential-ish noise).
+        let frame: Vec<[f32; 3]> = (0..width * height)
+            .map(|_| {
+                let v = -(1.0 - rng.unit()).ln() as f32;
+                [v, v, v]
+            })
+            .collect();
+        // A filter that lost 40 % of the light is pulled back to the frame's...
+        let dark: Vec<[f32; 3]> = vec![[0.6; 3]; width * height];
+        let anchored = anchor_light(&frame, &dark, width, height, Anchor::SHIPPED);
+        let light = mean_light(&anchored);
+        assert!((light - 1.0).abs() < 0.05, "pulled to the frame's light: {light}");
+        // ...one within the frame's noise of it is mostly left alone: not
+        // where the frame's local mean strays past the gate by chance, nor
+        // always near the edges, where clamped taps repeat pixels and the
+        // blur averages fewer samples than `Anchor::samples` says.
+        let close: Vec<[f32; 3]> = vec![[0.995; 3]; width * height];
+        let kept = anchor_light(&frame, &close, width, height, Anchor::SHIPPED);
+        let still = kept.iter().zip(&close).filter(|(a, b)| a[0] == b[0] as f64).count();
+        assert!(still as f64 >= 0.75 * close.len() as f64, "{still} of {} pixels kept", close.len());
+        // Every output is finite on a black frame, where the blurred lights are 0.
+        let black = vec![[0.0f32; 3]; width * height];
+        assert!(anchor_light(&black, &dark, width, height, Anchor::SHIPPED).iter().flatten().all(|v| v.is_finite()));
+    }
+}
