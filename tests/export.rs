@@ -256,7 +256,7 @@ fn an_exported_pipeline_in_plain_wgpu_matches_filter() {
         );
         assert_eq!(
             exported.manifest.dispatches_of(StageName::Anchor),
-            if text.contains("anchor") { filterjit::pipeline::ANCHOR_LEVELS as usize + 1 } else { 0 },
+            if text.contains("anchor") { filterjit::jit::ANCHOR_DISPATCHES } else { 0 },
             "{text}: the anchor's levels and its scaling exactly where the pipeline has it"
         );
         let mut frame = frame_of(&scene, &manifest);

@@ -6,9 +6,10 @@ use crate::pipeline;
 
 /// `anchor=K` on the filtered `image` of the noisy `frame` (docs/SEMANTICS.md,
 /// "The pipeline"; the formula at [`pipeline::Anchor`]): the sums (l, l², o)
-/// blurred level by level with the cubic B-spline at steps 1, 2, 4, taps
-/// outside the image clamped to its edge and each level's sums stored as
-/// f32, then the image scaled. The reference of `templates/anchor.wgsl.tera`.
+/// averaged over 2×2 blocks into the half-resolution grid, blurred there
+/// level by level with the cubic B-spline at steps 1, 2, taps outside the
+/// frame or the grid clamped to its edge and each step's sums stored as f32,
+/// then interpolated bilinearly to each pixel, which is scaled. The reference of `templates/anchor.wgsl.tera`.
 pub fn anchor_light(
     frame: &[[f32; 3]],
     image: &[[f32; 3]],
@@ -18,32 +19,47 @@ pub fn anchor_light(
 ) -> Vec<[f64; 3]> {
     use pipeline::{luminance, Anchor, Stencil, ANCHOR_ERROR_FLOOR, ANCHOR_LEVELS, ANCHOR_LIGHT_FLOOR};
     let f64s = |c: [f32; 3]| c.map(f64::from);
-    let mut sums: Vec<[f32; 3]> = frame
-        .iter()
-        .zip(image)
-        .map(|(&c, &o)| {
-            let (l, o) = (luminance(f64s(c)) as f32, luminance(f64s(o)) as f32);
-            [l, l * l, o]
-        })
-        .collect();
+    let (w, h) = (width as i64, height as i64);
+    let (gw, gh) = Anchor::grid(width as u32, height as u32);
+    let (gw, gh) = (gw as i64, gh as i64);
+    // The frame's pixel (x, y)'s sums (l, l², o), clamped to the frame.
+    let pixel_sums = |x: i64, y: i64| {
+        let i = (y.clamp(0, h - 1) * w + x.clamp(0, w - 1)) as usize;
+        let l = luminance(f64s(frame[i])) as f32;
+        [l, l * l, luminance(f64s(image[i])) as f32].map(f64::from)
+    };
+    // The 2×2 blocks averaged into the grid, stored as f32 as on the device.
+    let mut sums: Vec<[f32; 3]> = Vec::with_capacity((gw * gh) as usize);
+    for y in 0..gh {
+        for x in 0..gw {
+            let mut sum = [0.0f64; 3];
+            for (dx, dy) in [(0, 0), (1, 0), (0, 1), (1, 1)] {
+                let v = pixel_sums(2 * x + dx, 2 * y + dy);
+                for k in 0..3 {
+                    sum[k] += 0.25 * v[k];
+                }
+            }
+            sums.push(sum.map(|v| v as f32));
+        }
+    }
+    // The grid's texel (x, y), clamped to the grid.
+    let texel = |sums: &[[f32; 3]], x: i64, y: i64| {
+        sums[(y.clamp(0, gh - 1) * gw + x.clamp(0, gw - 1)) as usize].map(f64::from)
+    };
     let stencil = Stencil::Cubic5;
     let half = stencil.half_width() as i64;
     for level in 0..ANCHOR_LEVELS {
         let step = Anchor::step(level) as i64;
-        let tap = |x: i64, y: i64| {
-            let (x, y) = (x.clamp(0, width as i64 - 1) as usize, y.clamp(0, height as i64 - 1) as usize);
-            sums[y * width + x].map(f64::from)
-        };
         let mut next = Vec::with_capacity(sums.len());
-        for y in 0..height as i64 {
-            for x in 0..width as i64 {
+        for y in 0..gh {
+            for x in 0..gw {
                 let mut sum = [0.0f64; 3];
                 for dy in -half..=half {
                     for dx in -half..=half {
-                        let w = stencil.weight(dx as i32) * stencil.weight(dy as i32);
-                        let v = tap(x + dx * step, y + dy * step);
+                        let weight = stencil.weight(dx as i32) * stencil.weight(dy as i32);
+                        let v = texel(&sums, x + dx * step, y + dy * step);
                         for k in 0..3 {
-                            sum[k] += w * v[k];
+                            sum[k] += weight * v[k];
                         }
                     }
                 }
@@ -52,18 +68,29 @@ pub fn anchor_light(
         }
         sums = next;
     }
+    // Along one axis, the lower of the two texels around pixel x (centres at
+    // 2k + 0.5) and its weight: 0.25 below an even pixel, 0.75 below an odd one.
+    let lower = |x: i64| if x % 2 == 0 { (x / 2 - 1, 0.25) } else { (x / 2, 0.75) };
     let samples = f64::from(Anchor::samples());
     let gate = f64::from(anchor.gate);
-    sums.iter()
-        .zip(image)
-        .map(|(s, &o)| {
-            let [frame_light, frame_square, out_light] = s.map(f64::from);
+    let mut out = Vec::with_capacity(image.len());
+    for y in 0..h {
+        for x in 0..w {
+            let ((x0, wx), (y0, wy)) = (lower(x), lower(y));
+            let row = |y: i64| {
+                let (a, b) = (texel(&sums, x0, y), texel(&sums, x0 + 1, y));
+                std::array::from_fn::<f64, 3, _>(|k| wx * a[k] + (1.0 - wx) * b[k])
+            };
+            let (above, below) = (row(y0), row(y0 + 1));
+            let [frame_light, frame_square, out_light]: [f64; 3] =
+                std::array::from_fn(|k| wy * above[k] + (1.0 - wy) * below[k]);
             let error = ((frame_square - frame_light * frame_light).max(0.0) / samples).sqrt() + ANCHOR_ERROR_FLOOR;
             let pull = (((frame_light - out_light).abs() / error - gate) / gate).clamp(0.0, 1.0);
             let scale = 1.0 + pull * (frame_light / out_light.max(ANCHOR_LIGHT_FLOOR) - 1.0);
-            f64s(o).map(|v| v * scale)
-        })
-        .collect()
+            out.push(f64s(image[(y * w + x) as usize]).map(|v| v * scale));
+        }
+    }
+    out
 }
 
 #[cfg(test)]

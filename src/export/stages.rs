@@ -367,15 +367,15 @@ pub(super) fn order(manifest: &Manifest, placement: &Placement, pipeline: &Filte
     }
     if manifest.anchor.is_some() {
         steps.push(format!(
-            "anchor (`anchor`, {} dispatches, gate = {}): level = 0 … {} blur the sums of colour = the noisy \
-             colour and image = {} (sums = the image in level 0, else the level before's `anchor_sums0` / \
-             `anchor_sums1`, written in turn); level = {} scales the image by the sums and writes `anchored`: \
-             the filtered frame",
-            crate::pipeline::ANCHOR_LEVELS + 1,
+            "anchor (`anchor`, {} dispatches, gate = {}): level = 0 averages 2x2 blocks of colour = the noisy \
+             colour and image = {} into the top-left quarter of `anchor_sums0` (sums = the image, unread); level \
+             = 1 … {} blur those sums (read from the level before's `anchor_sums0` / `anchor_sums1`, written in \
+             turn); level = {} scales the image by them and writes `anchored`: the filtered frame",
+            jit::ANCHOR_DISPATCHES,
             pipeline.anchor.map_or(0.0, |a| a.gate),
-            crate::pipeline::ANCHOR_LEVELS - 1,
             if manifest.planefit.is_some() { "`fitted`" } else { "`filtered`, the form's last `output`" },
             crate::pipeline::ANCHOR_LEVELS,
+            crate::pipeline::ANCHOR_LEVELS + 1,
         ));
     }
     if manifest.pixelfilter.is_some() {

@@ -1,6 +1,6 @@
-//! `anchor` on the device (`jit::anchor`): one pipeline per device, a
-//! dispatch per blur level and one that scales the image, after the form
-//! and `planefit`; `cpu::anchor_light` is its reference.
+//! `anchor` on the device (`jit::anchor`): one pipeline per device; after
+//! the form and `planefit`, the sums averaged into a half-resolution grid,
+//! blurred there level by level, and the image scaled; `cpu::anchor_light` is its reference.
 
 use super::{Gpu, GpuError};
 use crate::jit::interface::Element;
@@ -17,9 +17,9 @@ impl Gpu {
     }
 
     /// Record `anchor` of `image` (`size`) against the noisy `frame` into
-    /// `encoder`, returning the buffer it writes. The image, and each blur
-    /// level's sums, are copied into textures for the next dispatch to
-    /// sample. Callers hold the GL turn and ran [`Gpu::prepare_anchor`].
+    /// `encoder`, returning the buffer it writes. The image, and the sums
+    /// after each dispatch on the grid, are copied into textures for the
+    /// next dispatch to sample. Callers hold the GL turn and ran [`Gpu::prepare_anchor`].
     pub(super) fn anchor(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -30,7 +30,7 @@ impl Gpu {
     ) -> Result<wgpu::Buffer, GpuError> {
         let kernel = self.built_in(BuiltIn::Anchor, 0)?;
         let interface = BindingInterface::anchor(None);
-        let buffer = |label| {
+        let buffer = |label, (width, height): (u32, u32)| {
             self.device().create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
                 size: (width * height) as u64 * 16,
@@ -40,9 +40,10 @@ impl Gpu {
         };
         let image = self.blitted(encoder, image, Element::Vec4F32, (width, height))?.create_view(&Default::default());
         let frame = frame.create_view(&Default::default());
-        // The level before's sums; level 0 reads none, and binds the image in their place.
+        // The sums so far; the first dispatch reads none, and binds the image in their place.
         let mut sums: Option<wgpu::TextureView> = None;
-        let (summed, anchored) = (buffer("anchor sums"), buffer("anchored"));
+        let grid = Anchor::grid(width, height);
+        let (summed, anchored) = (buffer("anchor sums", grid), buffer("anchored", (width, height)));
         for params in AnchorParams::sequence(anchor, width, height) {
             let out = if params.scales() { &anchored } else { &summed };
             let uniform = self.params_buffer(interface.params(), "anchor params", bytemuck::bytes_of(&params));
@@ -57,10 +58,11 @@ impl Gpu {
             let mut pass = self.compute_pass(encoder, format_args!("anchor: level {}", params.level));
             pass.set_pipeline(&kernel.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(width.div_ceil(WORKGROUP[0]), height.div_ceil(WORKGROUP[1]), 1);
+            let (columns, rows) = params.writes();
+            pass.dispatch_workgroups(columns.div_ceil(WORKGROUP[0]), rows.div_ceil(WORKGROUP[1]), 1);
             drop(pass);
             if !params.scales() {
-                let texture = self.blitted(encoder, &summed, Element::Vec4F32, (width, height))?;
+                let texture = self.blitted(encoder, &summed, Element::Vec4F32, grid)?;
                 sums = Some(texture.create_view(&Default::default()));
             }
         }

@@ -306,7 +306,7 @@ impl Gpu {
             Some(anchor) => {
                 let frame = buffers.frame.as_ref().expect("uploaded for a pipeline with `anchor`");
                 let anchored = self.anchor(&mut encoder, anchor, frame, &out, (buffers.width, buffers.height))?;
-                dispatches += crate::pipeline::ANCHOR_LEVELS as usize + 1;
+                dispatches += crate::jit::ANCHOR_DISPATCHES;
                 anchored
             }
             None => out,

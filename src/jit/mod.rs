@@ -20,7 +20,7 @@ pub mod spread;
 pub mod temporal;
 pub mod validate;
 
-pub use anchor::{anchor_module, anchor_wgsl, AnchorParams};
+pub use anchor::{anchor_module, anchor_wgsl, AnchorParams, ANCHOR_DISPATCHES};
 pub use blit::{blit_module, blit_wgsl, BlitParams};
 pub use builtin::BuiltIn;
 pub use helpers::Helper;

@@ -430,12 +430,15 @@ impl PlaneFit {
     }
 }
 
-/// `anchor=K`'s blur: the cubic B-spline stencil ([`Stencil::Cubic5`]) at
-/// steps 1, 2, 4, one level each: a kernel about as wide as a Gaussian of
-/// σ 4.6 pixels, the scale at which one sample a pixel still tells a change
-/// of light from noise (docs/JOURNAL.md, "The moving light's error is lag at
-/// low frequency").
-pub const ANCHOR_LEVELS: u32 = 3;
+/// `anchor=K`'s blur: the frame's 2×2 blocks averaged into a grid of half
+/// the resolution each way (all of the anchor's sums are low-frequency:
+/// a quarter of the pixels to blur), then the cubic B-spline stencil
+/// ([`Stencil::Cubic5`]) on that grid at steps 1 and 2, one level each, and
+/// the result interpolated bilinearly back to every pixel: a kernel about
+/// as wide as a Gaussian of σ 4.5 pixels, the scale at which one sample a
+/// pixel still tells a change of light from noise (docs/JOURNAL.md, "The
+/// moving light's error is lag at low frequency").
+pub const ANCHOR_LEVELS: u32 = 2;
 
 /// Added to the anchor's standard error, so that a flat black region has one.
 pub const ANCHOR_ERROR_FLOOR: f64 = 1e-4;
@@ -469,13 +472,21 @@ impl Anchor {
     /// The gate shipped pipelines use.
     pub const SHIPPED: Anchor = Anchor { gate: 2.0 };
 
-    /// The pixel step of blur level `level`.
+    /// The half-resolution grid of a frame of `width` × `height`: each texel
+    /// averages a 2×2 block (the last row or column of an odd size repeats
+    /// the frame's edge).
+    pub fn grid(width: u32, height: u32) -> (u32, u32) {
+        (width.div_ceil(2), height.div_ceil(2))
+    }
+
+    /// The step, in texels of the half-resolution grid, of blur level
+    /// `level` (0 .. [`ANCHOR_LEVELS`]).
     pub fn step(level: u32) -> u32 {
         1 << level
     }
 
-    /// The 1-D weights of the whole blur (every level's stencil convolved),
-    /// from offset −half to +half.
+    /// The 1-D weights, over the half-resolution grid, of the whole blur
+    /// (every level's stencil convolved), from offset −half to +half.
     pub fn blur_weights() -> Vec<f64> {
         let stencil = Stencil::Cubic5;
         let half = stencil.half_width();
@@ -496,12 +507,15 @@ impl Anchor {
         weights
     }
 
-    /// N, the effective number of samples the blur averages, 1 / Σ W²
-    /// over its 2-D weights W (away from the edges), rounded to f32 once:
-    /// the device and the CPU reference divide by this same number.
+    /// N, the number of pixels the blur averages as far as its noise goes:
+    /// four a texel of the grid over Σ W² of the 2-D weights W on the grid
+    /// (away from the edges; the interpolation's own averaging left out,
+    /// which makes the standard error a little larger, the gate a little
+    /// stricter), rounded to f32 once: the device and the CPU reference
+    /// divide by this same number.
     pub fn samples() -> f32 {
         let squares: f64 = Self::blur_weights().iter().map(|w| w * w).sum();
-        (1.0 / (squares * squares)) as f32
+        (4.0 / (squares * squares)) as f32
     }
 }
 
@@ -858,13 +872,13 @@ mod tests {
     #[test]
     fn the_anchors_blur_keeps_the_light_and_averages_about_a_gaussians_samples() {
         let weights = Anchor::blur_weights();
-        assert_eq!(weights.len(), 2 * (2 + 4 + 8) + 1, "three levels reach 2 + 4 + 8 pixels");
+        assert_eq!(weights.len(), 2 * (2 + 4) + 1, "two levels reach 2 + 4 texels");
         assert!((weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
-        let variance: f64 = weights.iter().enumerate().map(|(i, w)| w * (i as f64 - 14.0).powi(2)).sum();
-        assert!((variance - 21.0).abs() < 1e-9, "each level adds step², got {variance}");
-        // A Gaussian of variance 21 averages 4π·21 ≈ 264 samples; the spline, flatter, a few more.
+        let variance: f64 = weights.iter().enumerate().map(|(i, w)| w * (i as f64 - 6.0).powi(2)).sum();
+        assert!((variance - 5.0).abs() < 1e-9, "each level adds step², got {variance}");
+        // A Gaussian of variance 5 texels² averages 4π·5 texels of 4 pixels ≈ 251 pixels; the spline, flatter, a few more.
         let samples = Anchor::samples();
-        assert!((264.0..300.0).contains(&samples), "{samples}");
+        assert!((251.0..280.0).contains(&samples), "{samples}");
     }
 
     #[test]
