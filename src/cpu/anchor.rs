@@ -17,7 +17,7 @@ pub fn anchor_light(
     height: usize,
     anchor: pipeline::Anchor,
 ) -> Vec<[f64; 3]> {
-    use pipeline::{luminance, Anchor, Stencil, ANCHOR_ERROR_FLOOR, ANCHOR_LEVELS, ANCHOR_LIGHT_FLOOR};
+    use pipeline::{luminance, Anchor, ANCHOR_ERROR_FLOOR, ANCHOR_LEVELS, ANCHOR_LIGHT_FLOOR};
     let f64s = |c: [f32; 3]| c.map(f64::from);
     let (w, h) = (width as i64, height as i64);
     let (gw, gh) = Anchor::grid(width as u32, height as u32);
@@ -46,7 +46,7 @@ pub fn anchor_light(
     let texel = |sums: &[[f32; 3]], x: i64, y: i64| {
         sums[(y.clamp(0, gh - 1) * gw + x.clamp(0, gw - 1)) as usize].map(f64::from)
     };
-    let stencil = Stencil::Cubic5;
+    let stencil = Anchor::STENCIL;
     let half = stencil.half_width() as i64;
     for level in 0..ANCHOR_LEVELS {
         let step = Anchor::step(level) as i64;

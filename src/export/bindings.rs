@@ -186,8 +186,9 @@ pub(super) fn bindings(
                 (Role::Output, Stages::Anchor) => (
                     "output".into(),
                     "xyzw",
-                    "the blurred sums (levels 0 … levels - 1), or in the last dispatch the filtered frame; written \
-                     with textureStore; format rgba32float"
+                    "the sums in the half-resolution grid's top-left texels (levels 0 … levels: the 2x2 blocks' \
+                     average, then each blur), or in the last dispatch the filtered frame; written with \
+                     textureStore; format rgba32float"
                         .into(),
                     None,
                 ),

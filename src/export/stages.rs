@@ -122,12 +122,8 @@ pub(super) fn build(
             let params = jit::PixelFilterParams::of(filter, 0, 0);
             // The f32 weights widened exactly: a host stores them as the same f32s.
             let values = [("centre", params.centre as f64), ("side", params.side as f64)];
-            let frame = match (&manifest.anchor, &manifest.planefit) {
-                (Some(_), _) => "anchored",
-                (None, Some(_)) => "fitted",
-                (None, None) => "filtered",
-            };
-            (stage, once(&values, &[("color", frame), ("pixelfiltered", "pixelfiltered")]), code)
+            // `filtered`: the frame so far, which the plan names (`frame::plan`).
+            (stage, once(&values, &[("color", "filtered"), ("pixelfiltered", "pixelfiltered")]), code)
         }
         StageName::Prepass | StageName::TemporalVariance | StageName::Guide => return Ok(None),
     };

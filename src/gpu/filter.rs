@@ -301,7 +301,7 @@ impl Gpu {
             }
             None => out,
         };
-        // `anchor`: a dispatch per blur level, then one that scales the image.
+        // `anchor`: the sums averaged into the half-resolution grid, blurred there, then the image scaled.
         let out = match anchor {
             Some(anchor) => {
                 let frame = buffers.frame.as_ref().expect("uploaded for a pipeline with `anchor`");

@@ -57,7 +57,7 @@ pub fn anchor_wgsl(textures: Option<OutputFormat>) -> String {
     let values = AnchorTemplate {
         textures: textures.is_some(),
         luminance: pipeline::LUMINANCE.map(wgsl_f32),
-        stencil: pipeline::Stencil::Cubic5.weights().iter().map(|&w| wgsl_f32(w)).collect(),
+        stencil: Anchor::STENCIL.weights().iter().map(|&w| wgsl_f32(w)).collect(),
         levels: ANCHOR_LEVELS,
         samples: wgsl_f32(Anchor::samples() as f64),
         error_floor: wgsl_f32(pipeline::ANCHOR_ERROR_FLOOR),

@@ -5,7 +5,8 @@
 //! resources and uniforms are still assigned in one module's terms.
 
 use super::interface::{
-    dense, field, image_uniform, own_params, BindingInterface, Element, Resource, Role, TexelFormat,
+    dense, field, image_uniform, own_params, typed_image_uniform, BindingInterface, Element, Resource, Role,
+    TexelFormat,
 };
 use super::kernel::{Input, KernelKind, OutputFormat};
 use crate::lang::{Feature, ScalarVar};
@@ -149,7 +150,7 @@ impl BindingInterface {
     /// filtered image (`Color`, sampled) and its output: a storage buffer for
     /// filterjit (`None`) or, exported, a storage texture of the output format.
     pub fn pixel_filter(textures: Option<OutputFormat>) -> BindingInterface {
-        let uniform = Self::sized_uniform([
+        let uniform = typed_image_uniform([
             ("centre", "f32", "the 1-D weight of the centre tap; tap (dx, dy) weighs w(dx) w(dy)"),
             ("side", "f32", "the 1-D weight of a tap one pixel off the centre"),
         ]);
@@ -164,23 +165,17 @@ impl BindingInterface {
     /// storage texture of `rgba32float` whatever the output format (the sums
     /// hold squared luminances; the scaled image shares the binding).
     pub fn anchor(textures: Option<OutputFormat>) -> BindingInterface {
-        let uniform = Self::sized_uniform([
-            ("level", "u32", "0 .. levels - 1: blur the sums at step 2^level; levels: scale the image"),
+        let uniform = typed_image_uniform([
+            (
+                "level",
+                "u32",
+                "0: average 2x2 blocks into the half-resolution grid; 1 .. levels: blur there at step \
+                 2^(level - 1); levels + 1: scale the image",
+            ),
             ("gate", "f32", "K of anchor=K: the standard errors the blurred lights may differ by"),
         ]);
         let reads = [(Role::Color, "color"), (Role::Image, "image"), (Role::Sums, "sums")];
         Self::image_stage_with(textures, true, &reads, Self::full_precision_written(textures), uniform)
-    }
-
-    /// A 16-byte uniform: the image's width and height, then `fields` (name, WGSL type, meaning).
-    fn sized_uniform(fields: [(&str, &'static str, &str); 2]) -> Vec<super::interface::UniformField> {
-        let [(a, a_type, a_meaning), (b, b_type, b_meaning)] = fields;
-        vec![
-            field("width", "u32", 0, "image width in pixels"),
-            field("height", "u32", 4, "image height in pixels"),
-            field(a, a_type, 8, a_meaning),
-            field(b, b_type, 12, b_meaning),
-        ]
     }
 
     /// What a stage whose images another dispatch reads again writes: a

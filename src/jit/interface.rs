@@ -492,11 +492,17 @@ pub const fn own_params() -> Resource {
 
 /// The 16-byte uniform of a kernel over whole images: width, height, then two u32 `fields` (name, meaning).
 pub(super) fn image_uniform(fields: [(&str, &str); 2]) -> Vec<UniformField> {
+    typed_image_uniform(fields.map(|(name, meaning)| (name, "u32", meaning)))
+}
+
+/// [`image_uniform`] with each of the two fields' WGSL type given (name, type, meaning).
+pub(super) fn typed_image_uniform(fields: [(&str, &'static str, &str); 2]) -> Vec<UniformField> {
+    let [(a, a_type, a_meaning), (b, b_type, b_meaning)] = fields;
     vec![
         field("width", "u32", 0, "image width in pixels"),
         field("height", "u32", 4, "image height in pixels"),
-        field(fields[0].0, "u32", 8, fields[0].1),
-        field(fields[1].0, "u32", 12, fields[1].1),
+        field(a, a_type, 8, a_meaning),
+        field(b, b_type, 12, b_meaning),
     ]
 }
 

@@ -472,6 +472,9 @@ impl Anchor {
     /// The gate shipped pipelines use.
     pub const SHIPPED: Anchor = Anchor { gate: 2.0 };
 
+    /// The stencil of every blur level (the kernel's loop is written for its 5×5 taps).
+    pub const STENCIL: Stencil = Stencil::Cubic5;
+
     /// The half-resolution grid of a frame of `width` × `height`: each texel
     /// averages a 2×2 block (the last row or column of an odd size repeats
     /// the frame's edge).
@@ -488,7 +491,7 @@ impl Anchor {
     /// The 1-D weights, over the half-resolution grid, of the whole blur
     /// (every level's stencil convolved), from offset −half to +half.
     pub fn blur_weights() -> Vec<f64> {
-        let stencil = Stencil::Cubic5;
+        let stencil = Self::STENCIL;
         let half = stencil.half_width();
         let mut weights = vec![1.0];
         for level in 0..ANCHOR_LEVELS {
