@@ -93,6 +93,11 @@ impl CostModel {
             Op::ExpNonPositive(_) => self.unary(UnaryOp::Exp),
             Op::SqrtNonNegative(..) => self.unary(UnaryOp::Sqrt),
             Op::PowNonNegative(..) => self.binary(BinaryOp::Pow),
+            // Its squarings and the products of the powers n's bits name.
+            Op::IntegerPower(_, n, ..) => {
+                let products = n.ilog2() + n.count_ones() - 1;
+                products as f64 * self.binary(BinaryOp::Mul)
+            }
             // The squared distance: `distance2` without its square root (never cheaper than a dot product).
             Op::Distance2Squared(..) => {
                 (self.pair(PairOp::Distance2) - self.unary(UnaryOp::Sqrt)).max(self.pair(PairOp::Dot))

@@ -15,7 +15,10 @@
 //! * hoisting: an instruction that reads nothing of the neighbour goes to the
 //!   centre side;
 //! * strength reduction: `pow(x, 2)` is a product (`distance2` squared
-//!   without its square root), `pow(x, 1)` is x, `x / c` a multiplication by 1/c;
+//!   without its square root), `pow(x, n)` for a whole n up to 128 is
+//!   multiplied out by squaring (no `log2` or `exp2`: the same value, and
+//!   far cheaper where transcendentals are polynomials, as on a CPU device),
+//!   `pow(x, 1)` is x, `x / c` a multiplication by 1/c;
 //! * skipping checks: `-x` and `abs(x)` of an in-range value need no saturation,
 //!   and where a value's range proves a part of `fin` idle (src/jit/range.rs)
 //!   sums, products, quotients, `exp`, `sqrt` and `pow` leave that part out.
@@ -24,7 +27,7 @@ use std::collections::{BTreeSet, HashMap};
 
 use super::helpers::Helper;
 use super::kernel::LowerOptions;
-use super::range::{Guard, Range};
+use super::range::{Guard, Range, INTEGER_POWER_MAX};
 use crate::lang::{BinaryOp, Expr, Feature, PairOp, ScalarVar, UnaryOp};
 use crate::semantics;
 
@@ -83,6 +86,49 @@ pub enum Op {
     SqrtNonNegative(Operand, Guard),
     /// `pow(a, b)` of a non-negative a: no domain flag, no sign (`fj_pow_nonneg`).
     PowNonNegative(Operand, Operand),
+    /// `pow(a, n)` for a whole n in 3..=`INTEGER_POWER_MAX`: a held by
+    /// its cap so no product passes BIG, then squarings and products, with
+    /// the part of `fin` the range needs. A whole exponent never raises the
+    /// domain flag, and the sign of an odd power of a negative base comes
+    /// out of the products.
+    IntegerPower(Operand, u32, PowerCap, Guard),
+}
+
+/// What holds the base of a multiplied-out power (the bits of an f32 cap,
+/// the largest whose power is at most BIG) where its range needs it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PowerCap {
+    None,
+    /// A non-negative base: `min(a, cap)`.
+    Ceiling(u32),
+    /// `clamp(a, -cap, cap)`.
+    Clamp(u32),
+}
+
+impl PowerCap {
+    fn of(range: Range, n: u32) -> PowerCap {
+        match range.power_cap(n) {
+            None => PowerCap::None,
+            Some(c) if range.non_negative() => PowerCap::Ceiling(c.to_bits()),
+            Some(c) => PowerCap::Clamp(c.to_bits()),
+        }
+    }
+
+    fn value(self) -> Option<f32> {
+        match self {
+            PowerCap::None => None,
+            PowerCap::Ceiling(c) | PowerCap::Clamp(c) => Some(f32::from_bits(c)),
+        }
+    }
+
+    /// `base` held by the cap, in WGSL.
+    fn apply(self, base: &str) -> String {
+        match self {
+            PowerCap::None => base.to_string(),
+            PowerCap::Ceiling(c) => format!("min({base}, {:?})", f32::from_bits(c)),
+            PowerCap::Clamp(c) => format!("clamp({base}, {:?}, {:?})", -f32::from_bits(c), f32::from_bits(c)),
+        }
+    }
 }
 
 impl Op {
@@ -94,7 +140,8 @@ impl Op {
             | Op::Square(a, _)
             | Op::Scale(a, ..)
             | Op::ExpNonPositive(a)
-            | Op::SqrtNonNegative(a, _) => (Some(a), None),
+            | Op::SqrtNonNegative(a, _)
+            | Op::IntegerPower(a, ..) => (Some(a), None),
             Op::Binary(_, a, b) | Op::Arith(_, a, b, _) | Op::PowNonNegative(a, b) => (Some(a), Some(b)),
             Op::Pair(..) | Op::Distance2Squared(..) => (None, None),
         };
@@ -110,9 +157,11 @@ impl Op {
             Op::NegInRange(_) | Op::AbsInRange(_) => None,
             Op::Square(_, Guard::Fin) => Some(BinaryOp::Mul.helper()),
             Op::Distance2Squared(..) => Some("fj_distance2sq".into()),
-            Op::Square(_, guard) | Op::Scale(_, _, guard) | Op::Arith(.., guard) | Op::SqrtNonNegative(_, guard) => {
-                guard.helper().map(String::from)
-            }
+            Op::Square(_, guard)
+            | Op::Scale(_, _, guard)
+            | Op::Arith(.., guard)
+            | Op::SqrtNonNegative(_, guard)
+            | Op::IntegerPower(.., guard) => guard.helper().map(String::from),
             Op::ExpNonPositive(_) => Some("fj_exp_nonpos".into()),
             Op::PowNonNegative(..) => Some("fj_pow_nonneg".into()),
         }
@@ -181,6 +230,10 @@ impl Body {
         };
         let (mut centre, mut neighbour) = (Vec::new(), Vec::new());
         for (k, inst) in self.insts.iter().enumerate() {
+            let lines = match inst.side {
+                Side::Centre => &mut centre,
+                Side::Neighbour => &mut neighbour,
+            };
             let value = match inst.op {
                 Op::Unary(op, a) => format!("{}({})", op.helper(), operand(a)),
                 Op::Binary(op, a, b) => format!("{}({}, {})", op.helper(), operand(a), operand(b)),
@@ -206,15 +259,34 @@ impl Body {
                 Op::ExpNonPositive(a) => format!("fj_exp_nonpos({})", operand(a)),
                 Op::SqrtNonNegative(a, guard) => guard.apply(&format!("sqrt({})", operand(a))),
                 Op::PowNonNegative(a, b) => format!("fj_pow_nonneg({}, {})", operand(a), operand(b)),
+                Op::IntegerPower(a, n, cap, guard) => {
+                    let factors = multiply_out(&format!("{prefix}{k}"), &operand(a), n, cap, lines);
+                    guard.apply(&factors)
+                }
             };
-            let line = format!("let {prefix}{k} = {value};");
-            match inst.side {
-                Side::Centre => centre.push(line),
-                Side::Neighbour => neighbour.push(line),
-            }
+            lines.push(format!("let {prefix}{k} = {value};"));
         }
         (centre, neighbour, operand(self.result))
     }
+}
+
+/// `base`^n by squaring: pushes `let` lines for the base held by `cap` and its squares, named `name` + `_p` + the power, and
+/// returns the product of the powers whose bits n holds.
+fn multiply_out(name: &str, base: &str, n: u32, cap: PowerCap, lines: &mut Vec<String>) -> String {
+    lines.push(format!("let {name}_p1 = {};", cap.apply(base)));
+    let mut factors = Vec::new();
+    let mut power = 1;
+    while power <= n {
+        if power > 1 {
+            let half = power / 2;
+            lines.push(format!("let {name}_p{power} = {name}_p{half} * {name}_p{half};"));
+        }
+        if n & power != 0 {
+            factors.push(format!("{name}_p{power}"));
+        }
+        power *= 2;
+    }
+    factors.join(" * ")
 }
 
 /// The WGSL name of feature `f` loaded at the centre (`side` = 'i') or the neighbour ('j').
@@ -225,6 +297,11 @@ pub fn feature_ident(side: char, f: Feature) -> String {
 /// The WGSL name of variance `v` loaded at the centre.
 pub fn var_ident(v: ScalarVar) -> String {
     format!("var_{}", v.name().to_ascii_lowercase())
+}
+
+/// `b` as an exponent `pow` multiplies out: a whole number from 3 to `INTEGER_POWER_MAX`.
+fn whole_exponent(b: f64) -> Option<u32> {
+    (b == b.round() && (3.0..=INTEGER_POWER_MAX as f64).contains(&b)).then_some(b as u32)
 }
 
 /// The f32 value of a literal or of the negation of one, as the kernel holds it.
@@ -318,6 +395,12 @@ impl Builder {
                 if strength && *op == BinaryOp::Pow && b.literal_value() == Some(1.0) {
                     return a;
                 }
+                if let Some(n) = b.literal_value().and_then(whole_exponent).filter(|_| strength && *op == BinaryOp::Pow)
+                {
+                    let cap = PowerCap::of(self.range(a), n);
+                    let guard = self.guard(a, self.range(a).integer_power(n, cap.value()));
+                    return self.add(Op::IntegerPower(a, n, cap, guard));
+                }
                 if self.options.skip_redundant_checks {
                     if let Some(op) = self.bare(*op, a, b) {
                         return self.add(op);
@@ -362,9 +445,22 @@ impl Builder {
         if op == BinaryOp::Pow {
             return ra.non_negative().then_some(Op::PowNonNegative(a, b));
         }
-        let guard = Range::arithmetic(op, ra, self.range(b))?.guard().0;
+        let guard = self.arithmetic(op, a, b)?.guard().0;
         // A bare quotient drops its zero guard, worth it even with all of `fin`.
         (guard != Guard::Fin || op == BinaryOp::Div).then_some(Op::Arith(op, a, b, guard))
+    }
+
+    /// `a op b` as the bare operation computes it, before `fin`
+    /// (`Range::arithmetic`), knowing that `x + abs(x)` is never negative:
+    /// it is 2x or exactly 0 (the `max(0, x)` twice a weight spells so).
+    fn arithmetic(&self, op: BinaryOp, a: Operand, b: Operand) -> Option<Range> {
+        let range = Range::arithmetic(op, self.range(a), self.range(b))?;
+        let abs_of = |v: Operand, x: Operand| match v {
+            Operand::Value(k) => matches!(self.insts[k].op, Op::AbsInRange(y) | Op::Unary(UnaryOp::Abs, y) if y == x),
+            _ => false,
+        };
+        let one_sided = op == BinaryOp::Add && (abs_of(b, a) || abs_of(a, b));
+        Some(if one_sided { range.at_least_zero() } else { range })
     }
 
     /// What the value of `op` (with its operands' ranges known) can be.
@@ -372,7 +468,10 @@ impl Builder {
         let after = |range: Range| range.guard().1;
         match *op {
             Op::Unary(op, a) => Range::unary(op, self.range(a)),
-            Op::Binary(op, a, b) => Range::binary(op, self.range(a), self.range(b)),
+            Op::Binary(op, a, b) => match self.arithmetic(op, a, b) {
+                Some(range) if op != BinaryOp::Div => range.guard().1,
+                _ => Range::binary(op, self.range(a), self.range(b)),
+            },
             Op::Pair(op, ..) => Range::pair(op),
             Op::NegInRange(a) => self.range(a).negated(),
             Op::AbsInRange(a) => self.range(a).magnitude(),
@@ -382,12 +481,11 @@ impl Builder {
             }
             Op::Distance2Squared(..) => Range::pair(PairOp::Distance2),
             Op::Scale(a, r, _) => after(Range::product(self.range(a), Range::literal(f32::from_bits(r) as f64))),
-            Op::Arith(op, a, b, _) => {
-                after(Range::arithmetic(op, self.range(a), self.range(b)).expect("a bare operation's range is known"))
-            }
+            Op::Arith(op, a, b, _) => after(self.arithmetic(op, a, b).expect("a bare operation's range is known")),
             Op::ExpNonPositive(a) => Range::unary(UnaryOp::Exp, self.range(a)),
             Op::SqrtNonNegative(a, _) => self.range(a).sqrt_non_negative().1,
             Op::PowNonNegative(a, b) => Range::binary(BinaryOp::Pow, self.range(a), self.range(b)),
+            Op::IntegerPower(a, n, cap, _) => after(self.range(a).integer_power(n, cap.value())),
         }
     }
 
@@ -514,5 +612,50 @@ mod tests {
         let b = body("pow(distance2(normal), 1) * distance1(color)", plain);
         // Without strength reduction the power stays (of a distance: the sign-free helper).
         assert!(b.insts.iter().any(|i| matches!(i.op, Op::PowNonNegative(..))), "{b:?}");
+    }
+
+    #[test]
+    fn whole_powers_are_multiplied_out_and_their_bases_held_only_where_a_product_could_pass_big() {
+        // A distance may exceed BIG^(1/128) = 1.31: its base is held by `min`;
+        // the seven squarings follow and the result keeps both parts of `fin`.
+        let b = body("pow(distance2(color), 128)", LowerOptions::ALL);
+        let cap = 1.3097472f32.to_bits();
+        assert_eq!(
+            b.insts[1].op,
+            Op::IntegerPower(Operand::Value(0), 128, PowerCap::Ceiling(cap), Guard::FinNonNegative)
+        );
+        let (_, neighbour, result) = b.print("_e");
+        assert_eq!(neighbour[1], "let _e1_p1 = min(_e0, 1.3097472);");
+        assert_eq!(neighbour[8], "let _e1_p128 = _e1_p64 * _e1_p64;");
+        assert_eq!(neighbour[9], "let _e1 = fj_fin_pos(_e1_p128);");
+        assert_eq!(result, "_e1");
+        assert!(!b.helpers().iter().any(|h| h.starts_with("fj_pow")), "{:?}", b.helpers());
+        // An odd power of a signed value: clamped both ways, the powers of n's bits multiplied.
+        let b = body("pow(dot(normal), 5)", LowerOptions::ALL);
+        let (_, neighbour, _) = b.print("_e");
+        assert_eq!(neighbour[1], "let _e1_p1 = clamp(_e0, -999.99994, 999.99994);");
+        assert_eq!(neighbour.last().unwrap(), "let _e1 = fj_fin(_e1_p1 * _e1_p4);");
+        // A base in [0, 1] needs no hold, and its power only the flush.
+        let b = body("pow(exp(-distance2(color)), 64)", LowerOptions::ALL);
+        assert!(matches!(b.insts.last().unwrap().op, Op::IntegerPower(_, 64, PowerCap::None, Guard::FlushNonNegative)));
+        // Exponents outside 3..=128 or not whole keep the helper.
+        for text in ["pow(dot(normal), 129)", "pow(dot(normal), 2.5)", "pow(dot(normal), -3)"] {
+            let b = body(text, LowerOptions::ALL);
+            assert!(matches!(b.insts.last().unwrap().op, Op::Binary(BinaryOp::Pow, ..)), "{text}: {b:?}");
+        }
+        let plain = LowerOptions { strength_reduction: false, ..LowerOptions::ALL };
+        assert!(!body("pow(dot(normal), 5)", plain).insts.iter().any(|i| matches!(i.op, Op::IntegerPower(..))));
+    }
+
+    #[test]
+    fn a_value_plus_its_magnitude_is_known_never_negative() {
+        // SVGF's max(0, n_i · n_j), spelled with what the grammar has.
+        let b = body("(dot(normal) + abs(dot(normal))) / 2", LowerOptions::ALL);
+        let (_, neighbour, _) = b.print("_e");
+        assert_eq!(neighbour[2], "let _e2 = fj_fin_pos(_e0 + _e1);");
+        assert_eq!(neighbour[3], "let _e3 = fj_flush_pos(_e2 * 0.5);");
+        // Not for a difference, nor for another value's magnitude.
+        let b = body("dot(normal) - abs(dot(normal)) + (dot(color) + abs(dot(normal)))", LowerOptions::ALL);
+        assert!(b.helpers().contains("fj_add") && b.helpers().contains("fj_sub"), "{:?}", b.helpers());
     }
 }
