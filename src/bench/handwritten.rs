@@ -43,6 +43,7 @@ pub(super) fn measure(
         layout,
         tile_radius: None,
         first_pass_override: false,
+        variance_in_alpha: false,
         exprs: vec![bilateral.clone()],
         wgsl: HANDWRITTEN_BILATERAL.to_string(),
     })?;

@@ -21,7 +21,9 @@ pub const MAX_WEIGHTS_PER_DISPATCH: u64 = 1 << 22;
 /// Result of a filter dispatch.
 #[derive(Clone, Debug)]
 pub struct Filtered {
-    /// Filtered colour, RGBA (alpha copied from the input, 1).
+    /// Filtered colour, RGBA: alpha copied from the input (1), or where the
+    /// form carries a variance from pass to pass, the variance the last
+    /// pass carried (it rides in the alpha: `jit::KernelSource::variance_in_alpha`).
     pub color: Vec<[f32; 4]>,
     /// Domain-error bits per pixel.
     pub flags: Vec<u32>,
@@ -244,7 +246,11 @@ impl Gpu {
             let views = if sampled.is_empty() {
                 HashMap::new()
             } else {
-                buffers.sampled_views(self, &mut encoder, &sampled, level, carried)?
+                // A variance riding in the colour's alpha is read from the
+                // stage's image in the first pass only: later passes bind that
+                // image again rather than copy theirs into a texture.
+                let copied = carried.filter(|_| !kernel.source().variance_in_alpha);
+                buffers.sampled_views(self, &mut encoder, &sampled, level, copied)?
             };
             let mut row = 0;
             while row < buffers.height {

@@ -99,6 +99,11 @@ pub(super) struct KernelContext {
     pub shaped: bool,
     /// Whether an à-trous pass carries the colour variance to the next.
     pub carry_variance: bool,
+    /// Whether the carried variance rides in the colour's alpha (written
+    /// there by every pass, read from there after the first).
+    pub variance_in_alpha: bool,
+    /// Whether the kernel reads the guide (which only the first pass loads).
+    pub reads_guide: bool,
     /// The centre pixel's colour texel, and its modulation's (remodulating kernels).
     pub centre_color: String,
     #[serde(skip_serializing_if = "Option::is_none")]

@@ -38,6 +38,9 @@ pub struct KernelSource {
     /// Whether the kernel declares [`FIRST_PASS`]: each pipeline of it runs
     /// the first pass or the later ones ([`super::kernel::PassRole`]).
     pub first_pass_override: bool,
+    /// Whether the variance each pass carries rides in the colour's alpha
+    /// (read from the stage's own image in the first pass only).
+    pub variance_in_alpha: bool,
     pub wgsl: String,
 }
 
@@ -135,7 +138,8 @@ fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, Lower
         .chain(kind.template_helpers().iter().map(|h| h.to_string()));
     let carried = layout.carried_variance().filter(|_| shape.atrous);
     let carry_variance = carried.is_some();
-    let first_pass_override = loads.specialises_passes() && shape.atrous && layout.reads_guide();
+    let variance_in_alpha = carried.is_some_and(|v| loads.variance_in_alpha(v));
+    let first_pass_override = loads.specialises_passes() && shape.atrous && (layout.reads_guide() || variance_in_alpha);
     let tile_radius = tile.as_ref().map(|t| t.radius);
     let context = KernelContext {
         crate_version: env!("CARGO_PKG_VERSION"),
@@ -172,6 +176,8 @@ fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, Lower
         remodulate: shape.remodulate,
         shaped: shape != Shape::WINDOW,
         carry_variance,
+        variance_in_alpha,
+        reads_guide: layout.reads_guide(),
         centre_color: loads.centre_image(Role::Color),
         centre_modulation: shape.remodulate.then(|| loads.centre_image(Role::Modulation)),
         neighbour_variance: carried.map(|v| loads.carried_variance_at_neighbour(v)),
@@ -192,6 +198,7 @@ fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, Lower
         interface,
         tile_radius,
         first_pass_override,
+        variance_in_alpha,
         wgsl,
     })
 }
@@ -370,6 +377,26 @@ impl<'a> Loads<'a> {
         matches!(self, Loads::Buffers(i) | Loads::OwnTextures(i) if i.kind == KernelKind::Filter)
     }
 
+    /// Whether the variance `v` each pass carries to the next rides in the
+    /// colour's fourth channel (filterjit's own filter kernels on textures):
+    /// a pass reads it with the colour it loads at every tap, not from an
+    /// image of its own, and only the first pass reads the stage's image
+    /// ([`FIRST_PASS`]). On lavapipe a tap's loads are most of its cost
+    /// (docs/JOURNAL.md, "The carried variance in the colour's alpha").
+    fn variance_in_alpha(&self, v: ScalarVar) -> bool {
+        matches!(self, Loads::OwnTextures(i) if i.kind == KernelKind::Filter && i.carried_variance() == Some(v))
+            && self.has_passes()
+    }
+
+    /// `v` at (`x`, `y`) where it rides in the colour's alpha: the stage's image in the first pass.
+    fn variance_from_alpha(&self, v: ScalarVar, at: (&str, &str)) -> Option<String> {
+        let Loads::OwnTextures(i) = self else { return None };
+        self.variance_in_alpha(v).then(|| {
+            let own = texel(i.ident(Role::Input(Input::Variance(v))), at);
+            format!("select({}.w, {own}.x, {FIRST_PASS})", texel(i.ident(Role::Color), at))
+        })
+    }
+
     /// The line that binds feature `f` at `side` (`i` or `j`) to `value`;
     /// `color` is how that pixel's colour is read. From the second à-trous pass on the guide
     /// is the pass's own input (docs/SEMANTICS.md, "The guide"), so it is read
@@ -414,7 +441,9 @@ impl<'a> Loads<'a> {
                 }
             }
             Loads::Buffers(i) => format!("{}[i]", i.ident(Role::Input(input))),
-            Loads::OwnTextures(i) => format!("{}.x", texel(i.ident(Role::Input(input)), ("x", "y"))),
+            Loads::OwnTextures(i) => self
+                .variance_from_alpha(v, ("x", "y"))
+                .unwrap_or_else(|| format!("{}.x", texel(i.ident(Role::Input(input)), ("x", "y")))),
             Loads::Tiled => unreachable!("variances are read at the centre pixel, never from a tile"),
             // Bound to the pre-pass's packed `local` texture: x, y, z in `FROM_PREPASS` order.
             Loads::Textures(i) if v.from_prepass() => {
@@ -448,7 +477,9 @@ impl<'a> Loads<'a> {
         let input = Input::Variance(v);
         match self {
             Loads::Buffers(i) => format!("{}[j]", i.ident(Role::Input(input))),
-            Loads::OwnTextures(i) => format!("{}.x", texel(i.ident(Role::Input(input)), ("xj", "yj"))),
+            Loads::OwnTextures(i) => self
+                .variance_from_alpha(v, ("xj", "yj"))
+                .unwrap_or_else(|| format!("{}.x", texel(i.ident(Role::Input(input)), ("xj", "yj")))),
             Loads::Textures(i) if v.from_temporal() => {
                 format!("{}.x", texel(i.ident(Role::Input(input)), ("xj", "yj")))
             }
