@@ -121,8 +121,9 @@ mod tests {
         assert!(err.contains("no shipped expression `@realtme` (did you mean `@realtime`?)"), "{err}");
         let err = resolve("realtime").unwrap_err().to_string();
         assert!(err.contains("a shipped filter is written with an @: `@realtime`"), "{err}");
-        let err = resolve("@runs/evolve/hall_of_fame.txt:best").unwrap_err().to_string();
-        assert!(err.contains("no file runs/evolve/hall_of_fame.txt"), "{err}");
+        // Not runs/evolve's: the README's main command, run first, writes that one.
+        let err = resolve("@runs/no-such-run/hall_of_fame.txt:best").unwrap_err().to_string();
+        assert!(err.contains("no file runs/no-such-run/hall_of_fame.txt"), "{err}");
         // A file named with an entry, in the folder it is run from.
         let err = resolve("@nope.txt:best").unwrap_err().to_string();
         assert!(err.contains("no file nope.txt"), "{err}");

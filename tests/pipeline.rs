@@ -235,6 +235,10 @@ fn atrous_and_whole_pipelines_agree_with_the_cpu() {
         "exp(-(distance2(normal) / 0.3 + clampedShare * 4 + localStd / (localMean + 0.1)))",
         // The guide: blurred in the first pass, the pass's input after; against the colour.
         "exp(-(distance2(guide) / 0.5 + distance2(normal) / 0.3 + distance1(guide, color) / 4))",
+        // The texture with the world position and the normal: read from their
+        // fourth channels and the colour's after the first pass
+        // (`jit::TEXTURE_IN_FOURTH_CHANNELS`), at the centre against another feature too.
+        "exp(-(distance2(texture) / 0.1 + distance2(worldPosition) / 2 + distance2(normal) / 0.3 + distance1(texture, color) / 8))",
     ];
     for text in [
         "atrous=1",

@@ -9,7 +9,7 @@ use wgpu::util::DeviceExt;
 
 use super::prepass::{PrepassInputs, PrepassPipelines};
 use super::{Gpu, GpuError, Span};
-use crate::jit::{Input, Role, Shape, ValidatedKernel};
+use crate::jit::{Input, Role, Shape, ValidatedKernel, TEXTURE_IN_FOURTH_CHANNELS};
 use crate::lang::{Feature, ScalarVar};
 use crate::pipeline::{FilterPipeline, Keep};
 use crate::scene::{Missing, MissingInput, Scene};
@@ -346,10 +346,15 @@ impl SceneBuffers {
         let data: Vec<f32> = match input {
             Input::Feature(f) => {
                 let values = scene.feature(f).expect(CHECKED);
+                // A carrier's fourth channel holds a component of the texture
+                // (for filter kernels that read it from there after their first pass).
+                let carried = TEXTURE_IN_FOURTH_CHANNELS.iter().find(|(carrier, _)| *carrier == f);
+                let texture = carried.and_then(|(_, k)| Some((scene.feature(Feature::Texture)?, *k)));
                 if input.components() == 1 {
                     values.iter().map(|v| v[0]).collect()
                 } else {
-                    values.iter().flat_map(|v| [v[0], v[1], v[2], 0.0]).collect()
+                    let fourth = |p: usize| texture.map_or(0.0, |(t, k)| t[p][k]);
+                    values.iter().enumerate().flat_map(|(p, v)| [v[0], v[1], v[2], fourth(p)]).collect()
                 }
             }
             Input::Variance(v) => scene.variance(v).expect(CHECKED).to_vec(),

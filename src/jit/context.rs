@@ -102,6 +102,11 @@ pub(super) struct KernelContext {
     /// Whether the carried variance rides in the colour's alpha (written
     /// there by every pass, read from there after the first).
     pub variance_in_alpha: bool,
+    /// Whether later passes read the texture from fourth channels
+    /// (`interface::TEXTURE_IN_FOURTH_CHANNELS`).
+    pub texture_in_fourth_channels: bool,
+    /// What a pass writes to its output's alpha.
+    pub alpha_out: String,
     /// Whether the kernel reads the guide (which only the first pass loads).
     pub reads_guide: bool,
     /// The centre pixel's colour texel, and its modulation's (remodulating kernels).

@@ -9,7 +9,17 @@
 use serde::Serialize;
 
 use super::kernel::{Input, KernelKind, KernelLayout, OutputFormat, Shape, TEMPLATE_VERSION, WORKGROUP};
-use crate::lang::ScalarVar;
+use crate::lang::{Feature, ScalarVar};
+
+/// Where filterjit's own à-trous kernels find the `texture` feature (the
+/// albedo) after their first pass, when they read it at every tap with the
+/// world position and the normal and carry no variance: its x in the
+/// colour's alpha (written there by every pass), its y and z in the fourth
+/// channels of the world position's and the normal's images (written there
+/// when those are uploaded, `gpu::SceneBuffers`). One texture load a tap
+/// fewer: on lavapipe a tap's loads are most of its cost (docs/JOURNAL.md,
+/// "The albedo in the fourth channels").
+pub const TEXTURE_IN_FOURTH_CHANNELS: [(Feature, usize); 2] = [(Feature::WorldPosition, 1), (Feature::Normal, 2)];
 
 /// What a binding is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

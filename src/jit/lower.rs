@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 
 use super::context::{BindingView, KernelContext, MemberCode, Tile, TileArray};
 use super::helpers;
-use super::interface::{BindingInterface, Element, Role};
+use super::interface::{BindingInterface, Element, Role, TEXTURE_IN_FOURTH_CHANNELS};
 use super::ir::{self, feature_ident, var_ident};
 use super::kernel::{
     wgsl_f32, Input, KernelKind, KernelLayout, KernelSpec, LowerOptions, Shape, FIRST_PASS, TEMPLATE_VERSION,
@@ -139,7 +139,10 @@ fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, Lower
     let carried = layout.carried_variance().filter(|_| shape.atrous);
     let carry_variance = carried.is_some();
     let variance_in_alpha = carried.is_some_and(|v| loads.variance_in_alpha(v));
-    let first_pass_override = loads.specialises_passes() && shape.atrous && (layout.reads_guide() || variance_in_alpha);
+    let texture_in_fourth_channels = shape.atrous && loads.texture_in_fourth_channels();
+    let first_pass_override = loads.specialises_passes()
+        && shape.atrous
+        && (layout.reads_guide() || variance_in_alpha || texture_in_fourth_channels);
     let tile_radius = tile.as_ref().map(|t| t.radius);
     let context = KernelContext {
         crate_version: env!("CARGO_PKG_VERSION"),
@@ -177,6 +180,8 @@ fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, Lower
         shaped: shape != Shape::WINDOW,
         carry_variance,
         variance_in_alpha,
+        texture_in_fourth_channels,
+        alpha_out: loads.alpha_out(carried),
         reads_guide: layout.reads_guide(),
         centre_color: loads.centre_image(Role::Color),
         centre_modulation: shape.remodulate.then(|| loads.centre_image(Role::Modulation)),
@@ -335,6 +340,12 @@ impl<'a> Loads<'a> {
             (Loads::Textures(i) | Loads::OwnTextures(i), Feature::Color) => {
                 format!("{}.xyz", texel(i.ident(Role::Color), coords))
             }
+            (Loads::OwnTextures(i), Feature::Texture) if self.texture_in_fourth_channels() => {
+                let fourth = |role| format!("{}.w", texel(i.ident(role), coords));
+                let carriers = TEXTURE_IN_FOURTH_CHANNELS.map(|(f, _)| fourth(Role::Input(Input::Feature(f))));
+                let packed = format!("vec3<f32>({}, {}, {})", fourth(Role::Color), carriers[0], carriers[1]);
+                format!("select({packed}, {}.xyz, {FIRST_PASS})", texel(i.ident(input), coords))
+            }
             (Loads::OwnTextures(i), _) => {
                 let texel = texel(i.ident(input), coords);
                 if f.dimension() == 1 {
@@ -386,6 +397,34 @@ impl<'a> Loads<'a> {
     fn variance_in_alpha(&self, v: ScalarVar) -> bool {
         matches!(self, Loads::OwnTextures(i) if i.kind == KernelKind::Filter && i.carried_variance() == Some(v))
             && self.has_passes()
+    }
+
+    /// Whether the `texture` feature is read from the fourth channels of
+    /// the colour and its carriers after the first pass
+    /// ([`TEXTURE_IN_FOURTH_CHANNELS`]): filterjit's own filter kernels on
+    /// textures that bind the texture and its carriers, carrying no variance.
+    fn texture_in_fourth_channels(&self) -> bool {
+        let Loads::OwnTextures(i) = self else { return false };
+        let binds = |f| i.binding(Role::Input(Input::Feature(f))).is_some();
+        i.kind == KernelKind::Filter
+            && self.has_passes()
+            && i.carried_variance().is_none()
+            && binds(Feature::Texture)
+            && TEXTURE_IN_FOURTH_CHANNELS.iter().all(|(f, _)| binds(*f))
+    }
+
+    /// What a pass writes to its output's alpha: the variance it carries,
+    /// the texture's x (from the first pass on: later passes pass theirs
+    /// through), or the input's.
+    fn alpha_out(&self, carried: Option<ScalarVar>) -> String {
+        match self {
+            Loads::OwnTextures(_) if carried.is_some_and(|v| self.variance_in_alpha(v)) => "carried".into(),
+            Loads::OwnTextures(i) if self.texture_in_fourth_channels() => {
+                let own = texel(i.ident(Role::Input(Input::Feature(Feature::Texture))), ("x", "y"));
+                format!("select(centre.w, {own}.x, {FIRST_PASS})")
+            }
+            _ => "centre.w".into(),
+        }
     }
 
     /// `v` at (`x`, `y`) where it rides in the colour's alpha: the stage's image in the first pass.

@@ -24,7 +24,7 @@ pub use anchor::{anchor_module, anchor_wgsl, AnchorParams, ANCHOR_DISPATCHES};
 pub use blit::{blit_module, blit_wgsl, BlitParams};
 pub use builtin::BuiltIn;
 pub use helpers::Helper;
-pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot};
+pub use interface::{Access, AtrousParams, BindingInterface, Params, Role, Slot, TEXTURE_IN_FOURTH_CHANNELS};
 pub use kernel::{
     wgsl_f32, Input, KernelKind, KernelLayout, KernelSpec, LowerOptions, OutputFormat, PassRole, Shape, FIRST_PASS,
     TEMPLATE_VERSION, WORKGROUP, WORKGROUP_STORAGE_BUDGET,
