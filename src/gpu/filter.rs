@@ -21,9 +21,10 @@ pub const MAX_WEIGHTS_PER_DISPATCH: u64 = 1 << 22;
 /// Result of a filter dispatch.
 #[derive(Clone, Debug)]
 pub struct Filtered {
-    /// Filtered colour, RGBA: alpha copied from the input (1), or where the
-    /// form carries a variance from pass to pass, the variance the last
-    /// pass carried (it rides in the alpha: `jit::KernelSource::variance_in_alpha`).
+    /// Filtered colour, RGBA: alpha copied from the input (1), or what an
+    /// à-trous form's passes hand on in it (the variance they carry,
+    /// `jit::KernelSource::variance_in_alpha`, or the texture's x,
+    /// `jit::TEXTURE_IN_FOURTH_CHANNELS`). Only the RGB is an image.
     pub color: Vec<[f32; 4]>,
     /// Domain-error bits per pixel.
     pub flags: Vec<u32>,
