@@ -21,6 +21,13 @@ use crate::lang::{Feature, ScalarVar};
 /// "The albedo in the fourth channels").
 pub const TEXTURE_IN_FOURTH_CHANNELS: [(Feature, usize); 2] = [(Feature::WorldPosition, 1), (Feature::Normal, 2)];
 
+/// The feature whose image's fourth channel holds component `k` of the
+/// texture after the first pass, or `None` for the colour's alpha (the
+/// component `TEXTURE_IN_FOURTH_CHANNELS` leaves).
+pub fn texture_carrier(k: usize) -> Option<Feature> {
+    TEXTURE_IN_FOURTH_CHANNELS.iter().find(|(_, c)| *c == k).map(|(f, _)| *f)
+}
+
 /// What a binding is for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Role {

@@ -455,8 +455,11 @@ impl Builder {
     /// it is 2x or exactly 0 (the `max(0, x)` twice a weight spells so).
     fn arithmetic(&self, op: BinaryOp, a: Operand, b: Operand) -> Option<Range> {
         let range = Range::arithmetic(op, self.range(a), self.range(b))?;
+        // Only for an in-range x, whose `abs` is exact: a raw variance's saturates at BIG.
         let abs_of = |v: Operand, x: Operand| match v {
-            Operand::Value(k) => matches!(self.insts[k].op, Op::AbsInRange(y) | Op::Unary(UnaryOp::Abs, y) if y == x),
+            Operand::Value(k) => {
+                x.in_range() && matches!(self.insts[k].op, Op::AbsInRange(y) | Op::Unary(UnaryOp::Abs, y) if y == x)
+            }
             _ => false,
         };
         let one_sided = op == BinaryOp::Add && (abs_of(b, a) || abs_of(a, b));
@@ -654,7 +657,9 @@ mod tests {
         let (_, neighbour, _) = b.print("_e");
         assert_eq!(neighbour[2], "let _e2 = fj_fin_pos(_e0 + _e1);");
         assert_eq!(neighbour[3], "let _e3 = fj_flush_pos(_e2 * 0.5);");
-        // Not for a difference, nor for another value's magnitude.
+        // Not for a raw variance (its `abs` saturates), a difference, nor another value's magnitude.
+        let b = body("colorVariance + abs(colorVariance)", LowerOptions::ALL);
+        assert!(b.helpers().contains("fj_add"), "{:?}", b.helpers());
         let b = body("dot(normal) - abs(dot(normal)) + (dot(color) + abs(dot(normal)))", LowerOptions::ALL);
         assert!(b.helpers().contains("fj_add") && b.helpers().contains("fj_sub"), "{:?}", b.helpers());
     }

@@ -9,7 +9,7 @@ use std::sync::OnceLock;
 
 use super::context::{BindingView, KernelContext, MemberCode, Tile, TileArray};
 use super::helpers;
-use super::interface::{BindingInterface, Element, Role, TEXTURE_IN_FOURTH_CHANNELS};
+use super::interface::{texture_carrier, BindingInterface, Element, Role, TEXTURE_IN_FOURTH_CHANNELS};
 use super::ir::{self, feature_ident, var_ident};
 use super::kernel::{
     wgsl_f32, Input, KernelKind, KernelLayout, KernelSpec, LowerOptions, Shape, FIRST_PASS, TEMPLATE_VERSION,
@@ -341,9 +341,9 @@ impl<'a> Loads<'a> {
                 format!("{}.xyz", texel(i.ident(Role::Color), coords))
             }
             (Loads::OwnTextures(i), Feature::Texture) if self.texture_in_fourth_channels() => {
-                let fourth = |role| format!("{}.w", texel(i.ident(role), coords));
-                let carriers = TEXTURE_IN_FOURTH_CHANNELS.map(|(f, _)| fourth(Role::Input(Input::Feature(f))));
-                let packed = format!("vec3<f32>({}, {}, {})", fourth(Role::Color), carriers[0], carriers[1]);
+                let carrier = |k| texture_carrier(k).map_or(Role::Color, |f| Role::Input(Input::Feature(f)));
+                let fourth = |k| format!("{}.w", texel(i.ident(carrier(k)), coords));
+                let packed = format!("vec3<f32>({}, {}, {})", fourth(0), fourth(1), fourth(2));
                 format!("select({packed}, {}.xyz, {FIRST_PASS})", texel(i.ident(input), coords))
             }
             (Loads::OwnTextures(i), _) => {
@@ -421,7 +421,8 @@ impl<'a> Loads<'a> {
             Loads::OwnTextures(_) if carried.is_some_and(|v| self.variance_in_alpha(v)) => "carried".into(),
             Loads::OwnTextures(i) if self.texture_in_fourth_channels() => {
                 let own = texel(i.ident(Role::Input(Input::Feature(Feature::Texture))), ("x", "y"));
-                format!("select(centre.w, {own}.x, {FIRST_PASS})")
+                let in_alpha = (0..3).position(|k| texture_carrier(k).is_none()).expect("one in the colour's");
+                format!("select(centre.w, {own}.{}, {FIRST_PASS})", ["x", "y", "z"][in_alpha])
             }
             _ => "centre.w".into(),
         }

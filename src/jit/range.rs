@@ -228,8 +228,9 @@ impl Range {
     /// whole ulps first, then by the margin every bound is.
     pub fn integer_power(self, n: u32, cap: Option<f32>) -> Range {
         debug_assert!((2..=INTEGER_POWER_MAX).contains(&n));
-        let capped = match cap {
-            Some(c) => Range { lo: self.lo.max(-(c as f64)), hi: self.hi.min(c as f64), floor: self.floor },
+        // The base as the kernel holds it: every bound, the floor included, at most the cap.
+        let capped = match cap.map(f64::from) {
+            Some(c) => Range { lo: self.lo.clamp(-c, c), hi: self.hi.clamp(-c, c), floor: self.floor.min(c) },
             None => self,
         };
         let m = capped.magnitude();
@@ -405,6 +406,9 @@ mod tests {
             Range { lo: 0.0, hi: 1.0, floor: TINY },
             Range { lo: -3.0, hi: -0.5, floor: 0.5 },
             Range { lo: 1.0, hi: 1e8, floor: 1.0 },
+            // Every base above the cap: the kernel's power is the cap's, and so is the floor.
+            Range { lo: 3.0, hi: 1e8, floor: 3.0 },
+            Range { lo: -1e8, hi: -3.0, floor: 3.0 },
         ];
         for range in ranges {
             for n in [3u32, 4, 7, 64, 127, INTEGER_POWER_MAX] {
