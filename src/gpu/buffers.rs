@@ -348,8 +348,8 @@ impl SceneBuffers {
                 let values = scene.feature(f).expect(CHECKED);
                 // A carrier's fourth channel holds a component of the texture
                 // (for filter kernels that read it from there after their first pass).
-                let carried = TEXTURE_IN_FOURTH_CHANNELS.iter().find(|(carrier, _)| *carrier == f);
-                let texture = carried.and_then(|(_, k)| Some((scene.feature(Feature::Texture)?, *k)));
+                let component = TEXTURE_IN_FOURTH_CHANNELS.iter().find(|(carrier, _)| *carrier == f);
+                let texture = component.and_then(|(_, k)| Some((scene.feature(Feature::Texture)?, *k)));
                 if input.components() == 1 {
                     values.iter().map(|v| v[0]).collect()
                 } else {

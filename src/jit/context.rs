@@ -102,13 +102,10 @@ pub(super) struct KernelContext {
     /// Whether the carried variance rides in the colour's alpha (written
     /// there by every pass, read from there after the first).
     pub variance_in_alpha: bool,
-    /// Whether later passes read the texture from fourth channels
-    /// (`interface::TEXTURE_IN_FOURTH_CHANNELS`).
-    pub texture_in_fourth_channels: bool,
+    /// What only the first pass reads (where the kernel declares `FIRST_PASS`).
+    pub first_pass_reads: String,
     /// What a pass writes to its output's alpha.
     pub alpha_out: String,
-    /// Whether the kernel reads the guide (which only the first pass loads).
-    pub reads_guide: bool,
     /// The centre pixel's colour texel, and its modulation's (remodulating kernels).
     pub centre_color: String,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -119,4 +116,22 @@ pub(super) struct KernelContext {
     pub centre_variance: Option<String>,
     pub atrous_half: i32,
     pub stencil: Vec<String>,
+}
+
+/// What only the first pass of an à-trous kernel reads, each with what the
+/// later passes read instead, for the comment on `FIRST_PASS` (empty where
+/// every pass reads the same).
+pub(super) fn first_pass_reads(variance_in_alpha: bool, texture_in_fourth_channels: bool, guide: bool) -> String {
+    [
+        (variance_in_alpha, "the stage's variance image (later passes read the\n// carried variance from their input's alpha)"),
+        (
+            texture_in_fourth_channels,
+            "the texture's image (later passes read the texture from the\n// fourth channels of their input, the world position and the normal)",
+        ),
+        (guide, "the guide (later passes read their own input in its place)"),
+    ]
+    .iter()
+    .filter_map(|(read, what)| read.then_some(*what))
+    .collect::<Vec<_>>()
+    .join(" and ")
 }

@@ -395,8 +395,8 @@ impl Builder {
                 if strength && *op == BinaryOp::Pow && b.literal_value() == Some(1.0) {
                     return a;
                 }
-                if let Some(n) = b.literal_value().and_then(whole_exponent).filter(|_| strength && *op == BinaryOp::Pow)
-                {
+                let whole = b.literal_value().and_then(whole_exponent);
+                if let (true, BinaryOp::Pow, Some(n)) = (strength, op, whole) {
                     let cap = PowerCap::of(self.range(a), n);
                     let guard = self.guard(a, self.range(a).integer_power(n, cap.value()));
                     return self.add(Op::IntegerPower(a, n, cap, guard));
@@ -472,8 +472,8 @@ impl Builder {
         match *op {
             Op::Unary(op, a) => Range::unary(op, self.range(a)),
             Op::Binary(op, a, b) => match self.arithmetic(op, a, b) {
-                Some(range) if op != BinaryOp::Div => range.guard().1,
-                _ => Range::binary(op, self.range(a), self.range(b)),
+                Some(range) => range.guard().1,
+                None => Range::binary(op, self.range(a), self.range(b)),
             },
             Op::Pair(op, ..) => Range::pair(op),
             Op::NegInRange(a) => self.range(a).negated(),

@@ -7,7 +7,7 @@
 use std::collections::BTreeSet;
 use std::sync::OnceLock;
 
-use super::context::{BindingView, KernelContext, MemberCode, Tile, TileArray};
+use super::context::{self, BindingView, KernelContext, MemberCode, Tile, TileArray};
 use super::helpers;
 use super::interface::{texture_carrier, BindingInterface, Element, Role, TEXTURE_IN_FOURTH_CHANNELS};
 use super::ir::{self, feature_ident, var_ident};
@@ -139,10 +139,9 @@ fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, Lower
     let carried = layout.carried_variance().filter(|_| shape.atrous);
     let carry_variance = carried.is_some();
     let variance_in_alpha = carried.is_some_and(|v| loads.variance_in_alpha(v));
-    let texture_in_fourth_channels = shape.atrous && loads.texture_in_fourth_channels();
-    let first_pass_override = loads.specialises_passes()
-        && shape.atrous
-        && (layout.reads_guide() || variance_in_alpha || texture_in_fourth_channels);
+    let first_pass_reads =
+        context::first_pass_reads(variance_in_alpha, loads.texture_in_fourth_channels(), layout.reads_guide());
+    let first_pass_override = loads.specialises_passes() && shape.atrous && !first_pass_reads.is_empty();
     let tile_radius = tile.as_ref().map(|t| t.radius);
     let context = KernelContext {
         crate_version: env!("CARGO_PKG_VERSION"),
@@ -180,9 +179,8 @@ fn lower_members(exprs: &[Expr], spec: KernelSpec) -> Result<KernelSource, Lower
         shaped: shape != Shape::WINDOW,
         carry_variance,
         variance_in_alpha,
-        texture_in_fourth_channels,
+        first_pass_reads,
         alpha_out: loads.alpha_out(carried),
-        reads_guide: layout.reads_guide(),
         centre_color: loads.centre_image(Role::Color),
         centre_modulation: shape.remodulate.then(|| loads.centre_image(Role::Modulation)),
         neighbour_variance: carried.map(|v| loads.carried_variance_at_neighbour(v)),
