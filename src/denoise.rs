@@ -77,7 +77,17 @@ pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] = &[
     ("evolvedAtrous64PlaneNoPosition", "evolvedAtrous64PlaneNoPositionSparse"),
     ("evolvedAtrous64Surface", "evolvedAtrous64SurfaceSparse"),
     ("evolvedAtrous64Trim", "evolvedAtrous64TrimSparse"),
+    ("realtime", "realtimeSparse"),
 ];
+
+/// Shipped names that stand for a role rather than one weight: asked for by
+/// name, with the pipeline they were stored with, they still give way to
+/// their sparse-light variant ([`SPARSE_LIGHT_VARIANTS`]) as a chosen filter
+/// does. `@realtime` is "the real-time filter", which nothing chooses for a
+/// render, so it is always asked for; where the light is sparse its three 3x3
+/// passes stop short (docs/JOURNAL.md, "The real-time filter where the light
+/// is sparse"). A pipeline the caller gives keeps the filter asked for.
+pub const FOLLOWS_THE_LIGHT_WHEN_ASKED: &[&str] = &[SHIPPED_REALTIME];
 
 /// The noisy input's median pixel luminance over its mean below which its
 /// light counts as sparse ([`crate::metrics::Tails::median_over_mean`]).
@@ -222,9 +232,11 @@ impl Because {
             parts.push(chosen);
         }
         if let Some(median_over_mean) = self.sparse_light {
+            // Asked for by name, the filter changed: say how to keep it.
+            let keep = if self.chosen { "" } else { "; a pipeline given keeps the filter asked for" };
             parts.push(format!(
                 "its variant for sparse light, as the render's median pixel is {median_over_mean:.3} of its mean \
-                 luminance (under {SPARSE_MEDIAN_OVER_MEAN})"
+                 luminance (under {SPARSE_MEDIAN_OVER_MEAN}){keep}"
             ));
         }
         if self.point_sampled {
@@ -323,25 +335,29 @@ impl Choice {
     /// This choice for a render whose noisy colour is `color`: a chosen
     /// filter with a sparse-light variant ([`SPARSE_LIGHT_VARIANTS`]) gives
     /// way to it where the render's light is sparse, in the variant's own
-    /// pipeline unless the caller gave another; anything else, and any
-    /// filter asked for, stays. The variant reads what its filter reads, so
+    /// pipeline unless the caller gave one (`pipeline_given`); so does a role
+    /// asked for by name without a pipeline ([`FOLLOWS_THE_LIGHT_WHEN_ASKED`]);
+    /// anything else, and any other filter asked for, stays. The variant reads what its filter reads, so
     /// the render loaded for the first serves the second.
-    pub fn for_light<A: Copy + Into<f64>>(self, color: &[[A; 3]]) -> Result<Choice> {
-        let (Some(because), Some(name)) = (self.chosen_because.as_ref().filter(|b| b.chosen), &self.name) else {
-            return Ok(self);
-        };
+    pub fn for_light<A: Copy + Into<f64>>(self, color: &[[A; 3]], pipeline_given: bool) -> Result<Choice> {
+        let Some(name) = &self.name else { return Ok(self) };
         let Some((_, variant)) = SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| base == name) else { return Ok(self) };
+        let chosen = self.chosen_because.as_ref().is_some_and(|b| b.chosen);
+        let role = FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(&name.as_str()) && !pipeline_given;
+        if !chosen && !role {
+            return Ok(self);
+        }
+        let because = self.chosen_because.clone().unwrap_or_default();
         let Some(tails) = crate::metrics::tails(color) else { return Ok(self) };
         if tails.median_over_mean >= SPARSE_MEDIAN_OVER_MEAN {
             return Ok(self);
         }
         let asked = Choice::asked(&format!("@{variant}"), None, None)?;
-        let stored = Choice::asked(&format!("@{name}"), None, None)?.pipeline;
         Ok(Choice {
             name: asked.name,
             expr: asked.expr,
-            pipeline: if self.pipeline == stored { asked.pipeline } else { self.pipeline },
-            chosen_because: Some(Because { sparse_light: Some(tails.median_over_mean), ..because.clone() }),
+            pipeline: if pipeline_given { self.pipeline } else { asked.pipeline },
+            chosen_because: Some(Because { sparse_light: Some(tails.median_over_mean), ..because }),
             ..self
         })
     }
@@ -665,22 +681,34 @@ mod tests {
         let (base, variant) = SPARSE_LIGHT_VARIANTS[0];
         assert_eq!(chosen.name.as_deref(), Some(base));
 
-        let swapped = chosen.clone().for_light(&sparse).unwrap();
+        let swapped = chosen.clone().for_light(&sparse, false).unwrap();
         assert_eq!(swapped.name.as_deref(), Some(variant));
         assert_eq!(swapped.pipeline, Choice::asked(&format!("@{variant}"), None, None).unwrap().pipeline);
         assert_ne!(swapped.pipeline, chosen.pipeline, "the sparse variant reaches one pass farther");
         let because = swapped.chosen_because.as_ref().unwrap().to_string();
         assert!(because.contains("sparse light") && because.contains("0.000 of its mean"), "{because}");
-        let kept = chosen.clone().for_light(&even).unwrap();
+        let kept = chosen.clone().for_light(&even, false).unwrap();
         assert_eq!(kept.name.as_deref(), Some(base), "an even light keeps the filter");
 
         // One asked for by name stays, sparse or not.
         let asked = Choice::asked(&format!("@{base}"), None, None).unwrap();
-        assert_eq!(asked.for_light(&sparse).unwrap().name.as_deref(), Some(base));
+        assert_eq!(asked.for_light(&sparse, false).unwrap().name.as_deref(), Some(base));
+        // A role asked for by name follows the light, unless given a pipeline.
+        let role = FOLLOWS_THE_LIGHT_WHEN_ASKED[0];
+        let sparse_role = SPARSE_LIGHT_VARIANTS.iter().find(|(b, _)| *b == role).unwrap().1;
+        let asked = Choice::asked(&format!("@{role}"), None, None).unwrap();
+        let swapped = asked.clone().for_light(&sparse, false).unwrap();
+        assert_eq!(swapped.name.as_deref(), Some(sparse_role));
+        assert_eq!(swapped.pipeline, Choice::asked(&format!("@{sparse_role}"), None, None).unwrap().pipeline);
+        let because = swapped.chosen_because.as_ref().unwrap().to_string();
+        assert!(because.contains("sparse light") && because.contains("a pipeline given keeps"), "{because}");
+        assert_eq!(asked.clone().for_light(&even, false).unwrap().name.as_deref(), Some(role));
+        let pinned = Choice::asked(&format!("@{role}"), Some(asked.pipeline), None).unwrap();
+        assert_eq!(pinned.for_light(&sparse, true).unwrap().name.as_deref(), Some(role), "{}", asked.pipeline);
         // A pipeline the user gave stays with the variant.
         let given: FilterPipeline = "outliers=2,keep,demodulate,atrous=5".parse().unwrap();
         let chosen = Choice::asked_or_best(None, Some(given), None, &all).unwrap();
-        assert_eq!(chosen.for_light(&sparse).unwrap().pipeline, given);
+        assert_eq!(chosen.for_light(&sparse, true).unwrap().pipeline, given);
     }
 
     #[test]
@@ -695,7 +723,8 @@ mod tests {
                 (r.features, r.variances, r.albedo)
             };
             assert_eq!(inputs(&a), inputs(&b), "@{variant}: the render loaded for @{base} must serve it");
-            assert!(SHIPPED_BY_QUALITY.contains(base));
+            // Only a filter something chooses, or a role asked for, ever gives way to it.
+            assert!(SHIPPED_BY_QUALITY.contains(base) || FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(base), "@{base}");
         }
     }
 }

@@ -506,8 +506,9 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
 
 /// `filter` without `--expr` reads the render's light: where its median
 /// pixel is black (the built-in room lit through a ceiling slot, at 4 spp)
-/// the default gives way to its sparse-light variant and stderr says why;
-/// a tamely lit render (the Mitsuba Cornell sample) keeps the default.
+/// the default gives way to its sparse-light variant and stderr says why, as
+/// `@realtime` named does; a tamely lit render (the Mitsuba Cornell sample)
+/// keeps the default.
 #[test]
 fn filter_without_expr_takes_the_sparse_light_variant_where_the_median_pixel_is_black() {
     let (base, variant) = filterjit::denoise::SPARSE_LIGHT_VARIANTS[0];
@@ -530,6 +531,29 @@ fn filter_without_expr_takes_the_sparse_light_variant_where_the_median_pixel_is_
         dir.join("named.exr").to_str().unwrap(),
     ]);
     assert!(run.status.success() && !text(&run.stderr).contains("sparse"), "{}", text(&run.stderr));
+    // The real-time filter is a role: named, it still follows the light, and
+    // a pipeline given keeps it.
+    let role = filterjit::denoise::FOLLOWS_THE_LIGHT_WHEN_ASKED[0];
+    let (_, role_variant) = filterjit::denoise::SPARSE_LIGHT_VARIANTS.iter().find(|(b, _)| *b == role).unwrap();
+    let named = |pipeline: Option<&str>, out: &str| {
+        let mut args = vec!["filter", "--expr"];
+        let role = format!("@{role}");
+        args.push(&role);
+        if let Some(p) = pipeline {
+            args.extend(["--pipeline", p]);
+        }
+        let out = dir.join(out);
+        args.extend([dataset.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+        let run = filterjit(&args);
+        assert!(run.status.success(), "{}", text(&run.stderr));
+        text(&run.stderr)
+    };
+    let stderr = named(None, "role.exr");
+    assert!(stderr.contains(&format!("filter    @{role_variant} (pipeline ")), "{stderr}");
+    assert!(stderr.contains("a pipeline given keeps the filter asked for"), "{stderr}");
+    let stored = filterjit::denoise::Choice::asked(&format!("@{role}"), None, None).unwrap().pipeline.to_string();
+    let stderr = named(Some(&stored), "pinned.exr");
+    assert!(!stderr.contains("sparse") && !stderr.contains(role_variant), "{stderr}");
 
     let run =
         filterjit(&["filter", mitsuba_sample().to_str().unwrap(), "-o", dir.join("cornell.exr").to_str().unwrap()]);

@@ -267,7 +267,10 @@ fn denoise<'py>(
     let (height, width) = (images.height, images.width);
     let scene = scene::prepare(images, &request).map_err(value)?;
     // As `filterjit filter`: a chosen filter may give way to its variant for the render's light.
-    let choice = choice.for_light(&scene.color).map_err(value)?.for_point_sampled(point_sampled, pipeline.is_some());
+    let choice = choice
+        .for_light(&scene.color, pipeline.is_some())
+        .map_err(value)?
+        .for_point_sampled(point_sampled, pipeline.is_some());
     let kernel = kernel(&choice)?;
     let gpu = device()?;
     let filtered = py.detach(|| filterjit::denoise::filter(&gpu, &choice, &kernel, &scene)).map_err(runtime)?;

@@ -141,7 +141,8 @@ def test_the_default_filter_follows_the_inputs_given(render):
 def test_where_the_median_pixel_is_black_denoise_takes_the_sparse_light_variant(render):
     """As `filterjit filter` without --expr: a colour whose median pixel is
     black (here nine pixels in ten blacked out) gets the default's variant
-    for sparse light; the render as it is keeps the default."""
+    for sparse light, as `@realtime` asked for by name does; the render as it
+    is keeps the default."""
     y, x = np.mgrid[0:SIZE, 0:SIZE]
     sparse = np.where(((7 * x + 13 * y) % 10 == 0)[..., None], render["color"] * 10, 0).astype(np.float32)
     given = inputs(render)
@@ -151,6 +152,11 @@ def test_where_the_median_pixel_is_black_denoise_takes_the_sparse_light_variant(
     assert np.array_equal(chosen, filterjit.denoise(sparse, **given, filter=variant))
     assert not np.array_equal(chosen, filterjit.denoise(sparse, **given, filter=default))
     assert np.array_equal(filterjit.denoise(render["color"], **given), filterjit.denoise(render["color"], **given, filter=default))
+    # The real-time filter, named, follows the light too; a pipeline given keeps it.
+    realtime = filterjit.denoise(sparse, **given, filter="@realtime")
+    assert np.array_equal(realtime, filterjit.denoise(sparse, **given, filter="@realtimeSparse"))
+    pinned = filterjit.denoise(sparse, **given, filter="@realtime", pipeline="outliers=2.5,trim,keep,demodulate,atrous3x3=3")
+    assert not np.array_equal(realtime, pinned)
 
 
 def cli():

@@ -141,7 +141,7 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
     let scene = scene::load(scene_path, &request).with_context(|| format!("loading scene {}", scene_path.display()))?;
     let load_time = load_start.elapsed();
     // A chosen filter may give way to its variant for the render's light (one read by the same request).
-    let choice = choice.for_light(&scene.color)?;
+    let choice = choice.for_light(&scene.color, pipeline.is_some())?;
     // A render sampled at one point a pixel: the pixel filter its reference integrates, last.
     let point_sampled = scene::point_sampled(scene_path, request.view_layer.as_deref())
         .with_context(|| format!("reading scene {}", scene_path.display()))?;

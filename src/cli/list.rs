@@ -15,7 +15,7 @@ pub(crate) fn list(brief: bool) -> Result<()> {
         }
         if let Some(base) = s.sparse_light_variant_of {
             println!(
-                "    default   in place of @{base}, where the render's median pixel is below {} of its mean luminance",
+                "    sparse    in place of @{base}, where the render's median pixel is below {} of its mean luminance",
                 filterjit::denoise::SPARSE_MEDIAN_OVER_MEAN
             );
         }
