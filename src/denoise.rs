@@ -81,9 +81,8 @@ pub const SPARSE_LIGHT_VARIANTS: &[(&str, &str)] = &[
 ];
 
 /// Shipped names that stand for a role rather than one weight: asked for by
-/// name, with the pipeline they were stored with, they still give way to
-/// their sparse-light variant ([`SPARSE_LIGHT_VARIANTS`]) as a chosen filter
-/// does. `@realtime` is "the real-time filter", which nothing chooses for a
+/// name without a pipeline, they still give way to their sparse-light
+/// variant ([`SPARSE_LIGHT_VARIANTS`]) as a chosen filter does. `@realtime` is "the real-time filter", which nothing chooses for a
 /// render, so it is always asked for; where the light is sparse its three 3x3
 /// passes stop short (docs/JOURNAL.md, "The real-time filter where the light
 /// is sparse"). A pipeline the caller gives keeps the filter asked for.
@@ -337,8 +336,9 @@ impl Choice {
     /// way to it where the render's light is sparse, in the variant's own
     /// pipeline unless the caller gave one (`pipeline_given`); so does a role
     /// asked for by name without a pipeline ([`FOLLOWS_THE_LIGHT_WHEN_ASKED`]);
-    /// anything else, and any other filter asked for, stays. The variant reads what its filter reads, so
-    /// the render loaded for the first serves the second.
+    /// anything else, and any other filter asked for, stays. The variant
+    /// reads what its filter reads, so the render loaded for the first serves
+    /// the second.
     pub fn for_light<A: Copy + Into<f64>>(self, color: &[[A; 3]], pipeline_given: bool) -> Result<Choice> {
         let Some(name) = &self.name else { return Ok(self) };
         let Some((_, variant)) = SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| base == name) else { return Ok(self) };
