@@ -94,6 +94,20 @@ pub const FOLLOWS_THE_LIGHT_WHEN_ASKED: &[&str] = &[SHIPPED_REALTIME];
 /// opening or round a corner) or 0.27 and above (docs/SCENES.md).
 pub const SPARSE_MEDIAN_OVER_MEAN: f64 = 0.05;
 
+/// Where a render's light is sparse (its noisy colour's median pixel below
+/// [`SPARSE_MEDIAN_OVER_MEAN`] of its mean luminance), that ratio.
+pub fn sparse_light<A: Copy + Into<f64>>(color: &[[A; 3]]) -> Option<f64> {
+    crate::metrics::tails(color).map(|t| t.median_over_mean).filter(|m| *m < SPARSE_MEDIAN_OVER_MEAN)
+}
+
+/// The sparse-light variant that a filter asked for by `name` gives way to
+/// where a render's light is sparse: a role's ([`FOLLOWS_THE_LIGHT_WHEN_ASKED`]),
+/// unless the caller gave a pipeline. What `report` runs in a role's place.
+pub fn asked_variant(name: &str, pipeline_given: bool) -> Option<&'static str> {
+    let role = FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(&name) && !pipeline_given;
+    role.then(|| SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| *base == name).map(|(_, v)| *v)).flatten()
+}
+
 pub const DEFAULT_RADIUS: u32 = 5;
 
 /// The inputs a render has: stored features (colour and pixel position
@@ -343,21 +357,17 @@ impl Choice {
         let Some(name) = &self.name else { return Ok(self) };
         let Some((_, variant)) = SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| base == name) else { return Ok(self) };
         let chosen = self.chosen_because.as_ref().is_some_and(|b| b.chosen);
-        let role = FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(&name.as_str()) && !pipeline_given;
-        if !chosen && !role {
+        if !chosen && asked_variant(name, pipeline_given).is_none() {
             return Ok(self);
         }
         let because = self.chosen_because.clone().unwrap_or_default();
-        let Some(tails) = crate::metrics::tails(color) else { return Ok(self) };
-        if tails.median_over_mean >= SPARSE_MEDIAN_OVER_MEAN {
-            return Ok(self);
-        }
+        let Some(median_over_mean) = sparse_light(color) else { return Ok(self) };
         let asked = Choice::asked(&format!("@{variant}"), None, None)?;
         Ok(Choice {
             name: asked.name,
             expr: asked.expr,
             pipeline: if pipeline_given { self.pipeline } else { asked.pipeline },
-            chosen_because: Some(Because { sparse_light: Some(tails.median_over_mean), ..because }),
+            chosen_because: Some(Because { sparse_light: Some(median_over_mean), ..because }),
             ..self
         })
     }

@@ -231,6 +231,55 @@ fn tuning_improves_on_the_hand_set_sigmas_and_reports_what_it_found() {
     assert_eq!(tuned.sigmas.0.len(), Sigmas::hand_set(&all).0.len());
 }
 
+/// A role asked for by name (`@realtime`) is reported as `filter` runs it:
+/// on a scene whose median pixel is black (the built-in slot room at 4 spp)
+/// its sparse-light variant runs under its name, and the CSV says so; on an
+/// evenly lit one (the built-in Cornell box) it runs as itself.
+#[test]
+fn a_role_is_reported_as_filter_runs_it() {
+    let (role, variant) = filterjit::denoise::SPARSE_LIGHT_VARIANTS
+        .iter()
+        .find(|(base, _)| filterjit::denoise::FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(base))
+        .expect("a role with a variant");
+    let dir = temp_dir("report", "role");
+    let out = dir.join("r");
+    let (role_arg, variant_arg) = (format!("@{role}"), format!("@{variant}"));
+    let o = filterjit(&[
+        "report",
+        &role_arg,
+        &variant_arg,
+        "--scenes",
+        "skylight-slot,cornell",
+        "--size",
+        "32x32",
+        "--reference-spp",
+        "64",
+        "--baseline",
+        "@crossBilateral",
+        "--repeats",
+        "1",
+        "--timing-size",
+        "32",
+        "--no-oidn",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{stderr}");
+    assert!(stderr.contains(&format!("skylight-slot: {role} (as {variant}: its variant for sparse light")), "{stderr}");
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    let header: Vec<&str> = csv.lines().next().unwrap().split(',').collect();
+    let column = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let cell = |scene: &str, method: &str, name: &str| -> String {
+        let row = csv.lines().find(|l| l.starts_with(&format!("{scene},{method},"))).unwrap_or_else(|| panic!("{csv}"));
+        row.split(',').nth(column(name)).unwrap().to_string()
+    };
+    assert_eq!(cell("skylight-slot", role, "ran_instead"), *variant, "{csv}");
+    assert_eq!(cell("skylight-slot", role, "relmse"), cell("skylight-slot", variant, "relmse"), "{csv}");
+    assert_eq!(cell("cornell", role, "ran_instead"), "", "{csv}");
+    assert_ne!(cell("cornell", role, "relmse"), cell("cornell", variant, "relmse"), "{csv}");
+}
+
 #[test]
 fn report_refuses_bad_input_naming_it() {
     let dir = temp_dir("report", "bad");

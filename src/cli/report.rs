@@ -147,6 +147,7 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
         expr: baseline_expr,
         pipeline: baseline_pipeline,
         radius: None,
+        sparse_light_variant: None,
     });
     // The SVGF-style à-trous filter, tuned on training scenes, in its own pipeline.
     let svgf = corpus::resolve_with_pipeline("@svgfAtrous")?;
@@ -156,6 +157,7 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
         expr: svgf.expr,
         pipeline: svgf.pipeline.unwrap_or(context.pipeline),
         radius: None,
+        sparse_light_variant: None,
     });
     for name in ["thesis1", "thesis2", "thesis3"] {
         // The thesis's filters as published: one window.
@@ -166,16 +168,35 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
             expr,
             pipeline: Default::default(),
             radius: None,
+            sparse_light_variant: None,
         });
     }
     for (k, arg) in args.exprs.iter().enumerate() {
         let resolved = corpus::resolve_with_pipeline(arg)?;
+        // A role (`@realtime`) runs as `filter` runs it: its variant where a scene's light is sparse.
+        let variant = match resolved.name.as_deref().and_then(|n| filterjit::denoise::asked_variant(n, false)) {
+            Some(variant) => {
+                let v = corpus::resolve_with_pipeline(&format!("@{variant}"))?;
+                let pipeline = v.pipeline.unwrap_or(context.pipeline);
+                let (name, expr, radius) = (variant.to_string(), v.expr, v.radius);
+                Some(Box::new(Method {
+                    name,
+                    origin: Origin::Given,
+                    expr,
+                    pipeline,
+                    radius,
+                    sparse_light_variant: None,
+                }))
+            }
+            None => None,
+        };
         methods.push(Method {
             name: resolved.name.unwrap_or_else(|| format!("expr{}", k + 1)),
             origin: Origin::Given,
             expr: resolved.expr,
             pipeline: resolved.pipeline.unwrap_or(context.pipeline),
             radius: resolved.radius,
+            sparse_light_variant: variant,
         });
     }
     let hall_path = args
@@ -206,6 +227,7 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
                     expr: expr.clone(),
                     pipeline,
                     radius,
+                    sparse_light_variant: None,
                 });
             }
             hall.push(expr);

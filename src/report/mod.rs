@@ -54,6 +54,9 @@ pub struct Method {
     pub pipeline: FilterPipeline,
     /// Its own window radius (a front member's); `None`: the report's.
     pub radius: Option<u32>,
+    /// What runs in its place on a scene whose light is sparse, as `filter`
+    /// runs a role asked for by name ([`crate::denoise::asked_variant`]).
+    pub sparse_light_variant: Option<Box<Method>>,
 }
 
 #[derive(Clone, Debug)]
@@ -93,6 +96,8 @@ pub struct Cell {
     pub flagged_pixels: usize,
     /// Why the method did not run on this scene (a feature the scene lacks).
     pub unavailable: Option<String>,
+    /// The sparse-light variant that ran in the method's place on this scene.
+    pub ran_instead: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -174,13 +179,14 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         baseline,
         feature_usage: hall_of_fame.map(feature_usage),
     };
-    let kernels: Vec<jit::ValidatedKernel> = methods
+    let compile = |m: &Method| {
+        let shape = jit::Shape::of(&m.pipeline);
+        jit::compile(&m.expr, jit::KernelSpec { shape, ..jit::KernelSpec::default() }).with_context(|| m.name.clone())
+    };
+    // Each method's kernel, and its sparse-light variant's where it has one.
+    let kernels: Vec<(jit::ValidatedKernel, Option<jit::ValidatedKernel>)> = methods
         .iter()
-        .map(|m| {
-            let shape = jit::Shape::of(&m.pipeline);
-            jit::compile(&m.expr, jit::KernelSpec { shape, ..jit::KernelSpec::default() })
-                .with_context(|| m.name.clone())
-        })
+        .map(|m| Ok((compile(m)?, m.sparse_light_variant.as_deref().map(compile).transpose()?)))
         .collect::<Result<_>>()?;
     for path in scenes {
         let (provided, provided_variances) =
@@ -202,7 +208,8 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             }
         };
         let mut request = Request { reference: true, ..Default::default() };
-        for m in methods.iter().filter(|m| runnable(&m.expr).is_none()) {
+        let variants = methods.iter().filter_map(|m| m.sparse_light_variant.as_deref());
+        for m in methods.iter().chain(variants).filter(|m| runnable(&m.expr).is_none()) {
             request.features.extend(m.expr.features());
             request.features.extend(m.pipeline.features());
             request.variances.extend(m.expr.stored_variables());
@@ -238,17 +245,29 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         let timing_scene = scene.tiled(settings.timing_size);
         // Buffers per pipeline: each pipeline's pre-pass runs once per scene.
         let mut prepared: BTreeMap<String, (SceneBuffers, SceneBuffers, f64)> = BTreeMap::new();
-        for (method, kernel) in methods.iter().zip(&kernels) {
+        let sparse_light = crate::denoise::sparse_light(&scene.color);
+        for (asked, (kernel, variant_kernel)) in methods.iter().zip(&kernels) {
+            // A role's variant runs in its place where the light is sparse, under its name.
+            let (method, kernel, ran_instead) = match (asked.sparse_light_variant.as_deref(), variant_kernel) {
+                (Some(variant), Some(k)) if sparse_light.is_some() => (variant, k, Some(variant.name.clone())),
+                _ => (asked, kernel, None),
+            };
             if let Some(reason) = runnable(&method.expr) {
                 results.cells.push(Cell {
                     scene: scene.name.clone(),
-                    method: method.name.clone(),
+                    method: asked.name.clone(),
                     unavailable: Some(reason),
                     ..Cell::default()
                 });
                 continue;
             }
-            progress(&format!("scene {}: {}", scene.name, method.name));
+            match &ran_instead {
+                Some(variant) => progress(&format!(
+                    "scene {}: {} (as {variant}: its variant for sparse light, as `filter` runs it)",
+                    scene.name, asked.name
+                )),
+                None => progress(&format!("scene {}: {}", scene.name, method.name)),
+            }
             let key = method.pipeline.to_string();
             if !prepared.contains_key(&key) {
                 let buffers = SceneBuffers::for_pipeline(gpu, &scene, &method.pipeline)?;
@@ -269,8 +288,8 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             let (cell, filtered) =
                 measure(gpu, kernel, buffers, &scene, &mut timing, &reference, settings, method.radius, noisy.relmse)
                     .with_context(|| format!("filtering {} with {}", scene.name, method.name))?;
-            strip.push(views.write(&method.name, &filtered)?);
-            results.cells.push(Cell { method: method.name.clone(), ..cell });
+            strip.push(views.write(&asked.name, &filtered)?);
+            results.cells.push(Cell { method: asked.name.clone(), ran_instead, ..cell });
         }
         if let Some(oidn) = oidn {
             for aux in [oidn::Auxiliary::ColorOnly, oidn::Auxiliary::AlbedoNormal] {

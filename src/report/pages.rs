@@ -188,7 +188,10 @@ impl<'a> Page<'a> {
                         cells: cells
                             .iter()
                             .map(|c| CellRow {
-                                method: c.method.clone(),
+                                method: match &c.ran_instead {
+                                    Some(variant) => format!("{} (as {variant}: sparse light)", c.method),
+                                    None => c.method.clone(),
+                                },
                                 unavailable: c.unavailable.clone(),
                                 relmse: fmt(c.relmse, 5),
                                 relmse_half_spp: fmt(c.relmse_half_spp, 5),
@@ -295,12 +298,12 @@ fn off(light: f64) -> &'static str {
 }
 
 fn csv(results: &Results) -> String {
-    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,hdr_flip,light,normalised,relmse_vs_oidn,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable\n");
+    let mut out = String::from("scene,method,relmse,relmse_half_spp,mse,hdr_flip,light,normalised,relmse_vs_oidn,ms_per_mpx,ms_per_mpx_min,ms_per_mpx_max,flagged_pixels,unavailable,ran_instead\n");
     let opt = |v: Option<f64>| v.map(|v| format!("{v:e}")).unwrap_or_default();
     for c in &results.cells {
         let _ = writeln!(
             out,
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}",
             c.scene,
             c.method,
             opt(c.relmse),
@@ -314,7 +317,8 @@ fn csv(results: &Results) -> String {
             opt(c.ms_per_mpx_range.map(|r| r.0)),
             opt(c.ms_per_mpx_range.map(|r| r.1)),
             c.flagged_pixels,
-            c.unavailable.as_deref().unwrap_or("").replace(',', ";")
+            c.unavailable.as_deref().unwrap_or("").replace(',', ";"),
+            c.ran_instead.as_deref().unwrap_or("")
         );
     }
     out
