@@ -66,7 +66,9 @@ pub const SHIPPED_TEMPORAL_BY_QUALITY: &[&str] = &["temporal", "temporalDepth", 
 
 /// Shipped filters with a variant for renders whose light is sparse, and
 /// that variant: the same inputs, the weight's pixel term widened from pass
-/// to pass (and for `@evolvedAtrous64Plane`, one à-trous pass more). A chosen filter (never one asked for) gives way
+/// to pass (and for `@evolvedAtrous64Plane` and `@realtime`, one à-trous pass
+/// more). A chosen filter, or a role asked for without a pipeline
+/// ([`FOLLOWS_THE_LIGHT_WHEN_ASKED`]), gives way
 /// to its variant where the noisy input's median pixel is black or nearly
 /// ([`SPARSE_MEDIAN_OVER_MEAN`]): at a few samples a pixel most pixels
 /// caught no light, and the filter must gather from farther to estimate it
@@ -100,12 +102,17 @@ pub fn sparse_light<A: Copy + Into<f64>>(color: &[[A; 3]]) -> Option<f64> {
     crate::metrics::tails(color).map(|t| t.median_over_mean).filter(|m| *m < SPARSE_MEDIAN_OVER_MEAN)
 }
 
-/// The sparse-light variant that a filter asked for by `name` gives way to
-/// where a render's light is sparse: a role's ([`FOLLOWS_THE_LIGHT_WHEN_ASKED`]),
-/// unless the caller gave a pipeline. What `report` runs in a role's place.
-pub fn asked_variant(name: &str, pipeline_given: bool) -> Option<&'static str> {
-    let role = FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(&name) && !pipeline_given;
-    role.then(|| SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| *base == name).map(|(_, v)| *v)).flatten()
+/// The sparse-light variant that a filter asked for by `name` with `expr`
+/// gives way to where a render's light is sparse: a role's
+/// ([`FOLLOWS_THE_LIGHT_WHEN_ASKED`]), unless the caller gave a pipeline.
+/// The shipped role, not an entry of a user's file that bears its name: its
+/// expression must be the shipped one. What `report` runs in a role's place.
+pub fn asked_variant(name: &str, expr: &Expr, pipeline_given: bool) -> Option<&'static str> {
+    if pipeline_given || !FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(&name) {
+        return None;
+    }
+    let shipped = corpus::resolve_with_pipeline(&format!("@{name}")).ok()?;
+    (shipped.expr == *expr).then(|| SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| *base == name).map(|(_, v)| *v))?
 }
 
 pub const DEFAULT_RADIUS: u32 = 5;
@@ -357,7 +364,7 @@ impl Choice {
         let Some(name) = &self.name else { return Ok(self) };
         let Some((_, variant)) = SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| base == name) else { return Ok(self) };
         let chosen = self.chosen_because.as_ref().is_some_and(|b| b.chosen);
-        if !chosen && asked_variant(name, pipeline_given).is_none() {
+        if !chosen && asked_variant(name, &self.expr, pipeline_given).is_none() {
             return Ok(self);
         }
         let because = self.chosen_because.clone().unwrap_or_default();
@@ -465,7 +472,7 @@ pub struct Shipped {
     pub measured: Option<&'static str>,
     /// The entry whose weight it shares, where the file writes it as `@other`.
     pub weight_of: Option<&'static str>,
-    /// The chosen filter it stands in for where a render's light is sparse ([`SPARSE_LIGHT_VARIANTS`]).
+    /// The filter it stands in for where a render's light is sparse ([`SPARSE_LIGHT_VARIANTS`]).
     pub sparse_light_variant_of: Option<&'static str>,
     pub text: &'static str,
 }
@@ -715,6 +722,9 @@ mod tests {
         assert_eq!(asked.clone().for_light(&even, false).unwrap().name.as_deref(), Some(role));
         let pinned = Choice::asked(&format!("@{role}"), Some(asked.pipeline), None).unwrap();
         assert_eq!(pinned.for_light(&sparse, true).unwrap().name.as_deref(), Some(role), "{}", asked.pipeline);
+        // A user's own expression under the role's name is not the role.
+        let own = Choice { expr: crate::lang::parse_expr("exp(-distance2(color))").unwrap(), ..asked.clone() };
+        assert_eq!(own.for_light(&sparse, false).unwrap().name.as_deref(), Some(role));
         // A pipeline the user gave stays with the variant.
         let given: FilterPipeline = "outliers=2,keep,demodulate,atrous=5".parse().unwrap();
         let chosen = Choice::asked_or_best(None, Some(given), None, &all).unwrap();

@@ -278,6 +278,10 @@ fn a_role_is_reported_as_filter_runs_it() {
     assert_eq!(cell("skylight-slot", role, "relmse"), cell("skylight-slot", variant, "relmse"), "{csv}");
     assert_eq!(cell("cornell", role, "ran_instead"), "", "{csv}");
     assert_ne!(cell("cornell", role, "relmse"), cell("cornell", variant, "relmse"), "{csv}");
+    // The summary and the expressions say what ran in its place.
+    let md = std::fs::read_to_string(out.join("results.md")).unwrap();
+    assert!(md.contains(&format!("{role} (as {variant} on 1 of its scenes")), "{md}");
+    assert!(md.contains(&format!("{variant} (in {role}'s place where the light is sparse)")), "{md}");
 }
 
 #[test]

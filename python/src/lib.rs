@@ -214,7 +214,8 @@ fn given_names(given: &Provided) -> String {
 /// :param filter: a shipped filter's name (``"@evolvedAtrous3x3"``), an
 ///     expression, or ``"@FILE:NAME"`` (a hall of fame entry). By default the
 ///     best shipped filter whose inputs are given, by the rule the command
-///     line uses (see :func:`choose`).
+///     line uses (see :func:`choose`). ``"@realtime"`` without a ``pipeline``
+///     runs ``"@realtimeSparse"`` where the colour's median pixel is black.
 /// :param pipeline: the filter pipeline, e.g. ``"outliers=2,demodulate,atrous=5"``;
 ///     by default the one the filter was stored with.
 /// :param radius: window radius of the ``window`` form; by default the stored one, else 5.

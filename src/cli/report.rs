@@ -174,7 +174,8 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
     for (k, arg) in args.exprs.iter().enumerate() {
         let resolved = corpus::resolve_with_pipeline(arg)?;
         // A role (`@realtime`) runs as `filter` runs it: its variant where a scene's light is sparse.
-        let variant = match resolved.name.as_deref().and_then(|n| filterjit::denoise::asked_variant(n, false)) {
+        let asked_variant = |n: &str| filterjit::denoise::asked_variant(n, &resolved.expr, false);
+        let variant = match resolved.name.as_deref().and_then(asked_variant) {
             Some(variant) => {
                 let v = corpus::resolve_with_pipeline(&format!("@{variant}"))?;
                 let pipeline = v.pipeline.unwrap_or(context.pipeline);

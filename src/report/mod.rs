@@ -118,6 +118,19 @@ pub struct MethodInfo {
     pub mean_vs_peer: Option<f64>,
     pub mean_ms_per_mpx: Option<f64>,
     pub scenes_run: usize,
+    /// The sparse-light variant that ran in its place on some scenes.
+    pub ran_instead: Option<RanInstead>,
+}
+
+/// A role's sparse-light variant, where it ran in the role's place ([`Method::sparse_light_variant`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct RanInstead {
+    pub name: String,
+    pub expr: String,
+    pub length: usize,
+    pub pipeline: String,
+    /// The scenes it ran on.
+    pub scenes: usize,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -257,6 +270,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
                     scene: scene.name.clone(),
                     method: asked.name.clone(),
                     unavailable: Some(reason),
+                    ran_instead,
                     ..Cell::default()
                 });
                 continue;
@@ -387,7 +401,18 @@ fn summarise(
         }
         _ => None,
     };
+    let ran_instead = method.and_then(|m| m.sparse_light_variant.as_deref()).and_then(|v| {
+        let scenes = ran.iter().filter(|c| c.ran_instead.as_deref() == Some(v.name.as_str())).count();
+        (scenes > 0).then(|| RanInstead {
+            name: v.name.clone(),
+            expr: v.expr.to_string(),
+            length: v.expr.len(),
+            pipeline: v.pipeline.to_string(),
+            scenes,
+        })
+    });
     MethodInfo {
+        ran_instead,
         mean_vs_peer,
         mean_relmse: mean(&|c| c.relmse),
         mean_flip: mean(&|c| c.flip),

@@ -141,7 +141,10 @@ impl<'a> Page<'a> {
                 .methods
                 .iter()
                 .map(|m| MethodRow {
-                    name: m.name.clone(),
+                    name: match &m.ran_instead {
+                        Some(v) => format!("{} (as {} on {} of its scenes: sparse light)", m.name, v.name, v.scenes),
+                        None => m.name.clone(),
+                    },
                     normalised: fmt(m.mean_normalised, 4),
                     relmse: fmt(m.mean_relmse, 4),
                     vs_peer: fmt(m.mean_vs_peer, 2),
@@ -219,24 +222,34 @@ impl<'a> Page<'a> {
                 .filter(|(_, light)| !off(*light).is_empty())
                 .map(|(c, light)| {
                     let change = (light - 1.0) * 100.0;
-                    format!(
-                        "{} on {}: {light:.3} of the reference's mean luminance ({change:+.1} %)",
-                        c.method, c.scene
-                    )
+                    let method = match &c.ran_instead {
+                        Some(variant) => format!("{} (as {variant})", c.method),
+                        None => c.method.clone(),
+                    };
+                    format!("{method} on {}: {light:.3} of the reference's mean luminance ({change:+.1} %)", c.scene)
                 })
                 .collect(),
             light_tolerance: format!("{:.0} %", metrics::LIGHT_TOLERANCE * 100.0),
             expressions: results
                 .methods
                 .iter()
-                .filter_map(|m| {
-                    Some(ExpressionItem {
+                .flat_map(|m| {
+                    let own = m.expr.clone().map(|expr| ExpressionItem {
                         name: m.name.clone(),
                         origin: format!("{:?}", m.origin),
                         length: m.length.unwrap_or(0),
                         pipeline: m.pipeline.clone().unwrap_or_else(|| "window".into()),
-                        expr: m.expr.clone()?,
-                    })
+                        expr,
+                    });
+                    // What ran in its place where the light was sparse: listed under it.
+                    let variant = m.ran_instead.as_ref().map(|v| ExpressionItem {
+                        name: format!("{} (in {}'s place where the light is sparse)", v.name, m.name),
+                        origin: format!("{:?}", m.origin),
+                        length: v.length,
+                        pipeline: v.pipeline.clone(),
+                        expr: v.expr.clone(),
+                    });
+                    own.into_iter().chain(variant)
                 })
                 .collect(),
         }
@@ -397,6 +410,7 @@ mod tests {
                 mean_vs_peer: None,
                 mean_ms_per_mpx: None,
                 scenes_run: 1,
+                ran_instead: None,
             }],
             cells: vec![Cell {
                 scene: "s".into(),
@@ -440,6 +454,7 @@ mod tests {
             mean_vs_peer: None,
             mean_ms_per_mpx: None,
             scenes_run: 1,
+            ran_instead: None,
         };
         let results = Results {
             generator: "filterjit".into(),
