@@ -112,7 +112,12 @@ pub fn asked_variant(name: &str, expr: &Expr, pipeline_given: bool) -> Option<&'
         return None;
     }
     let shipped = corpus::resolve_with_pipeline(&format!("@{name}")).ok()?;
-    (shipped.expr == *expr).then(|| SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| *base == name).map(|(_, v)| *v))?
+    (shipped.expr == *expr).then(|| sparse_light_variant(name))?
+}
+
+/// The shipped filter `name`'s sparse-light variant ([`SPARSE_LIGHT_VARIANTS`]).
+fn sparse_light_variant(name: &str) -> Option<&'static str> {
+    SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| *base == name).map(|(_, v)| *v)
 }
 
 pub const DEFAULT_RADIUS: u32 = 5;
@@ -362,13 +367,14 @@ impl Choice {
     /// the second.
     pub fn for_light<A: Copy + Into<f64>>(self, color: &[[A; 3]], pipeline_given: bool) -> Result<Choice> {
         let Some(name) = &self.name else { return Ok(self) };
-        let Some((_, variant)) = SPARSE_LIGHT_VARIANTS.iter().find(|(base, _)| base == name) else { return Ok(self) };
         let chosen = self.chosen_because.as_ref().is_some_and(|b| b.chosen);
-        if !chosen && asked_variant(name, &self.expr, pipeline_given).is_none() {
-            return Ok(self);
-        }
-        let because = self.chosen_because.clone().unwrap_or_default();
+        let variant = match chosen {
+            true => sparse_light_variant(name),
+            false => asked_variant(name, &self.expr, pipeline_given),
+        };
+        let Some(variant) = variant else { return Ok(self) };
         let Some(median_over_mean) = sparse_light(color) else { return Ok(self) };
+        let because = self.chosen_because.clone().unwrap_or_default();
         let asked = Choice::asked(&format!("@{variant}"), None, None)?;
         Ok(Choice {
             name: asked.name,

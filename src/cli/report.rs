@@ -171,34 +171,24 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
             sparse_light_variant: None,
         });
     }
+    let given = |name: String, resolved: corpus::Resolved, sparse_light_variant| Method {
+        name,
+        origin: Origin::Given,
+        expr: resolved.expr,
+        pipeline: resolved.pipeline.unwrap_or(context.pipeline),
+        radius: resolved.radius,
+        sparse_light_variant,
+    };
     for (k, arg) in args.exprs.iter().enumerate() {
         let resolved = corpus::resolve_with_pipeline(arg)?;
         // A role (`@realtime`) runs as `filter` runs it: its variant where a scene's light is sparse.
         let asked_variant = |n: &str| filterjit::denoise::asked_variant(n, &resolved.expr, false);
         let variant = match resolved.name.as_deref().and_then(asked_variant) {
-            Some(variant) => {
-                let v = corpus::resolve_with_pipeline(&format!("@{variant}"))?;
-                let pipeline = v.pipeline.unwrap_or(context.pipeline);
-                let (name, expr, radius) = (variant.to_string(), v.expr, v.radius);
-                Some(Box::new(Method {
-                    name,
-                    origin: Origin::Given,
-                    expr,
-                    pipeline,
-                    radius,
-                    sparse_light_variant: None,
-                }))
-            }
+            Some(v) => Some(Box::new(given(v.to_string(), corpus::resolve_with_pipeline(&format!("@{v}"))?, None))),
             None => None,
         };
-        methods.push(Method {
-            name: resolved.name.unwrap_or_else(|| format!("expr{}", k + 1)),
-            origin: Origin::Given,
-            expr: resolved.expr,
-            pipeline: resolved.pipeline.unwrap_or(context.pipeline),
-            radius: resolved.radius,
-            sparse_light_variant: variant,
-        });
+        let name = resolved.name.clone().unwrap_or_else(|| format!("expr{}", k + 1));
+        methods.push(given(name, resolved, variant));
     }
     let hall_path = args
         .hall_of_fame

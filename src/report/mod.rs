@@ -258,7 +258,9 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         let timing_scene = scene.tiled(settings.timing_size);
         // Buffers per pipeline: each pipeline's pre-pass runs once per scene.
         let mut prepared: BTreeMap<String, (SceneBuffers, SceneBuffers, f64)> = BTreeMap::new();
-        let sparse_light = crate::denoise::sparse_light(&scene.color);
+        // Measured only where a method has a variant to run.
+        let has_variant = methods.iter().any(|m| m.sparse_light_variant.is_some());
+        let sparse_light = has_variant.then(|| crate::denoise::sparse_light(&scene.color)).flatten();
         for (asked, (kernel, variant_kernel)) in methods.iter().zip(&kernels) {
             // A role's variant runs in its place where the light is sparse, under its name.
             let (method, kernel, ran_instead) = match (asked.sparse_light_variant.as_deref(), variant_kernel) {
