@@ -208,5 +208,6 @@ mod tests {
         let bytes = std::fs::read(&path).unwrap();
         // The first stored row is the image's bottom row.
         assert_eq!(f32::from_le_bytes(bytes[12..16].try_into().unwrap()), 3.0);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -53,6 +53,28 @@ fn only_the_edge_reads_or_sets_the_environment() {
 }
 
 #[test]
+fn tests_write_under_the_target_folder_not_the_systems_temporary_folder() {
+    // A run writes some 150 MB; `common::temp_dir` keeps it in `target/tmp` and
+    // removes ended runs' files, which a direct `std::env::temp_dir()` would not.
+    let tests = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests");
+    let mut writers = Vec::new();
+    for dir in [tests.clone(), tests.join("common")] {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            let text = if path.extension().is_some_and(|e| e == "rs") {
+                std::fs::read_to_string(&path).unwrap()
+            } else {
+                continue;
+            };
+            if code_of(&text).iter().any(|l| l.contains(concat!("env::", "temp_dir("))) {
+                writers.push(path.strip_prefix(&tests).unwrap().display().to_string());
+            }
+        }
+    }
+    assert!(writers.is_empty(), "{writers:?} write into the system's temporary folder: use common::temp_dir");
+}
+
+#[test]
 fn naga_validates_in_one_place_and_no_pipeline_infers_its_layout() {
     assert_eq!(files_with("Validator::new"), ["jit/validate.rs"]);
     // `scene/mod.rs` has a `layout: None` of its own: a scene's renderer layout, not wgpu's.

@@ -40,7 +40,7 @@ pub(crate) fn relmse(stdout: &str, row: &str) -> f64 {
 
 #[test]
 fn filter_runs_the_first_thesis_expression_on_the_mitsuba_sample() {
-    let out_dir = std::env::temp_dir().join(format!("filterjit-cli-{}", std::process::id()));
+    let out_dir = crate::common::temp_dir("cli", "thesis1");
     let output = out_dir.join("thesis1.exr");
     let sample = mitsuba_sample();
     let run = filterjit(&[
@@ -81,7 +81,7 @@ fn filter_runs_the_first_thesis_expression_on_the_mitsuba_sample() {
 /// overrides it, and the CPU reference agrees with the device through the whole pipeline.
 #[test]
 fn filter_honours_a_stored_pipeline_and_the_flag() {
-    let out_dir = std::env::temp_dir().join(format!("filterjit-cli-pipeline-{}", std::process::id()));
+    let out_dir = crate::common::temp_dir("cli", "pipeline");
     let output = out_dir.join("atrous.exr");
     let sample = mitsuba_sample();
     let run = |extra: &[&str]| {
@@ -183,7 +183,7 @@ fn compile_prints_validated_wgsl_and_unknown_names_are_listed() {
 
 #[test]
 fn render_then_filter_a_builtin_scene_with_every_thesis_expression() {
-    let dir = std::env::temp_dir().join(format!("filterjit-cli-render-{}", std::process::id()));
+    let dir = crate::common::temp_dir("cli", "render");
     let dataset = dir.join("glossy-floor");
     let run = render("glossy-floor", "24x16", 2, 8, &dataset);
     assert!(run.status.success(), "{}", text(&run.stderr));
@@ -211,7 +211,7 @@ fn render_then_filter_a_builtin_scene_with_every_thesis_expression() {
 
 #[test]
 fn bad_hall_of_fame_and_checkpoint_files_are_refused_clearly() {
-    let dir = std::env::temp_dir().join(format!("filterjit-cli-bad-{}", std::process::id()));
+    let dir = crate::common::temp_dir("cli", "bad");
     std::fs::create_dir_all(&dir).unwrap();
     let hof = dir.join("hall_of_fame.txt");
     std::fs::write(&hof, "# a damaged hall of fame\nisland0_rank1 = exp(-distance2(normal) +\n").unwrap();
@@ -390,7 +390,7 @@ fn expressions_too_deep_for_any_pass_end_with_an_error_not_a_crash() {
     assert_eq!(run.status.code(), Some(1), "stderr:\n{stderr}");
     assert!(stderr.contains("nests deeper than 256") && stderr.contains("1:1028"), "{stderr}");
 
-    let dir = std::env::temp_dir().join(format!("filterjit-cli-deep-{}", std::process::id()));
+    let dir = crate::common::temp_dir("cli", "deep");
     std::fs::create_dir_all(&dir).unwrap();
     let file = dir.join("hall_of_fame.txt");
     let long = vec!["colorVariance"; 20_000].join(" + ");
@@ -410,7 +410,7 @@ fn expressions_too_deep_for_any_pass_end_with_an_error_not_a_crash() {
 /// names the flag that changes the outcome.
 #[test]
 fn a_missing_channel_is_a_data_error_and_the_cli_names_the_flag() {
-    let out = std::env::temp_dir().join(format!("filterjit-cli-absent-{}.exr", std::process::id()));
+    let out = crate::common::temp_dir("cli", "absent").join("out.exr");
     // The Mitsuba sample has no direct-illumination channel, which @thesis1 reads.
     let sample = mitsuba_sample();
     let run = filterjit(&["filter", "--expr", "@thesis1", sample.to_str().unwrap(), "-o", out.to_str().unwrap()]);
@@ -780,7 +780,7 @@ fn render_refuses_a_size_larger_than_the_device_filters() {
 #[test]
 fn a_radius_for_an_a_trous_form_is_refused() {
     let sample = mitsuba_sample();
-    let out = std::env::temp_dir().join(format!("filterjit-cli-radius-{}", std::process::id()));
+    let out = crate::common::temp_dir("cli", "radius");
     let filter = filterjit(&[
         "filter",
         "--expr",

@@ -2,7 +2,7 @@
 
 pub mod browser;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use parking_lot::{ReentrantMutex, ReentrantMutexGuard};
@@ -83,13 +83,42 @@ pub fn mitsuba_sample() -> PathBuf {
     dir
 }
 
-/// An empty directory for one test: `area` and `name` keep tests apart, the
-/// process id keeps concurrent runs apart.
+/// An empty directory for one test: `area` and `name` keep tests apart.
+///
+/// It lies in this run's folder under Cargo's scratch folder for integration
+/// tests (`target/tmp/filterjit-tests/PID`), never the system's temporary
+/// folder: a run writes some 150 MB, and a run that failed keeps its files to
+/// be looked at. So nothing piles up, the first call of a run removes the
+/// folders of runs that have ended.
 pub fn temp_dir(area: &str, name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("filterjit-{area}-{}-{name}", std::process::id()));
+    let dir = this_run_scratch().join(format!("{area}-{name}"));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temporary directory");
     dir
+}
+
+/// This process's folder of test directories; the folders of ended runs are
+/// removed the first time it is asked for.
+fn this_run_scratch() -> &'static Path {
+    static RUN: OnceLock<PathBuf> = OnceLock::new();
+    RUN.get_or_init(|| {
+        let root = Path::new(env!("CARGO_TARGET_TMPDIR")).join("filterjit-tests");
+        let this = std::process::id();
+        for entry in std::fs::read_dir(&root).into_iter().flatten().flatten() {
+            let pid = entry.file_name().to_str().and_then(|name| name.parse::<u32>().ok());
+            if pid.is_some_and(|pid| pid != this && !may_be_running(pid)) {
+                let _ = std::fs::remove_dir_all(entry.path());
+            }
+        }
+        root.join(this.to_string())
+    })
+}
+
+/// Whether process `pid` may still be running. Linux says so in `/proc`;
+/// where there is no `/proc`, every process may be, and no run's files go.
+fn may_be_running(pid: u32) -> bool {
+    let proc = Path::new("/proc");
+    !proc.join("self").exists() || proc.join(pid.to_string()).exists()
 }
 
 /// Limits read from the environment so CI can shrink or grow a run.
