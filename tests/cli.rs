@@ -511,7 +511,7 @@ fn list_shows_each_shipped_filter_with_what_it_reads_and_its_rank() {
 /// keeps the default.
 #[test]
 fn filter_without_expr_takes_the_sparse_light_variant_where_the_median_pixel_is_black() {
-    let (base, variant) = filterjit::denoise::SPARSE_LIGHT_VARIANTS[0];
+    let filterjit::denoise::SparseLightVariant { base, variant, .. } = filterjit::denoise::SPARSE_LIGHT_VARIANTS[0];
     let dir = crate::common::temp_dir("cli", "sparse-light");
     let dataset = dir.join("skylight-slot");
     let run = render("skylight-slot", "32x32", 4, 16, &dataset);
@@ -534,7 +534,7 @@ fn filter_without_expr_takes_the_sparse_light_variant_where_the_median_pixel_is_
     // The real-time filter is a role: named, it still follows the light, and
     // a pipeline given keeps it.
     let role = filterjit::denoise::FOLLOWS_THE_LIGHT_WHEN_ASKED[0];
-    let (_, role_variant) = filterjit::denoise::SPARSE_LIGHT_VARIANTS.iter().find(|(b, _)| *b == role).unwrap();
+    let role_variant = filterjit::denoise::SPARSE_LIGHT_VARIANTS.iter().find(|v| v.base == role).unwrap().variant;
     let named = |pipeline: Option<&str>, out: &str| {
         let mut args = vec!["filter", "--expr"];
         let role = format!("@{role}");

@@ -237,9 +237,9 @@ fn tuning_improves_on_the_hand_set_sigmas_and_reports_what_it_found() {
 /// evenly lit one (the built-in Cornell box) it runs as itself.
 #[test]
 fn a_role_is_reported_as_filter_runs_it() {
-    let (role, variant) = filterjit::denoise::SPARSE_LIGHT_VARIANTS
+    let filterjit::denoise::SparseLightVariant { base: role, variant, .. } = filterjit::denoise::SPARSE_LIGHT_VARIANTS
         .iter()
-        .find(|(base, _)| filterjit::denoise::FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(base))
+        .find(|v| filterjit::denoise::FOLLOWS_THE_LIGHT_WHEN_ASKED.contains(&v.base))
         .expect("a role with a variant");
     let dir = temp_dir("report", "role");
     let out = dir.join("r");

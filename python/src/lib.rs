@@ -215,7 +215,7 @@ fn given_names(given: &Provided) -> String {
 ///     expression, or ``"@FILE:NAME"`` (a hall of fame entry). By default the
 ///     best shipped filter whose inputs are given, by the rule the command
 ///     line uses (see :func:`choose`). ``"@realtime"`` without a ``pipeline``
-///     runs ``"@realtimeSparse"`` where the colour's median pixel is black.
+///     runs ``"@realtimeSparse"`` where the colour's median pixel is under 0.15 of its mean.
 /// :param pipeline: the filter pipeline, e.g. ``"outliers=2,demodulate,atrous=5"``;
 ///     by default the one the filter was stored with.
 /// :param radius: window radius of the ``window`` form; by default the stored one, else 5.

@@ -90,7 +90,7 @@ pub(crate) enum Command {
     Filter {
         /// The expression, @name for a shipped one, or @FILE[:NAME] [default:
         /// the best shipped filter whose inputs the scene has; stderr says which and why].
-        /// `@realtime` without --pipeline runs `@realtimeSparse` where the render's median pixel is black.
+        /// `@realtime` without --pipeline runs `@realtimeSparse` where the render's median pixel is under 0.15 of its mean.
         #[arg(long)]
         expr: Option<String>,
         /// Window radius r: the window is (2r+1)² pixels [default: the one

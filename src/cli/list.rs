@@ -13,10 +13,10 @@ pub(crate) fn list(brief: bool) -> Result<()> {
         if let Some(rank) = s.rank {
             println!("    default   {rank}. choice of `filter` without --expr, where the render has what it reads");
         }
-        if let Some(base) = s.sparse_light_variant_of {
+        if let Some(rule) = s.sparse_light_variant_of {
             println!(
-                "    sparse    in place of @{base}, where the render's median pixel is below {} of its mean luminance",
-                filterjit::denoise::SPARSE_MEDIAN_OVER_MEAN
+                "    sparse    in place of @{}, where the render's median pixel is below {} of its mean luminance",
+                rule.base, rule.under
             );
         }
         if let Some(measured) = s.measured {
@@ -45,7 +45,7 @@ fn list_brief() -> Result<()> {
             _ if s.name == SHIPPED_REALTIME_TEMPORAL => {
                 ((2, 1), format!("sequence, real time: --expr @{SHIPPED_REALTIME_TEMPORAL}"))
             }
-            (_, _, Some(base)) => ((3, 0), format!("render: @{base} where the light is sparse")),
+            (_, _, Some(rule)) => ((3, 0), format!("render: @{} where the light is sparse", rule.base)),
             _ => ((4, 0), String::new()),
         }
     };

@@ -184,7 +184,10 @@ pub(crate) fn report(env: &Environment, args: ReportArgs) -> Result<()> {
         // A role (`@realtime`) runs as `filter` runs it: its variant where a scene's light is sparse.
         let asked_variant = |n: &str| filterjit::denoise::asked_variant(n, &resolved.expr, false);
         let variant = match resolved.name.as_deref().and_then(asked_variant) {
-            Some(v) => Some(Box::new(given(v.to_string(), corpus::resolve_with_pipeline(&format!("@{v}"))?, None))),
+            Some(rule) => {
+                let variant = corpus::resolve_with_pipeline(&format!("@{}", rule.variant))?;
+                Some((Box::new(given(rule.variant.to_string(), variant, None)), rule))
+            }
             None => None,
         };
         let name = resolved.name.clone().unwrap_or_else(|| format!("expr{}", k + 1));

@@ -54,9 +54,10 @@ pub struct Method {
     pub pipeline: FilterPipeline,
     /// Its own window radius (a front member's); `None`: the report's.
     pub radius: Option<u32>,
-    /// What runs in its place on a scene whose light is sparse, as `filter`
-    /// runs a role asked for by name ([`crate::denoise::asked_variant`]).
-    pub sparse_light_variant: Option<Box<Method>>,
+    /// What runs in its place on a scene whose light is sparse, and the
+    /// rule that says where, as `filter` runs a role asked for by name
+    /// ([`crate::denoise::asked_variant`]).
+    pub sparse_light_variant: Option<(Box<Method>, &'static crate::denoise::SparseLightVariant)>,
 }
 
 #[derive(Clone, Debug)]
@@ -199,7 +200,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
     // Each method's kernel, and its sparse-light variant's where it has one.
     let kernels: Vec<(jit::ValidatedKernel, Option<jit::ValidatedKernel>)> = methods
         .iter()
-        .map(|m| Ok((compile(m)?, m.sparse_light_variant.as_deref().map(compile).transpose()?)))
+        .map(|m| Ok((compile(m)?, m.sparse_light_variant.as_ref().map(|(v, _)| compile(v)).transpose()?)))
         .collect::<Result<_>>()?;
     for path in scenes {
         let (provided, provided_variances) =
@@ -221,7 +222,7 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
             }
         };
         let mut request = Request { reference: true, ..Default::default() };
-        let variants = methods.iter().filter_map(|m| m.sparse_light_variant.as_deref());
+        let variants = methods.iter().filter_map(|m| m.sparse_light_variant.as_ref().map(|(v, _)| &**v));
         for m in methods.iter().chain(variants).filter(|m| runnable(&m.expr).is_none()) {
             request.features.extend(m.expr.features());
             request.features.extend(m.pipeline.features());
@@ -258,13 +259,12 @@ pub fn run(gpu: &Gpu, inputs: Inputs<'_>, output: &Path, progress: &mut dyn FnMu
         let timing_scene = scene.tiled(settings.timing_size);
         // Buffers per pipeline: each pipeline's pre-pass runs once per scene.
         let mut prepared: BTreeMap<String, (SceneBuffers, SceneBuffers, f64)> = BTreeMap::new();
-        // Measured only where a method has a variant to run.
-        let has_variant = methods.iter().any(|m| m.sparse_light_variant.is_some());
-        let sparse_light = has_variant.then(|| crate::denoise::sparse_light(&scene.color)).flatten();
         for (asked, (kernel, variant_kernel)) in methods.iter().zip(&kernels) {
             // A role's variant runs in its place where the light is sparse, under its name.
-            let (method, kernel, ran_instead) = match (asked.sparse_light_variant.as_deref(), variant_kernel) {
-                (Some(variant), Some(k)) if sparse_light.is_some() => (variant, k, Some(variant.name.clone())),
+            let (method, kernel, ran_instead) = match (&asked.sparse_light_variant, variant_kernel) {
+                (Some((variant, rule)), Some(k)) if rule.sparse_for(&scene.color).is_some() => {
+                    (&**variant, k, Some(variant.name.clone()))
+                }
                 _ => (asked, kernel, None),
             };
             if let Some(reason) = runnable(&method.expr) {
@@ -403,7 +403,7 @@ fn summarise(
         }
         _ => None,
     };
-    let ran_instead = method.and_then(|m| m.sparse_light_variant.as_deref()).and_then(|v| {
+    let ran_instead = method.and_then(|m| m.sparse_light_variant.as_ref()).and_then(|(v, _)| {
         let scenes = ran.iter().filter(|c| c.ran_instead.as_deref() == Some(v.name.as_str())).count();
         (scenes > 0).then(|| RanInstead {
             name: v.name.clone(),
