@@ -212,3 +212,19 @@ fn built_in_sequences_render_with_motion_vectors_in_blenders_convention() {
         }
     }
 }
+
+/// The scene files the sparse-light thresholds were chosen on parse, each a
+/// still, and their comments say what they vary.
+#[test]
+fn the_sparse_light_scene_files_parse() {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/sparse-light");
+    let mut files: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().path()).collect();
+    files.sort();
+    assert_eq!(files.len(), 11, "{files:?}");
+    for file in files {
+        let scene = filterjit::render::Description::load(&file).unwrap_or_else(|e| panic!("{e}"));
+        assert!(scene.animation.is_none(), "{}", file.display());
+        let text = std::fs::read_to_string(&file).unwrap();
+        assert!(text.starts_with("# `scenes/") && text.contains("SPARSE_MEDIAN_OVER_MEAN"), "{}", file.display());
+    }
+}
