@@ -12,7 +12,7 @@ use crate::corpus;
 use crate::gpu::{Filtered, Gpu, SceneBuffers, TemporalState};
 use crate::jit;
 use crate::lang::{Expr, Feature, ScalarVar};
-use crate::pipeline::{FilterPipeline, PixelFilter};
+use crate::pipeline::{FilterPipeline, Form, PixelFilter, Stencil};
 use crate::scene::Scene;
 use crate::scene::{Holds, Missing, Needs, Request};
 
@@ -149,6 +149,15 @@ fn sparse_light_variant(name: &str) -> Option<&'static SparseLightVariant> {
     SPARSE_LIGHT_VARIANTS.iter().find(|v| v.base == name)
 }
 
+/// Samples per pixel from which `filter`'s choice runs two 5x5 à-trous
+/// passes where it has three: less noise to spread, and the third pass's
+/// reach blurs what the samples already resolve. At 16 spp (128², 256-spp
+/// references) two passes have 0.942× three's relMSE on the thirteen
+/// built-in training scenes (geometric mean; better on ten) and 0.828× on
+/// the four test scenes (better on all); at 4 spp three are better
+/// (docs/JOURNAL.md, "Fewer passes where the render has more samples").
+pub const FEWER_PASSES_FROM_SPP: u32 = 16;
+
 pub const DEFAULT_RADIUS: u32 = 5;
 
 /// The inputs a render has: stored features (colour and pixel position
@@ -202,6 +211,8 @@ pub struct Because {
     pub sparse_light: Option<(f64, f64)>,
     /// Whether the pixel filter was added for a render sampled at one point a pixel.
     pub point_sampled: bool,
+    /// Where a pass was left out for a render of many samples ([`FEWER_PASSES_FROM_SPP`]): its samples per pixel.
+    pub fewer_passes: Option<u32>,
 }
 
 /// How a caller names the inputs a filter reads, for [`Because::render`].
@@ -291,6 +302,12 @@ impl Because {
             parts.push(format!(
                 "its variant for sparse light, as the render's median pixel is {median_over_mean:.3} of its mean \
                  luminance (under {under}){keep}"
+            ));
+        }
+        if let Some(spp) = self.fewer_passes {
+            parts.push(format!(
+                "two à-trous passes, not three, as the render has {spp} samples a pixel (from \
+                 {FEWER_PASSES_FROM_SPP} on: less noise to spread)"
             ));
         }
         if self.point_sampled {
@@ -412,6 +429,28 @@ impl Choice {
             chosen_because: Some(Because { sparse_light: Some((median_over_mean, variant.under)), ..because }),
             ..self
         })
+    }
+
+    /// This choice for a render of `spp` samples a pixel: `filter`'s choice
+    /// of a still's filter runs two 5x5 à-trous passes where it has three
+    /// from [`FEWER_PASSES_FROM_SPP`] on; a filter asked for, a pipeline
+    /// given, a sparse-light variant (whose light needs the reach) and a
+    /// sequence's filter stay as they are. Where the count is unknown
+    /// (arrays, renders without a header or `meta.json`) nothing changes.
+    pub fn for_samples(self, spp: Option<u32>, pipeline_given: bool) -> Choice {
+        let because = self.chosen_because.clone().unwrap_or_default();
+        let Some(spp) = spp.filter(|s| *s >= FEWER_PASSES_FROM_SPP) else { return self };
+        let three = Form::Atrous { passes: 3, stencil: Stencil::Cubic5 };
+        let still = self.pipeline.temporal.is_none() && self.pipeline.form == three;
+        if pipeline_given || !because.chosen || because.sparse_light.is_some() || !still {
+            return self;
+        }
+        let form = Form::Atrous { passes: 2, stencil: Stencil::Cubic5 };
+        Choice {
+            pipeline: FilterPipeline { form, ..self.pipeline },
+            chosen_because: Some(Because { fewer_passes: Some(spp), ..because }),
+            ..self
+        }
     }
 
     /// This choice for a render (or a sequence's frames) whose renderer
@@ -770,6 +809,31 @@ mod tests {
         let given: FilterPipeline = "outliers=2,keep,demodulate,atrous=5".parse().unwrap();
         let chosen = Choice::asked_or_best(None, Some(given), None, &all).unwrap();
         assert_eq!(chosen.for_light(&sparse, true).unwrap().pipeline, given);
+    }
+
+    #[test]
+    fn a_render_of_many_samples_gets_one_pass_fewer_from_the_chosen_filter() {
+        use Feature::*;
+        let all = provided(&[Texture, Normal, WorldPosition, Depth], &[]);
+        let chosen = Choice::best_for(&all).unwrap();
+        let three = Form::Atrous { passes: 3, stencil: Stencil::Cubic5 };
+        assert_eq!(chosen.pipeline.form, three, "the default runs three 5x5 passes");
+        let many = chosen.clone().for_samples(Some(FEWER_PASSES_FROM_SPP), false);
+        assert_eq!(many.pipeline.form, Form::Atrous { passes: 2, stencil: Stencil::Cubic5 });
+        assert_eq!(FilterPipeline { form: three, ..many.pipeline }, chosen.pipeline, "only the count changes");
+        let because = many.chosen_because.as_ref().unwrap().to_string();
+        assert!(because.contains("two à-trous passes, not three") && because.contains("16 samples"), "{because}");
+        for (spp, pipeline_given) in [(Some(FEWER_PASSES_FROM_SPP - 1), false), (None, false), (Some(64), true)] {
+            assert_eq!(chosen.clone().for_samples(spp, pipeline_given).pipeline, chosen.pipeline, "{spp:?}");
+        }
+        // A filter asked for stays as asked.
+        let asked = Choice::asked(&format!("@{}", SHIPPED_BY_QUALITY[0]), None, None).unwrap();
+        assert_eq!(asked.clone().for_samples(Some(64), false).pipeline, asked.pipeline);
+        // A sparse-light variant keeps its reach.
+        let mut sparse = vec![[0.0f32; 3]; 100];
+        sparse[0] = [100.0; 3];
+        let variant = chosen.for_light(&sparse, false).unwrap();
+        assert_eq!(variant.clone().for_samples(Some(64), false).pipeline, variant.pipeline);
     }
 
     #[test]

@@ -801,3 +801,31 @@ fn a_radius_for_an_a_trous_form_is_refused() {
     assert!(text(&evolve.stderr).contains("--radius 4 sets a window's size"), "{}", text(&evolve.stderr));
     assert!(!out.join("run").exists(), "no run directory made");
 }
+
+/// A render of many samples (its `meta.json` says 16) gets the default with
+/// one à-trous pass fewer, and stderr says why; the same render with the
+/// filter named keeps three.
+#[test]
+fn filter_without_expr_runs_one_pass_fewer_on_a_render_of_many_samples() {
+    let dir = crate::common::temp_dir("cli", "many-samples");
+    let dataset = dir.join("cornell");
+    let spp = filterjit::denoise::FEWER_PASSES_FROM_SPP;
+    let run = render("cornell", "32x32", spp, 32, &dataset);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let run = filterjit(&["filter", dataset.to_str().unwrap(), "-o", dir.join("out.exr").to_str().unwrap()]);
+    let stderr = text(&run.stderr);
+    assert!(run.status.success(), "{stderr}");
+    assert!(stderr.contains("demodulate,atrous=2,planefit=3)"), "{stderr}");
+    assert!(stderr.contains(&format!("two à-trous passes, not three, as the render has {spp} samples")), "{stderr}");
+    let default = filterjit::denoise::SHIPPED_BY_QUALITY[0];
+    let run = filterjit(&[
+        "filter",
+        "--expr",
+        &format!("@{default}"),
+        dataset.to_str().unwrap(),
+        "-o",
+        dir.join("named.exr").to_str().unwrap(),
+    ]);
+    let stderr = text(&run.stderr);
+    assert!(run.status.success() && !stderr.contains("two à-trous passes"), "{stderr}");
+}

@@ -210,7 +210,8 @@ fn given_names(given: &Provided) -> String {
 /// :param depth: depth (Mitsuba's ``depth``), (H, W) or (H, W, 1).
 /// :param variance: per-pixel sample variance of the colour, (H, W), (H, W, 1)
 ///     or (H, W, 3) (the mean over channels is used, as from files).
-/// :param spp: samples per pixel of ``color`` (for information only).
+/// :param spp: samples per pixel of ``color``: from 16 on, the filter chosen
+///     runs two à-trous passes where it has three, as ``filterjit filter`` does.
 /// :param filter: a shipped filter's name (``"@evolvedAtrous3x3"``), an
 ///     expression, or ``"@FILE:NAME"`` (a hall of fame entry). By default the
 ///     best shipped filter whose inputs are given, by the rule the command
@@ -267,11 +268,13 @@ fn denoise<'py>(
     let request = scene::Request { reference: false, ..choice.request() };
     let (height, width) = (images.height, images.width);
     let scene = scene::prepare(images, &request).map_err(value)?;
-    // As `filterjit filter`: a chosen filter may give way to its variant for the render's light.
+    // As `filterjit filter`: a chosen filter may give way to its variant for
+    // the render's light, and run one pass fewer on a render of many samples.
     let choice = choice
         .for_light(&scene.color, pipeline.is_some())
         .map_err(value)?
-        .for_point_sampled(point_sampled, pipeline.is_some());
+        .for_point_sampled(point_sampled, pipeline.is_some())
+        .for_samples(spp, pipeline.is_some());
     let kernel = kernel(&choice)?;
     let gpu = device()?;
     let filtered = py.detach(|| filterjit::denoise::filter(&gpu, &choice, &kernel, &scene)).map_err(runtime)?;

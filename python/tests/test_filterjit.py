@@ -82,6 +82,19 @@ def inputs(render, *without):
     return {k: render[k] for k in names if k not in without}
 
 
+def test_a_render_of_many_samples_gets_one_pass_fewer(render):
+    # As `filterjit filter` where a render says it took 16 samples a pixel or
+    # more: the chosen filter runs two a-trous passes where it has three.
+    name, pipeline, _ = filterjit.choose(list(inputs(render)))
+    assert "atrous=3," in pipeline, pipeline
+    many = filterjit.denoise(render["color"], **inputs(render), spp=16)
+    two = filterjit.denoise(render["color"], **inputs(render), filter=name,
+                            pipeline=pipeline.replace("atrous=3,", "atrous=2,"))
+    few = filterjit.denoise(render["color"], **inputs(render), spp=SPP)
+    assert np.array_equal(many, two)
+    assert not np.array_equal(many, few)
+
+
 def test_a_mitsuba_render_is_denoised_below_its_noisy_error(render):
     out = filterjit.denoise(render["color"], **inputs(render), spp=SPP)
     assert out.shape == (SIZE, SIZE, 3) and out.dtype == np.float32

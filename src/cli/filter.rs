@@ -146,6 +146,13 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
     let point_sampled = scene::point_sampled(scene_path, request.view_layer.as_deref())
         .with_context(|| format!("reading scene {}", scene_path.display()))?;
     let choice = choice.for_point_sampled(point_sampled, pipeline.is_some());
+    // A render of many samples: one pass fewer for the chosen filter (its `meta.json` or its header says how many).
+    let samples = match scene.spp {
+        Some(spp) => Some(spp),
+        None => scene::samples_per_pixel(scene_path, request.view_layer.as_deref())
+            .with_context(|| format!("reading scene {}", scene_path.display()))?,
+    };
+    let choice = choice.for_samples(samples, pipeline.is_some());
     if let Some(because) = &choice.chosen_because {
         eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
     }
