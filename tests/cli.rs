@@ -802,7 +802,7 @@ fn a_radius_for_an_a_trous_form_is_refused() {
     assert!(!out.join("run").exists(), "no run directory made");
 }
 
-/// A render of many samples (its `meta.json` says 16) gets the default with
+/// A render of many samples (its `meta.json` says 8) gets the default with
 /// one à-trous pass fewer, and stderr says why; the same render with the
 /// filter named keeps three.
 #[test]

@@ -83,11 +83,11 @@ def inputs(render, *without):
 
 
 def test_a_render_of_many_samples_gets_one_pass_fewer(render):
-    # As `filterjit filter` where a render says it took 16 samples a pixel or
+    # As `filterjit filter` where a render says it took 8 samples a pixel or
     # more: the chosen filter runs two a-trous passes where it has three.
     name, pipeline, _ = filterjit.choose(list(inputs(render)))
     assert "atrous=3," in pipeline, pipeline
-    many = filterjit.denoise(render["color"], **inputs(render), spp=16)
+    many = filterjit.denoise(render["color"], **inputs(render), spp=8)
     two = filterjit.denoise(render["color"], **inputs(render), filter=name,
                             pipeline=pipeline.replace("atrous=3,", "atrous=2,"))
     few = filterjit.denoise(render["color"], **inputs(render), spp=SPP)
