@@ -149,14 +149,18 @@ fn sparse_light_variant(name: &str) -> Option<&'static SparseLightVariant> {
     SPARSE_LIGHT_VARIANTS.iter().find(|v| v.base == name)
 }
 
-/// Samples per pixel from which `filter`'s choice runs two 5x5 à-trous
-/// passes where it has three: less noise to spread, and the third pass's
-/// reach blurs what the samples already resolve. On the thirteen built-in
-/// training scenes (128², 256-spp references) two passes have 0.984× three's
-/// relMSE at 8 spp and 0.942× at 16 (geometric means; on the four test
-/// scenes 0.884× and 0.828×); the pipeline's three were chosen at 4 spp
-/// (docs/JOURNAL.md, "Fewer passes where the render has more samples").
-pub const FEWER_PASSES_FROM_SPP: u32 = 8;
+/// Samples per pixel from which `filter`'s choice runs fewer 5x5 à-trous
+/// passes than the three it has, and how many: less noise to spread, and
+/// the last passes' reach blurs what the samples already resolve. On the
+/// thirteen built-in training scenes (128²) two passes have 0.984× three's
+/// relMSE at 8 spp and 0.942× at 16, one pass 0.866× two's at 64
+/// (geometric means; on the four test scenes two passes 0.884× and 0.828×
+/// three's, one 0.983× two's at 64); the pipeline's three were chosen at 4
+/// spp (docs/JOURNAL.md, "Fewer passes where the render has more samples").
+pub const FEWER_PASSES_BY_SPP: [(u32, u32); 2] = [(8, 2), (64, 1)];
+
+/// The fewest samples a pixel that get fewer passes ([`FEWER_PASSES_BY_SPP`]).
+pub const FEWER_PASSES_FROM_SPP: u32 = FEWER_PASSES_BY_SPP[0].0;
 
 pub const DEFAULT_RADIUS: u32 = 5;
 
@@ -211,8 +215,10 @@ pub struct Because {
     pub sparse_light: Option<(f64, f64)>,
     /// Whether the pixel filter was added for a render sampled at one point a pixel.
     pub point_sampled: bool,
-    /// Where a pass was left out for a render of many samples ([`FEWER_PASSES_FROM_SPP`]): its samples per pixel.
-    pub fewer_passes: Option<u32>,
+    /// Where passes were left out for a render of many samples
+    /// ([`FEWER_PASSES_BY_SPP`]): its samples per pixel, the count from
+    /// which the rule applies, and the passes it runs.
+    pub fewer_passes: Option<(u32, u32, u32)>,
 }
 
 /// How a caller names the inputs a filter reads, for [`Because::render`].
@@ -304,10 +310,11 @@ impl Because {
                  luminance (under {under}){keep}"
             ));
         }
-        if let Some(spp) = self.fewer_passes {
+        if let Some((spp, from, passes)) = self.fewer_passes {
+            let passes =
+                if passes == 1 { "one à-trous pass".to_string() } else { format!("{passes} à-trous passes") };
             parts.push(format!(
-                "two à-trous passes, not three, as the render has {spp} samples a pixel (from \
-                 {FEWER_PASSES_FROM_SPP} on: less noise to spread)"
+                "{passes}, not three, as the render has {spp} samples a pixel (from {from} on: less noise to spread)"
             ));
         }
         if self.point_sampled {
@@ -433,22 +440,23 @@ impl Choice {
 
     /// This choice for a render of `spp` samples a pixel: `filter`'s choice
     /// of a still's filter runs two 5x5 à-trous passes where it has three
-    /// from [`FEWER_PASSES_FROM_SPP`] on; a filter asked for, a pipeline
+    /// from [`FEWER_PASSES_FROM_SPP`] on, one from 64 ([`FEWER_PASSES_BY_SPP`]); a filter asked for, a pipeline
     /// given, a sparse-light variant (whose light needs the reach) and a
     /// sequence's filter stay as they are. Where the count is unknown
     /// (arrays, renders without a header or `meta.json`) nothing changes.
     pub fn for_samples(self, spp: Option<u32>, pipeline_given: bool) -> Choice {
         let because = self.chosen_because.clone().unwrap_or_default();
-        let Some(spp) = spp.filter(|s| *s >= FEWER_PASSES_FROM_SPP) else { return self };
+        let rule = FEWER_PASSES_BY_SPP.iter().rev().find(|(from, _)| spp.is_some_and(|spp| spp >= *from));
+        let (Some(spp), Some(&(from, passes))) = (spp, rule) else { return self };
         let three = Form::Atrous { passes: 3, stencil: Stencil::Cubic5 };
         let still = self.pipeline.temporal.is_none() && self.pipeline.form == three;
         if pipeline_given || !because.chosen || because.sparse_light.is_some() || !still {
             return self;
         }
-        let form = Form::Atrous { passes: 2, stencil: Stencil::Cubic5 };
+        let form = Form::Atrous { passes, stencil: Stencil::Cubic5 };
         Choice {
             pipeline: FilterPipeline { form, ..self.pipeline },
-            chosen_because: Some(Because { fewer_passes: Some(spp), ..because }),
+            chosen_because: Some(Because { fewer_passes: Some((spp, from, passes)), ..because }),
             ..self
         }
     }
@@ -823,7 +831,11 @@ mod tests {
         assert_eq!(FilterPipeline { form: three, ..many.pipeline }, chosen.pipeline, "only the count changes");
         let because = many.chosen_because.as_ref().unwrap().to_string();
         let samples = format!("{FEWER_PASSES_FROM_SPP} samples");
-        assert!(because.contains("two à-trous passes, not three") && because.contains(&samples), "{because}");
+        assert!(because.contains("2 à-trous passes, not three") && because.contains(&samples), "{because}");
+        let most = chosen.clone().for_samples(Some(FEWER_PASSES_BY_SPP[1].0), false);
+        assert_eq!(most.pipeline.form, Form::Atrous { passes: 1, stencil: Stencil::Cubic5 });
+        let because = most.chosen_because.as_ref().unwrap().to_string();
+        assert!(because.contains("one à-trous pass, not three"), "{because}");
         for (spp, pipeline_given) in [(Some(FEWER_PASSES_FROM_SPP - 1), false), (None, false), (Some(64), true)] {
             assert_eq!(chosen.clone().for_samples(spp, pipeline_given).pipeline, chosen.pipeline, "{spp:?}");
         }

@@ -211,7 +211,8 @@ fn given_names(given: &Provided) -> String {
 /// :param variance: per-pixel sample variance of the colour, (H, W), (H, W, 1)
 ///     or (H, W, 3) (the mean over channels is used, as from files).
 /// :param spp: samples per pixel of ``color``: from 8 on, the filter chosen
-///     runs two à-trous passes where it has three, as ``filterjit filter`` does.
+///     runs two à-trous passes where it has three (from 64, one), as
+///     ``filterjit filter`` does.
 /// :param filter: a shipped filter's name (``"@evolvedAtrous3x3"``), an
 ///     expression, or ``"@FILE:NAME"`` (a hall of fame entry). By default the
 ///     best shipped filter whose inputs are given, by the rule the command
