@@ -311,8 +311,11 @@ impl Because {
             ));
         }
         if let Some((spp, from, passes)) = self.fewer_passes {
-            let passes =
-                if passes == 1 { "one à-trous pass".to_string() } else { format!("{passes} à-trous passes") };
+            let passes = match passes {
+                1 => "one à-trous pass".to_string(),
+                2 => "two à-trous passes".to_string(),
+                n => format!("{n} à-trous passes"),
+            };
             parts.push(format!(
                 "{passes}, not three, as the render has {spp} samples a pixel (from {from} on: less noise to spread)"
             ));
@@ -831,7 +834,7 @@ mod tests {
         assert_eq!(FilterPipeline { form: three, ..many.pipeline }, chosen.pipeline, "only the count changes");
         let because = many.chosen_because.as_ref().unwrap().to_string();
         let samples = format!("{FEWER_PASSES_FROM_SPP} samples");
-        assert!(because.contains("2 à-trous passes, not three") && because.contains(&samples), "{because}");
+        assert!(because.contains("two à-trous passes, not three") && because.contains(&samples), "{because}");
         let most = chosen.clone().for_samples(Some(FEWER_PASSES_BY_SPP[1].0), false);
         assert_eq!(most.pipeline.form, Form::Atrous { passes: 1, stencil: Stencil::Cubic5 });
         let because = most.chosen_because.as_ref().unwrap().to_string();

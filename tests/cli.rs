@@ -816,7 +816,7 @@ fn filter_without_expr_runs_one_pass_fewer_on_a_render_of_many_samples() {
     let stderr = text(&run.stderr);
     assert!(run.status.success(), "{stderr}");
     assert!(stderr.contains("demodulate,atrous=2,planefit=3)"), "{stderr}");
-    assert!(stderr.contains(&format!("2 à-trous passes, not three, as the render has {spp} samples")), "{stderr}");
+    assert!(stderr.contains(&format!("two à-trous passes, not three, as the render has {spp} samples")), "{stderr}");
     let default = filterjit::denoise::SHIPPED_BY_QUALITY[0];
     let run = filterjit(&[
         "filter",
