@@ -162,6 +162,12 @@ pub const FEWER_PASSES_BY_SPP: [(u32, u32); 2] = [(8, 2), (64, 1)];
 /// The fewest samples a pixel that get fewer passes ([`FEWER_PASSES_BY_SPP`]).
 pub const FEWER_PASSES_FROM_SPP: u32 = FEWER_PASSES_BY_SPP[0].0;
 
+/// The rule of [`FEWER_PASSES_BY_SPP`] a render of `spp` samples a pixel
+/// falls under: the count it applies from, and the passes it runs.
+fn fewer_passes(spp: u32) -> Option<(u32, u32)> {
+    FEWER_PASSES_BY_SPP.iter().rev().find(|(from, _)| spp >= *from).copied()
+}
+
 pub const DEFAULT_RADIUS: u32 = 5;
 
 /// The inputs a render has: stored features (colour and pixel position
@@ -216,9 +222,8 @@ pub struct Because {
     /// Whether the pixel filter was added for a render sampled at one point a pixel.
     pub point_sampled: bool,
     /// Where passes were left out for a render of many samples
-    /// ([`FEWER_PASSES_BY_SPP`]): its samples per pixel, the count from
-    /// which the rule applies, and the passes it runs.
-    pub fewer_passes: Option<(u32, u32, u32)>,
+    /// ([`FEWER_PASSES_BY_SPP`]): its samples per pixel.
+    pub fewer_passes: Option<u32>,
 }
 
 /// How a caller names the inputs a filter reads, for [`Because::render`].
@@ -310,7 +315,8 @@ impl Because {
                  luminance (under {under}){keep}"
             ));
         }
-        if let Some((spp, from, passes)) = self.fewer_passes {
+        if let Some((spp, (from, passes))) = self.fewer_passes.and_then(|spp| fewer_passes(spp).map(|rule| (spp, rule)))
+        {
             let passes = match passes {
                 1 => "one à-trous pass".to_string(),
                 2 => "two à-trous passes".to_string(),
@@ -448,9 +454,9 @@ impl Choice {
     /// sequence's filter stay as they are. Where the count is unknown
     /// (arrays, renders without a header or `meta.json`) nothing changes.
     pub fn for_samples(self, spp: Option<u32>, pipeline_given: bool) -> Choice {
+        let Some(spp) = spp else { return self };
+        let Some((_, passes)) = fewer_passes(spp) else { return self };
         let because = self.chosen_because.clone().unwrap_or_default();
-        let rule = FEWER_PASSES_BY_SPP.iter().rev().find(|(from, _)| spp.is_some_and(|spp| spp >= *from));
-        let (Some(spp), Some(&(from, passes))) = (spp, rule) else { return self };
         let three = Form::Atrous { passes: 3, stencil: Stencil::Cubic5 };
         let still = self.pipeline.temporal.is_none() && self.pipeline.form == three;
         if pipeline_given || !because.chosen || because.sparse_light.is_some() || !still {
@@ -459,7 +465,7 @@ impl Choice {
         let form = Form::Atrous { passes, stencil: Stencil::Cubic5 };
         Choice {
             pipeline: FilterPipeline { form, ..self.pipeline },
-            chosen_because: Some(Because { fewer_passes: Some((spp, from, passes)), ..because }),
+            chosen_because: Some(Because { fewer_passes: Some(spp), ..because }),
             ..self
         }
     }

@@ -61,11 +61,10 @@ fn tests_write_under_the_target_folder_not_the_systems_temporary_folder() {
     for dir in [tests.clone(), tests.join("common")] {
         for entry in std::fs::read_dir(&dir).unwrap() {
             let path = entry.unwrap().path();
-            let text = if path.extension().is_some_and(|e| e == "rs") {
-                std::fs::read_to_string(&path).unwrap()
-            } else {
+            if path.extension().is_none_or(|e| e != "rs") {
                 continue;
-            };
+            }
+            let text = std::fs::read_to_string(&path).unwrap();
             if code_of(&text).iter().any(|l| l.contains(concat!("env::", "temp_dir("))) {
                 writers.push(path.strip_prefix(&tests).unwrap().display().to_string());
             }

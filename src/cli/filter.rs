@@ -142,17 +142,12 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
     let load_time = load_start.elapsed();
     // A chosen filter may give way to its variant for the render's light (one read by the same request).
     let choice = choice.for_light(&scene.color, pipeline.is_some())?;
-    // A render sampled at one point a pixel: the pixel filter its reference integrates, last.
-    let point_sampled = scene::point_sampled(scene_path, request.view_layer.as_deref())
+    let header_samples = scene::samples_per_pixel(scene_path, request.view_layer.as_deref())
         .with_context(|| format!("reading scene {}", scene_path.display()))?;
-    let choice = choice.for_point_sampled(point_sampled, pipeline.is_some());
-    // A render of many samples: one pass fewer for the chosen filter (its `meta.json` or its header says how many).
-    let samples = match scene.spp {
-        Some(spp) => Some(spp),
-        None => scene::samples_per_pixel(scene_path, request.view_layer.as_deref())
-            .with_context(|| format!("reading scene {}", scene_path.display()))?,
-    };
-    let choice = choice.for_samples(samples, pipeline.is_some());
+    // A render sampled at one point a pixel: the pixel filter its reference integrates, last.
+    let choice = choice.for_point_sampled(scene::point_sampled_at(header_samples), pipeline.is_some());
+    // A render of many samples (its `meta.json` or its header says how many): fewer passes for the chosen filter.
+    let choice = choice.for_samples(scene.spp.or(header_samples), pipeline.is_some());
     if let Some(because) = &choice.chosen_because {
         eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
     }

@@ -488,7 +488,12 @@ pub fn samples_per_pixel(path: &Path, view_layer: Option<&str>) -> Result<Option
 /// on it jitters over the pixel; docs/JOURNAL.md, "The 1-spp frames are not
 /// what their references average"). No other renderer is known to.
 pub fn point_sampled(path: &Path, view_layer: Option<&str>) -> Result<bool, SceneError> {
-    Ok(samples_per_pixel(path, view_layer)? == Some(1))
+    Ok(point_sampled_at(samples_per_pixel(path, view_layer)?))
+}
+
+/// [`point_sampled`] for a render whose header gave `samples` ([`samples_per_pixel`]).
+pub fn point_sampled_at(samples: Option<u32>) -> bool {
+    samples == Some(1)
 }
 
 /// The features and variances a scene on disk provides, from its channel
