@@ -150,7 +150,8 @@ fn sparse_light_variant(name: &str) -> Option<&'static SparseLightVariant> {
 }
 
 /// Samples per pixel from which `filter`'s choice runs fewer 5x5 à-trous
-/// passes than the three it has, and how many: less noise to spread, and
+/// passes than the three it has, and how many, for a render of
+/// [`FEWER_PASSES_MEASURED_AT`] pixels on a side: less noise to spread, and
 /// the last passes' reach blurs what the samples already resolve. On the
 /// thirteen built-in training scenes (128²) two passes have 0.984× three's
 /// relMSE at 8 spp and 0.942× at 16, one pass 0.866× two's at 64
@@ -159,13 +160,45 @@ fn sparse_light_variant(name: &str) -> Option<&'static SparseLightVariant> {
 /// spp (docs/JOURNAL.md, "Fewer passes where the render has more samples").
 pub const FEWER_PASSES_BY_SPP: [(u32, u32); 2] = [(8, 2), (64, 1)];
 
-/// The fewest samples a pixel that get fewer passes ([`FEWER_PASSES_BY_SPP`]).
+/// The size [`FEWER_PASSES_BY_SPP`] was measured at, in pixels on a side.
+/// A wider render needs as many more samples for the same rule: its
+/// surfaces span more pixels, so the passes' reach blurs less of them. At
+/// 256² two passes have 1.009× three's relMSE at 8 spp and 0.973× at 16 on
+/// the training scenes, as at 128² with 4 spp (1.040×) and 8 (0.974×)
+/// (docs/JOURNAL.md, "The pass rule at other sizes"). Smaller renders keep
+/// the counts measured here.
+pub const FEWER_PASSES_MEASURED_AT: u32 = 128;
+
+/// The fewest samples a pixel that get fewer passes at
+/// [`FEWER_PASSES_MEASURED_AT`] ([`FEWER_PASSES_BY_SPP`]).
 pub const FEWER_PASSES_FROM_SPP: u32 = FEWER_PASSES_BY_SPP[0].0;
 
+/// Where a render's sample count took passes away ([`FEWER_PASSES_BY_SPP`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FewerPasses {
+    /// The render's samples a pixel.
+    pub spp: u32,
+    /// Its width and height.
+    pub size: (usize, usize),
+    /// The count the rule applies from at this size.
+    pub from: u32,
+    /// The passes it runs.
+    pub passes: u32,
+}
+
 /// The rule of [`FEWER_PASSES_BY_SPP`] a render of `spp` samples a pixel
-/// falls under: the count it applies from, and the passes it runs.
-fn fewer_passes(spp: u32) -> Option<(u32, u32)> {
-    FEWER_PASSES_BY_SPP.iter().rev().find(|(from, _)| spp >= *from).copied()
+/// and `size` pixels falls under, its counts scaled by the render's side
+/// (the square root of its pixels) over [`FEWER_PASSES_MEASURED_AT`].
+pub fn fewer_passes(spp: u32, size: (usize, usize)) -> Option<FewerPasses> {
+    let side = ((size.0 as f64) * (size.1 as f64)).sqrt();
+    let scale = (side / f64::from(FEWER_PASSES_MEASURED_AT)).max(1.0);
+    let at_size = |from: u32| (f64::from(from) * scale).ceil().min(f64::from(u32::MAX)) as u32;
+    FEWER_PASSES_BY_SPP
+        .iter()
+        .rev()
+        .map(|&(from, passes)| (at_size(from), passes))
+        .find(|&(from, _)| spp >= from)
+        .map(|(from, passes)| FewerPasses { spp, size, from, passes })
 }
 
 pub const DEFAULT_RADIUS: u32 = 5;
@@ -222,8 +255,8 @@ pub struct Because {
     /// Whether the pixel filter was added for a render sampled at one point a pixel.
     pub point_sampled: bool,
     /// Where passes were left out for a render of many samples
-    /// ([`FEWER_PASSES_BY_SPP`]): its samples per pixel.
-    pub fewer_passes: Option<u32>,
+    /// ([`FEWER_PASSES_BY_SPP`]).
+    pub fewer_passes: Option<FewerPasses>,
 }
 
 /// How a caller names the inputs a filter reads, for [`Because::render`].
@@ -315,15 +348,15 @@ impl Because {
                  luminance (under {under}){keep}"
             ));
         }
-        if let Some((spp, (from, passes))) = self.fewer_passes.and_then(|spp| fewer_passes(spp).map(|rule| (spp, rule)))
-        {
+        if let Some(FewerPasses { spp, size: (width, height), from, passes }) = self.fewer_passes {
             let passes = match passes {
                 1 => "one à-trous pass".to_string(),
                 2 => "two à-trous passes".to_string(),
                 n => format!("{n} à-trous passes"),
             };
             parts.push(format!(
-                "{passes}, not three, as the render has {spp} samples a pixel (from {from} on: less noise to spread)"
+                "{passes}, not three, as the render has {spp} samples a pixel (from {from} on at its \
+                 {width}x{height} pixels: less noise to spread)"
             ));
         }
         if self.point_sampled {
@@ -447,25 +480,26 @@ impl Choice {
         })
     }
 
-    /// This choice for a render of `spp` samples a pixel: `filter`'s choice
-    /// of a still's filter runs two 5x5 à-trous passes where it has three
-    /// from [`FEWER_PASSES_FROM_SPP`] on, one from 64 ([`FEWER_PASSES_BY_SPP`]); a filter asked for, a pipeline
-    /// given, a sparse-light variant (whose light needs the reach) and a
-    /// sequence's filter stay as they are. Where the count is unknown
-    /// (arrays, renders without a header or `meta.json`) nothing changes.
-    pub fn for_samples(self, spp: Option<u32>, pipeline_given: bool) -> Choice {
-        let Some(spp) = spp else { return self };
-        let Some((_, passes)) = fewer_passes(spp) else { return self };
+    /// This choice for a render of `spp` samples a pixel and `size` pixels:
+    /// `filter`'s choice of a still's filter runs two 5x5 à-trous passes
+    /// where it has three from [`FEWER_PASSES_FROM_SPP`] on, one from 64, at
+    /// 128² and proportionally more on wider renders ([`fewer_passes`]); a
+    /// filter asked for, a pipeline given, a sparse-light variant (whose
+    /// light needs the reach) and a sequence's filter stay as they are.
+    /// Where the count is unknown (arrays, renders without a header or
+    /// `meta.json`) nothing changes.
+    pub fn for_samples(self, spp: Option<u32>, size: (usize, usize), pipeline_given: bool) -> Choice {
+        let Some(rule) = spp.and_then(|spp| fewer_passes(spp, size)) else { return self };
         let because = self.chosen_because.clone().unwrap_or_default();
         let three = Form::Atrous { passes: 3, stencil: Stencil::Cubic5 };
         let still = self.pipeline.temporal.is_none() && self.pipeline.form == three;
         if pipeline_given || !because.chosen || because.sparse_light.is_some() || !still {
             return self;
         }
-        let form = Form::Atrous { passes, stencil: Stencil::Cubic5 };
+        let form = Form::Atrous { passes: rule.passes, stencil: Stencil::Cubic5 };
         Choice {
             pipeline: FilterPipeline { form, ..self.pipeline },
-            chosen_because: Some(Because { fewer_passes: Some(spp), ..because }),
+            chosen_because: Some(Because { fewer_passes: Some(rule), ..because }),
             ..self
         }
     }
@@ -835,27 +869,41 @@ mod tests {
         let chosen = Choice::best_for(&all).unwrap();
         let three = Form::Atrous { passes: 3, stencil: Stencil::Cubic5 };
         assert_eq!(chosen.pipeline.form, three, "the default runs three 5x5 passes");
-        let many = chosen.clone().for_samples(Some(FEWER_PASSES_FROM_SPP), false);
+        let measured = FEWER_PASSES_MEASURED_AT as usize;
+        let size = (measured, measured);
+        let many = chosen.clone().for_samples(Some(FEWER_PASSES_FROM_SPP), size, false);
         assert_eq!(many.pipeline.form, Form::Atrous { passes: 2, stencil: Stencil::Cubic5 });
         assert_eq!(FilterPipeline { form: three, ..many.pipeline }, chosen.pipeline, "only the count changes");
         let because = many.chosen_because.as_ref().unwrap().to_string();
         let samples = format!("{FEWER_PASSES_FROM_SPP} samples");
         assert!(because.contains("two à-trous passes, not three") && because.contains(&samples), "{because}");
-        let most = chosen.clone().for_samples(Some(FEWER_PASSES_BY_SPP[1].0), false);
+        let most = chosen.clone().for_samples(Some(FEWER_PASSES_BY_SPP[1].0), size, false);
         assert_eq!(most.pipeline.form, Form::Atrous { passes: 1, stencil: Stencil::Cubic5 });
         let because = most.chosen_because.as_ref().unwrap().to_string();
         assert!(because.contains("one à-trous pass, not three"), "{because}");
         for (spp, pipeline_given) in [(Some(FEWER_PASSES_FROM_SPP - 1), false), (None, false), (Some(64), true)] {
-            assert_eq!(chosen.clone().for_samples(spp, pipeline_given).pipeline, chosen.pipeline, "{spp:?}");
+            assert_eq!(chosen.clone().for_samples(spp, size, pipeline_given).pipeline, chosen.pipeline, "{spp:?}");
         }
+        // A render twice as wide needs twice the samples; a smaller one keeps the counts measured.
+        let wide = (2 * measured, 2 * measured);
+        let twice = chosen.clone().for_samples(Some(2 * FEWER_PASSES_FROM_SPP - 1), wide, false);
+        assert_eq!(twice.pipeline, chosen.pipeline, "too few samples at twice the width");
+        let twice = chosen.clone().for_samples(Some(2 * FEWER_PASSES_FROM_SPP), wide, false);
+        assert_eq!(twice.pipeline.form, Form::Atrous { passes: 2, stencil: Stencil::Cubic5 });
+        let because = twice.chosen_because.as_ref().unwrap().to_string();
+        assert!(because.contains(&format!("from {} on at its", 2 * FEWER_PASSES_FROM_SPP)), "{because}");
+        let small = chosen.clone().for_samples(Some(FEWER_PASSES_FROM_SPP), (measured / 4, measured / 2), false);
+        assert_eq!(small.pipeline.form, Form::Atrous { passes: 2, stencil: Stencil::Cubic5 });
+        let tall = fewer_passes(FEWER_PASSES_FROM_SPP * 3, (measured, 4 * measured)).unwrap();
+        assert_eq!((tall.from, tall.passes), (2 * FEWER_PASSES_FROM_SPP, 2), "the side is the root of the pixels");
         // A filter asked for stays as asked.
         let asked = Choice::asked(&format!("@{}", SHIPPED_BY_QUALITY[0]), None, None).unwrap();
-        assert_eq!(asked.clone().for_samples(Some(64), false).pipeline, asked.pipeline);
+        assert_eq!(asked.clone().for_samples(Some(64), size, false).pipeline, asked.pipeline);
         // A sparse-light variant keeps its reach.
         let mut sparse = vec![[0.0f32; 3]; 100];
         sparse[0] = [100.0; 3];
         let variant = chosen.for_light(&sparse, false).unwrap();
-        assert_eq!(variant.clone().for_samples(Some(64), false).pipeline, variant.pipeline);
+        assert_eq!(variant.clone().for_samples(Some(64), size, false).pipeline, variant.pipeline);
     }
 
     #[test]

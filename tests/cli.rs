@@ -804,7 +804,7 @@ fn a_radius_for_an_a_trous_form_is_refused() {
 
 /// A render of many samples (its `meta.json` says 8) gets the default with
 /// one à-trous pass fewer, and stderr says why; the same render with the
-/// filter named keeps three.
+/// filter named keeps three, and so does a wider render of as many samples.
 #[test]
 fn filter_without_expr_runs_one_pass_fewer_on_a_render_of_many_samples() {
     let dir = crate::common::temp_dir("cli", "many-samples");
@@ -817,6 +817,15 @@ fn filter_without_expr_runs_one_pass_fewer_on_a_render_of_many_samples() {
     assert!(run.status.success(), "{stderr}");
     assert!(stderr.contains("demodulate,atrous=2,planefit=3)"), "{stderr}");
     assert!(stderr.contains(&format!("two à-trous passes, not three, as the render has {spp} samples")), "{stderr}");
+    assert!(stderr.contains(&format!("(from {spp} on at its 32x32 pixels")), "{stderr}");
+    // A wider render needs more samples a pixel for the same rule: at 1.5 times the width, 1.5 times as many.
+    let wide = dir.join("wide");
+    let run = render("cornell", "192x192", spp, 4, &wide);
+    assert!(run.status.success(), "{}", text(&run.stderr));
+    let run = filterjit(&["filter", wide.to_str().unwrap(), "-o", dir.join("wide.exr").to_str().unwrap()]);
+    let stderr = text(&run.stderr);
+    assert!(run.status.success() && stderr.contains("demodulate,atrous=3,planefit=3)"), "{stderr}");
+    assert!(!stderr.contains("à-trous passes, not three"), "{stderr}");
     let default = filterjit::denoise::SHIPPED_BY_QUALITY[0];
     let run = filterjit(&[
         "filter",

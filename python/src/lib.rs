@@ -211,8 +211,9 @@ fn given_names(given: &Provided) -> String {
 /// :param variance: per-pixel sample variance of the colour, (H, W), (H, W, 1)
 ///     or (H, W, 3) (the mean over channels is used, as from files).
 /// :param spp: samples per pixel of ``color``: from 8 on, the filter chosen
-///     runs two à-trous passes where it has three (from 64, one), as
-///     ``filterjit filter`` does.
+///     runs two à-trous passes where it has three (from 64, one) on an
+///     image of up to 128x128 pixels, from twice as many on one twice as
+///     wide, as ``filterjit filter`` does.
 /// :param filter: a shipped filter's name (``"@evolvedAtrous3x3"``), an
 ///     expression, or ``"@FILE:NAME"`` (a hall of fame entry). By default the
 ///     best shipped filter whose inputs are given, by the rule the command
@@ -275,7 +276,7 @@ fn denoise<'py>(
         .for_light(&scene.color, pipeline.is_some())
         .map_err(value)?
         .for_point_sampled(point_sampled, pipeline.is_some())
-        .for_samples(spp, pipeline.is_some());
+        .for_samples(spp, (width, height), pipeline.is_some());
     let kernel = kernel(&choice)?;
     let gpu = device()?;
     let filtered = py.detach(|| filterjit::denoise::filter(&gpu, &choice, &kernel, &scene)).map_err(runtime)?;

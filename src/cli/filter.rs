@@ -147,7 +147,7 @@ fn filter_one(env: &Environment, asked: Asked, scene_path: &Path, output: &Path)
     // A render sampled at one point a pixel: the pixel filter its reference integrates, last.
     let choice = choice.for_point_sampled(scene::point_sampled_at(header_samples), pipeline.is_some());
     // A render of many samples (its `meta.json` or its header says how many): fewer passes for the chosen filter.
-    let choice = choice.for_samples(scene.spp.or(header_samples), pipeline.is_some());
+    let choice = choice.for_samples(scene.spp.or(header_samples), (scene.width, scene.height), pipeline.is_some());
     if let Some(because) = &choice.chosen_because {
         eprintln!("filter    {} (pipeline {}): {because}", choice.describe(), choice.pipeline);
     }
