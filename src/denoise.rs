@@ -161,7 +161,7 @@ fn sparse_light_variant(name: &str) -> Option<&'static SparseLightVariant> {
 pub const FEWER_PASSES_BY_SPP: [(u32, u32); 2] = [(8, 2), (64, 1)];
 
 /// The size [`FEWER_PASSES_BY_SPP`] was measured at, in pixels on a side.
-/// A wider render needs as many more samples for the same rule: its
+/// A wider render needs proportionally more samples for the same rule: its
 /// surfaces span more pixels, so the passes' reach blurs less of them. At
 /// 256² two passes have 1.009× three's relMSE at 8 spp and 0.973× at 16 on
 /// the training scenes, as at 128² with 4 spp (1.040×) and 8 (0.974×)
