@@ -189,10 +189,11 @@ pub struct FewerPasses {
 /// The rule of [`FEWER_PASSES_BY_SPP`] a render of `spp` samples a pixel
 /// and `size` pixels falls under, its counts scaled by the render's side
 /// (the square root of its pixels) over [`FEWER_PASSES_MEASURED_AT`].
-pub fn fewer_passes(spp: u32, size: (usize, usize)) -> Option<FewerPasses> {
+fn fewer_passes(spp: u32, size: (usize, usize)) -> Option<FewerPasses> {
     let side = ((size.0 as f64) * (size.1 as f64)).sqrt();
     let scale = (side / f64::from(FEWER_PASSES_MEASURED_AT)).max(1.0);
-    let at_size = |from: u32| (f64::from(from) * scale).ceil().min(f64::from(u32::MAX)) as u32;
+    // `as` saturates: a count past u32::MAX is never reached.
+    let at_size = |from: u32| (f64::from(from) * scale).ceil() as u32;
     FEWER_PASSES_BY_SPP
         .iter()
         .rev()
@@ -483,7 +484,7 @@ impl Choice {
     /// This choice for a render of `spp` samples a pixel and `size` pixels:
     /// `filter`'s choice of a still's filter runs two 5x5 à-trous passes
     /// where it has three from [`FEWER_PASSES_FROM_SPP`] on, one from 64, at
-    /// 128² and proportionally more on wider renders ([`fewer_passes`]); a
+    /// 128² and proportionally more on wider renders (`fewer_passes`); a
     /// filter asked for, a pipeline given, a sparse-light variant (whose
     /// light needs the reach) and a sequence's filter stay as they are.
     /// Where the count is unknown (arrays, renders without a header or
