@@ -69,7 +69,9 @@ pack() {
         "$lib"/libtbb.so.12 "$kit/lib/"
     # The Vulkan loader: the device's image has the driver's ICD, not always the loader.
     cp -L /lib/x86_64-linux-gnu/libvulkan.so.1 "$kit/lib/"
-    tar -C "$root/target" -cf - gpu-kit | xz -T2 -6 > "$kit_archive.tmp"
+    # One thread and a dictionary wider than a binary: the builds differ in a
+    # few kernels, so each after the first packs into almost nothing.
+    tar -C "$root/target" -cf - gpu-kit | xz -T1 --lzma2=preset=6,dict=64MiB > "$kit_archive.tmp"
     mv "$kit_archive.tmp" "$kit_archive"
     trap - EXIT
     echo "gpu_session pack: $(du -h "$kit_archive" | cut -f1) in $kit_archive (carry it; 64 MiB at most)"
