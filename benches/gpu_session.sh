@@ -22,8 +22,9 @@
 set -euo pipefail
 
 # The experiments a GPU decides, each a patch under docs/experiments/ that
-# applies to the commit the kit is built at; each is timed on the filters
-# whose kernels it changes.
+# applies to the commit the kit is built at (tests/readme.rs checks that
+# each still applies: rebase it or drop it here); each is timed on the
+# filters whose kernels it changes.
 EXPERIMENTS=(
     "temporal-packed-stores:@realtimeTemporal @temporal"
     "one-band-per-pass:@realtime @evolvedAtrous64Plane"

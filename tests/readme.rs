@@ -75,3 +75,34 @@ fn the_readme_names_what_ships_and_links_what_exists() {
         }
     }
 }
+
+/// The call prepared for a lent GPU (`benches/gpu_session.sh`) times what
+/// exists: each experiment it builds is a patch under docs/experiments/
+/// that applies to this tree (a patch that has rotted fails here, not on
+/// the device's few minutes), and each filter it names ships.
+#[test]
+fn the_gpu_session_script_names_patches_that_apply_and_filters_that_ship() {
+    let script = read("benches/gpu_session.sh");
+    let list = |name: &str| -> Vec<String> {
+        let start = script.find(&format!("{name}=(")).unwrap_or_else(|| panic!("gpu_session.sh has no {name}"));
+        let body = &script[start + name.len() + 2..];
+        body[..body.find(')').unwrap()].split_whitespace().map(|w| w.trim_matches('"').to_string()).collect()
+    };
+    let experiments: Vec<String> =
+        list("EXPERIMENTS").iter().filter_map(|w| Some(w.split_once(':')?.0.to_string())).collect();
+    assert!(!experiments.is_empty(), "no experiments read from gpu_session.sh");
+    for experiment in &experiments {
+        let patch = format!("docs/experiments/{experiment}.patch");
+        let check = std::process::Command::new("git")
+            .args(["apply", "--check", &patch])
+            .current_dir(root())
+            .output()
+            .unwrap_or_else(|e| panic!("git apply --check {patch}: {e}"));
+        assert!(check.status.success(), "{patch} no longer applies: {}", String::from_utf8_lossy(&check.stderr));
+    }
+    let filters = shipped_names(&script);
+    assert!(filters.len() >= 5, "{filters:?}");
+    for name in &filters {
+        assert!(corpus::lookup(name).is_some(), "gpu_session.sh names `@{name}`, which `filterjit list` does not have");
+    }
+}
