@@ -28,6 +28,7 @@ set -euo pipefail
 EXPERIMENTS=(
     "temporal-packed-stores:@realtimeTemporal @temporal"
     "one-band-per-pass:@realtime @evolvedAtrous64Plane"
+    "trusted-built-ins:@realtime @realtimeTemporal"
 )
 # The frames of the real-time issue: the shipped filters at 1080p and 1440p.
 FILTERS=(@realtime @realtimeTemporal @evolvedAtrous64Plane @temporal @evolvedAtrous3x3)
