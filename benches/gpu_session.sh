@@ -49,14 +49,16 @@ pack() {
     fi
     local kit="$root/target/gpu-kit"
     rm -rf "$kit" && mkdir -p "$kit/bin" "$kit/lib"
-    # Restores the tree if a patch's build fails half-way.
-    trap 'git -C "$root" checkout -- . ' EXIT
     for experiment in "${EXPERIMENTS[@]}"; do
         local name=${experiment%%:*}
-        git apply "docs/experiments/$name.patch"
+        patch="docs/experiments/$name.patch"
+        git apply "$patch"
+        # Takes the patch out again if its build fails half-way.
+        trap 'git -C "$root" apply -R "$patch"' EXIT
         cargo build --release --quiet
         strip -o "$kit/bin/filterjit-$name" target/release/filterjit
-        git checkout -- .
+        git apply -R "$patch"
+        trap - EXIT
     done
     cargo build --release --quiet
     strip -o "$kit/bin/filterjit" target/release/filterjit
@@ -75,12 +77,22 @@ pack() {
     # few kernels, so each after the first packs into almost nothing.
     tar -C "$root/target" -cf - gpu-kit | xz -T1 --lzma2=preset=6,dict=64MiB > "$kit_archive.tmp"
     mv "$kit_archive.tmp" "$kit_archive"
-    trap - EXIT
     echo "gpu_session pack: $(du -h "$kit_archive" | cut -f1) in $kit_archive (carry it; 64 MiB at most)"
 }
 
+# step NAME COMMAND...: runs COMMAND into $out/NAME.txt; a step that fails
+# says so and the run goes on, since the device's minutes are not repeated.
+step() {
+    local log="$out/$1.txt"
+    shift
+    if ! "$@" > "$log" 2>&1; then
+        echo "gpu_session run: $(basename "$log") failed:"
+        tail -5 "$log"
+    fi
+}
+
 run() {
-    local out="${OUT:?gpu_session run: OUT names the folder the results go to}"
+    out="${OUT:?gpu_session run: OUT names the folder the results go to}"
     local quick="${FILTERJIT_GPU_SESSION_QUICK:-}"
     local kit
     kit=$(mktemp -d)
@@ -97,18 +109,17 @@ run() {
     local filters=()
     for f in "${FILTERS[@]}"; do filters+=(--filter "$f"); done
     # 1. The frames with OIDN (CUDA where found), then where each goes, pass by pass.
-    "$kit/bin/filterjit" bench --frames "$sizes" --repeats "$repeats" "${filters[@]}" \
-        -o "$out/frames.json" > "$out/frames.txt" 2>&1
-    "$kit/bin/filterjit" bench --frames "${sizes%%,*}" --repeats "$profile_repeats" --no-oidn --profile \
-        "${filters[@]}" -o "$out/profile.json" > "$out/profile.txt" 2>&1
+    step frames "$kit/bin/filterjit" bench --frames "$sizes" --repeats "$repeats" "${filters[@]}" -o "$out/frames.json"
+    step profile "$kit/bin/filterjit" bench --frames "${sizes%%,*}" --repeats "$profile_repeats" --no-oidn --profile \
+        "${filters[@]}" -o "$out/profile.json"
     # 2. Each experiment against the build it changes, alternated twice.
     for experiment in "${EXPERIMENTS[@]}"; do
         local name=${experiment%%:*} its=()
         for f in ${experiment#*:}; do its+=(--filter "$f"); done
         for round in 1 2; do
             for build in filterjit "filterjit-$name"; do
-                "$kit/bin/$build" bench --frames "${sizes%%,*}" --repeats "$profile_repeats" --no-oidn --profile \
-                    "${its[@]}" -o "$out/$name-$build-$round.json" > "$out/$name-$build-$round.txt" 2>&1
+                step "$name-$build-$round" "$kit/bin/$build" bench --frames "${sizes%%,*}" \
+                    --repeats "$profile_repeats" --no-oidn --profile "${its[@]}" -o "$out/$name-$build-$round.json"
             done
         done
     done
