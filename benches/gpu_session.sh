@@ -126,7 +126,7 @@ run() {
     tail -25 "$out/frames.txt"
     # Each experiment's frames beside its base build's, for the reply's tail.
     for f in "$out"/*-[12].txt; do
-        echo "$(basename "$f" .txt): $(grep '^profile' "$f" | sed 's/: each kernel.*frames)://' | tr '\n' ';')"
+        echo "$(basename "$f" .txt): $(grep '^profile' "$f" | sed 's/: each kernel.*frames)://; s/ (the rest[^)]*)//' | tr '\n' ';')"
     done
     echo "gpu_session run: results in $out"
 }
