@@ -96,7 +96,12 @@ run() {
     local quick="${FILTERJIT_GPU_SESSION_QUICK:-}"
     local kit
     kit=$(mktemp -d)
-    xz -dc "$kit_archive" | tar -C "$kit" -xf -
+    # The device's image may lack xz; Python's lzma reads the same archive.
+    if command -v xz > /dev/null; then
+        xz -dc "$kit_archive" | tar -C "$kit" -xf -
+    else
+        python3 -c 'import sys, tarfile; tarfile.open(sys.argv[1], "r:xz").extractall(sys.argv[2])' "$kit_archive" "$kit"
+    fi
     kit="$kit/gpu-kit"
     export LD_LIBRARY_PATH="$kit/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
     export FILTERJIT_OIDN="$kit/bin/oidnDenoise"
