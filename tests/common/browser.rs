@@ -127,7 +127,14 @@ impl Browser {
         }
         self.socket.send(tungstenite::Message::text(message.to_string())).unwrap();
         loop {
-            let reply = self.socket.read().unwrap_or_else(|e| panic!("DevTools, waiting for {method}: {e}"));
+            let reply = match self.socket.read() {
+                Ok(reply) => reply,
+                // A signal to the test process (other tests run children
+                // and threads beside this one) interrupts the blocking read
+                // before it took a byte: the frame is still on the socket.
+                Err(tungstenite::Error::Io(e)) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                Err(e) => panic!("DevTools, waiting for {method}: {e}"),
+            };
             let tungstenite::Message::Text(text) = reply else { continue };
             let reply: Value = serde_json::from_str(&text).unwrap();
             if reply["id"] == id {
