@@ -14,7 +14,7 @@
 #   bash benches/gpu_session.sh run     # there: writes $OUT/
 #
 # `pack` needs a clean work tree (it applies each experiment's patch in
-# place, builds, and checks the tree out again), the release build's
+# place, builds, and takes the patch out again), the release build's
 # dependencies, and OIDN from the `pyoidn` package (FILTERJIT_OIDN or
 # /tmp/venv). `run` works on any Vulkan adapter, lavapipe included, which
 # is how it is tested: `FILTERJIT_GPU_SESSION_QUICK=1` runs it at 256²

@@ -83,13 +83,14 @@ fn the_readme_names_what_ships_and_links_what_exists() {
 #[test]
 fn the_gpu_session_script_names_patches_that_apply_and_filters_that_ship() {
     let script = read("benches/gpu_session.sh");
-    let list = |name: &str| -> Vec<String> {
-        let start = script.find(&format!("{name}=(")).unwrap_or_else(|| panic!("gpu_session.sh has no {name}"));
-        let body = &script[start + name.len() + 2..];
-        body[..body.find(')').unwrap()].split_whitespace().map(|w| w.trim_matches('"').to_string()).collect()
-    };
-    let experiments: Vec<String> =
-        list("EXPERIMENTS").iter().filter_map(|w| Some(w.split_once(':')?.0.to_string())).collect();
+    // One `"NAME:@filter …"` a line between `EXPERIMENTS=(` and `)`.
+    let start = script.find("EXPERIMENTS=(").expect("gpu_session.sh has no EXPERIMENTS");
+    let body = &script[start..];
+    let experiments: Vec<&str> = body[..body.find(')').unwrap()]
+        .lines()
+        .skip(1)
+        .filter_map(|line| line.trim().trim_matches('"').split_once(':').map(|(name, _)| name))
+        .collect();
     assert!(!experiments.is_empty(), "no experiments read from gpu_session.sh");
     for experiment in &experiments {
         let patch = format!("docs/experiments/{experiment}.patch");
